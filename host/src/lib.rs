@@ -1,0 +1,13 @@
+//! slicelight's host: scene loading, the CPU and GPU backends, the pass plan,
+//! image output. The render binary (`src/main.rs`) and the tests in the
+//! top-level `tests/` folder use it.
+
+pub mod cpu;
+pub mod gpu;
+pub mod metrics;
+pub mod output;
+pub mod reference;
+pub mod render;
+pub mod scene;
+
+pub use slicelight_shaders as shaders;

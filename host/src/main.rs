@@ -1,0 +1,139 @@
+//! `slicelight`: render a scene, render its reference, compare two images.
+
+use anyhow::{anyhow, Context, Result};
+use clap::{Parser, Subcommand};
+use glam::{DVec3, Vec4};
+use slicelight::render::{Backend, BackendChoice};
+use slicelight::{metrics, output, reference, render, scene};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(name = "slicelight", version, about = "Light in participating media, as Rust-GPU compute kernels")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene file to one or more images (.png tone-mapped sRGB, .exr linear).
+    Render {
+        scene: PathBuf,
+        /// Output image; give it more than once for several formats.
+        #[arg(short, long = "output", required = true)]
+        output: Vec<PathBuf>,
+        #[arg(long, value_enum, default_value = "auto")]
+        backend: BackendChoice,
+        /// Write the device, the pass plan and each pass's time as JSON.
+        #[arg(long)]
+        stats: Option<PathBuf>,
+        /// No progress bar.
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Render the f64 reference (shadow rays against the real geometry, no maps or tables).
+    Reference {
+        scene: PathBuf,
+        #[arg(short, long = "output", required = true)]
+        output: Vec<PathBuf>,
+    },
+    /// Print the RMS and max difference of IMAGE against REFERENCE.
+    Compare {
+        image: PathBuf,
+        reference: PathBuf,
+        /// Exposure of the 8-bit tone mapping the % figures are taken after.
+        #[arg(long, default_value_t = 1.0)]
+        exposure: f32,
+        /// Write |image - reference| as a PNG, scaled so the largest difference is white.
+        #[arg(long)]
+        diff: Option<PathBuf>,
+    },
+}
+
+fn main() {
+    if let Err(e) = run(Cli::parse()) {
+        eprintln!("slicelight: error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn check_outputs(outputs: &[PathBuf]) -> Result<()> {
+    for o in outputs {
+        output::format_of(o)?;
+    }
+    Ok(())
+}
+
+fn write_outputs(outputs: &[PathBuf], pixels: &[Vec4], data: &scene::SceneData) -> Result<()> {
+    for o in outputs {
+        output::write_image(o, pixels, data.width(), data.height(), data.exposure)?;
+        eprintln!("wrote {}", o.display());
+    }
+    Ok(())
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Render { scene, output, backend, stats, quiet } => {
+            check_outputs(&output)?;
+            let data = scene::load(&scene)?;
+            let backend = Backend::open(backend)?;
+            eprintln!("backend: {} on {}", backend.name(), backend.device());
+            let show = !quiet && std::io::stderr().is_terminal();
+            let (pixels, st) = render::render(&data, &backend, show)?;
+            for p in &st.passes {
+                if p.ran {
+                    eprintln!("  {:<12} {:>9.3} s  {}", p.name, p.seconds, p.reason);
+                } else {
+                    eprintln!("  {:<12}   skipped  {}", p.name, p.reason);
+                }
+            }
+            eprintln!("  total        {:>9.3} s", st.total_seconds);
+            write_outputs(&output, &pixels, &data)?;
+            if let Some(path) = stats {
+                let json = serde_json::to_vec_pretty(&st)?;
+                output::write_atomically(&path, &json)?;
+            }
+            Ok(())
+        }
+        Command::Reference { scene, output } => {
+            check_outputs(&output)?;
+            let data = scene::load(&scene)?;
+            let t = Instant::now();
+            let image = reference::render(&data);
+            eprintln!("reference: {:.3} s", t.elapsed().as_secs_f64());
+            let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
+            write_outputs(&output, &pixels, &data)
+        }
+        Command::Compare { image, reference, exposure, diff } => {
+            let (w, h, a) = read_linear(&image)?;
+            let (rw, rh, b) = read_linear(&reference)?;
+            if (w, h) != (rw, rh) {
+                return Err(anyhow!("{} is {w}x{h} but {} is {rw}x{rh}", image.display(), reference.display()));
+            }
+            let d = metrics::difference(&a, &b, exposure);
+            println!("rms_relative     {:.6}", d.rms_relative);
+            println!("max_relative     {:.6}", d.max_relative);
+            println!("rms_8bit_percent {:.4}", d.rms_8bit_percent);
+            println!("max_8bit_percent {:.4}", d.max_8bit_percent);
+            if let Some(path) = diff {
+                let largest = a.iter().zip(&b).map(|(x, y)| (*x - *y).abs().max_element()).fold(0.0, f64::max).max(1e-300);
+                let pixels: Vec<Vec4> = a.iter().zip(&b).map(|(x, y)| ((*x - *y).abs() / largest).as_vec3().extend(0.0)).collect();
+                output::write_image(&path, &pixels, w, h, 1.0)?;
+                eprintln!("wrote {} (white = {largest:.4e})", path.display());
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Reads an image as linear rgb: EXR as stored, PNG with its sRGB transfer undone.
+fn read_linear(path: &Path) -> Result<(u32, u32, Vec<DVec3>)> {
+    let format = output::format_of(path)?;
+    let img = image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?.to_rgb32f();
+    let decode = |v: f32| if format == output::Format::Png { scene::srgb_to_linear(v) } else { v };
+    let pixels = img.pixels().map(|p| DVec3::new(decode(p[0]) as f64, decode(p[1]) as f64, decode(p[2]) as f64)).collect();
+    Ok((img.width(), img.height(), pixels))
+}

@@ -1,0 +1,77 @@
+//! Writing images: linear OpenEXR or tone-mapped sRGB PNG, chosen by the file
+//! extension. A file is written whole or not at all (written to a temporary
+//! file beside it, then renamed).
+
+use anyhow::{anyhow, bail, Context, Result};
+use glam::Vec4;
+use image::{ImageFormat, Rgb32FImage, RgbImage};
+use std::io::Write;
+use std::path::Path;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    Png,
+    Exr,
+}
+
+/// The format named by the extension of `path`, or an error saying which are known.
+pub fn format_of(path: &Path) -> Result<Format> {
+    match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+        Some("png") => Ok(Format::Png),
+        Some("exr") => Ok(Format::Exr),
+        _ => bail!("{}: expected an output file ending in .png (tone-mapped sRGB) or .exr (linear radiance)", path.display()),
+    }
+}
+
+/// sRGB transfer function (IEC 61966-2-1) of a linear value in [0, 1].
+pub fn linear_to_srgb(c: f32) -> f32 {
+    if c <= 0.0031308 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// The 8-bit sRGB value of a linear radiance times the exposure, clamped:
+/// the tone mapping of the PNG output.
+pub fn to_8bit(radiance: f32, exposure: f32) -> u8 {
+    let v = (radiance * exposure).clamp(0.0, 1.0);
+    (linear_to_srgb(v) * 255.0 + 0.5) as u8
+}
+
+pub fn tone_map(pixels: &[Vec4], width: u32, height: u32, exposure: f32) -> RgbImage {
+    RgbImage::from_fn(width, height, |x, y| {
+        let p = pixels[(y * width + x) as usize];
+        image::Rgb([to_8bit(p.x, exposure), to_8bit(p.y, exposure), to_8bit(p.z, exposure)])
+    })
+}
+
+/// Writes `pixels` (rgb radiance, row-major, row 0 at the top) to `path`.
+pub fn write_image(path: &Path, pixels: &[Vec4], width: u32, height: u32, exposure: f32) -> Result<()> {
+    let format = format_of(path)?;
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    match format {
+        Format::Png => tone_map(pixels, width, height, exposure).write_to(&mut bytes, ImageFormat::Png)?,
+        Format::Exr => {
+            let img = Rgb32FImage::from_fn(width, height, |x, y| {
+                let p = pixels[(y * width + x) as usize];
+                image::Rgb([p.x, p.y, p.z])
+            });
+            img.write_to(&mut bytes, ImageFormat::OpenExr)?
+        }
+    }
+    write_atomically(path, bytes.get_ref())
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder, so
+/// that `path` either keeps its old contents or gets all of the new ones.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).with_context(|| format!("{}: cannot create a file in {}", path.display(), dir.display()))?;
+    tmp.write_all(bytes).with_context(|| format!("{}: write failed", path.display()))?;
+    tmp.persist(path).map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
+    Ok(())
+}

@@ -1,0 +1,171 @@
+//! The reference renderer: f64, no shadow maps (shadow rays are cast against
+//! the actual spheres and triangles), no tables. It shares the scene and the
+//! pixel positions with the kernels and nothing of their method, so the
+//! difference between the two is the method's error.
+//!
+//! It renders the same quantity as the kernels' passes that exist so far: the
+//! attenuated surface radiance `I_o exp(-sigma_t T)` (eq. 1, first term, of the
+//! 2002 shafts-of-light paper), at pixel centres.
+
+use glam::{DVec3, Vec4, Vec4Swizzles};
+use rayon::prelude::*;
+use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL};
+
+use crate::scene::SceneData;
+
+fn d3(v: Vec4) -> DVec3 {
+    v.xyz().as_dvec3()
+}
+
+struct Surface {
+    t: f64,
+    normal: DVec3,
+    albedo: DVec3,
+}
+
+/// Nearest intersection beyond `t_min`, in f64.
+fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<Surface> {
+    let mut best: Option<Surface> = None;
+    let mut limit = t_max;
+    for s in &data.spheres {
+        let c = d3(s.center_radius);
+        let r = s.center_radius.w as f64;
+        let oc = c - o;
+        let tc = oc.dot(d);
+        let d2 = (oc - d * tc).length_squared();
+        if d2 > r * r {
+            continue;
+        }
+        let half = (r * r - d2).sqrt();
+        for t in [tc - half, tc + half] {
+            if t > t_min && t < limit {
+                limit = t;
+                best = Some(Surface { t, normal: (o + d * t - c).normalize(), albedo: d3(s.albedo) });
+                break;
+            }
+        }
+    }
+    for tri in &data.triangles {
+        let (a, b, c) = (d3(tri.v0), d3(tri.v1), d3(tri.v2));
+        let n = (b - a).cross(c - a);
+        let denom = n.dot(d);
+        if denom.abs() < 1e-300 {
+            continue;
+        }
+        let t = n.dot(a - o) / denom;
+        if !(t > t_min && t < limit) {
+            continue;
+        }
+        let p = o + d * t;
+        // Inside test by the signs of the sub-triangle areas.
+        let inside = n.dot((b - a).cross(p - a)) >= 0.0 && n.dot((c - b).cross(p - b)) >= 0.0 && n.dot((a - c).cross(p - c)) >= 0.0;
+        if inside {
+            limit = t;
+            best = Some(Surface { t, normal: n.normalize(), albedo: d3(tri.albedo) });
+        }
+    }
+    best
+}
+
+/// Whether the segment from `p` toward the light is free of geometry.
+fn sees_light(data: &SceneData, p: DVec3, to_light: DVec3, distance: f64) -> bool {
+    // Start and stop a hair off the endpoints, relative to the scene's scale,
+    // so that the surface the point lies on does not shadow itself.
+    let eps = 1e-7 * (1.0 + p.length()).max(distance);
+    nearest(data, p, to_light, eps, distance - eps).is_none()
+}
+
+/// Light map and cone profile, evaluated directly from the light's definition.
+fn emitted(data: &SceneData, light: &GpuLight, local: DVec3) -> DVec3 {
+    let power = d3(light.power);
+    let (u, v) = if light.kind == LIGHT_DIRECTIONAL {
+        if local.z < 0.0 {
+            return DVec3::ZERO;
+        }
+        let u = 0.5 + 0.5 * local.x / light.half_extent_x as f64;
+        let v = 0.5 + 0.5 * local.y / light.half_extent_y as f64;
+        if light.bounded != 0 && !((0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)) {
+            return DVec3::ZERO;
+        }
+        (u, v)
+    } else {
+        if local.z <= 0.0 {
+            return DVec3::ZERO;
+        }
+        let angle = (local.x.hypot(local.y)).atan2(local.z);
+        let (cut, beam) = (light.cutoff as f64, light.beam as f64);
+        if angle > cut {
+            return DVec3::ZERO;
+        }
+        let profile = if beam >= cut { 1.0 } else { ((cut - angle) / (cut - beam)).clamp(0.0, 1.0) };
+        let s = 0.5 / (local.z * cut.tan());
+        return power * profile * light_map(data, light, 0.5 + local.x * s, 0.5 + local.y * s);
+    };
+    power * light_map(data, light, u, v)
+}
+
+/// Bilinear light-map lookup in f64 (the light map is an input, like the
+/// geometry: its filtering is part of the scene's definition).
+fn light_map(data: &SceneData, light: &GpuLight, u: f64, v: f64) -> DVec3 {
+    let (w, h) = (light.light_map_width as usize, light.light_map_height as usize);
+    if w == 0 {
+        return DVec3::ONE;
+    }
+    let fx = (u * w as f64 - 0.5).clamp(0.0, (w - 1) as f64);
+    let fy = (v * h as f64 - 0.5).clamp(0.0, (h - 1) as f64);
+    let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+    let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+    let at = |x: usize, y: usize| d3(data.light_map[light.light_map_offset as usize + y * w + x]);
+    let top = at(x0, y0) * (1.0 - tx) + at(x1, y0) * tx;
+    let bottom = at(x0, y1) * (1.0 - tx) + at(x1, y1) * tx;
+    top * (1.0 - ty) + bottom * ty
+}
+
+/// Attenuated surface radiance at one pixel centre, f64.
+pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
+    let p = &data.params;
+    let ndc_x = 2.0 * (x as f64 + 0.5) / p.width as f64 - 1.0;
+    let ndc_y = 1.0 - 2.0 * (y as f64 + 0.5) / p.height as f64;
+    let o = d3(p.camera_position);
+    let d = (d3(p.camera_forward) + d3(p.camera_right) * ndc_x + d3(p.camera_up) * ndc_y).normalize();
+    let Some(hit) = nearest(data, o, d, 0.0, f64::INFINITY) else {
+        return DVec3::ZERO;
+    };
+    let point = o + d * hit.t;
+    let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
+    let sigma_t = d3(p.sigma_t);
+    let mut irradiance = DVec3::ZERO;
+    for light in &data.lights {
+        let rel = point - d3(light.position);
+        let local = DVec3::new(rel.dot(d3(light.axis_x)), rel.dot(d3(light.axis_y)), rel.dot(d3(light.axis_z)));
+        let (to_light, distance, falloff) = if light.kind == LIGHT_DIRECTIONAL {
+            (-d3(light.axis_z), local.z, 1.0)
+        } else {
+            let s = rel.length();
+            (-rel / s, s, 1.0 / (s * s))
+        };
+        let cos = normal.dot(to_light);
+        if cos <= 0.0 {
+            continue;
+        }
+        let e = emitted(data, light, local);
+        if e == DVec3::ZERO {
+            continue;
+        }
+        // A directional light's shadow ray ends at its entry plane.
+        if !sees_light(data, point, to_light, distance) {
+            continue;
+        }
+        let attenuation = (-sigma_t * distance).exp();
+        irradiance += e * attenuation * (cos * falloff);
+    }
+    let radiance = hit.albedo * irradiance / std::f64::consts::PI;
+    radiance * (-sigma_t * hit.t).exp()
+}
+
+/// The whole reference image, rgb in f64, row-major.
+pub fn render(data: &SceneData) -> Vec<DVec3> {
+    let w = data.width();
+    (0..data.pixel_count()).into_par_iter().map(|i| surface_pixel(data, i % w, i / w)).collect()
+}

@@ -1,0 +1,558 @@
+//! Scene files (TOML): parsing, validation with errors that name the file and
+//! the field, and conversion to the buffers the kernels read.
+//!
+//! The format is documented in `scenes/README.md`.
+
+use anyhow::{anyhow, bail, Context, Result};
+use glam::{Vec3, Vec4};
+use serde::Deserialize;
+use slicelight_shaders::types::{
+    FrameParams, GpuLight, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL, LIGHT_SPOT, PHASE_DOBASHI,
+    PHASE_HENYEY_GREENSTEIN, PHASE_ISOTROPIC, PHASE_RAYLEIGH,
+};
+use std::path::{Path, PathBuf};
+
+pub const DEFAULT_SHADOW_MAP_RESOLUTION: u32 = 1024;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub camera: Camera,
+    #[serde(default)]
+    pub medium: Medium,
+    #[serde(default)]
+    pub spotlight: Vec<Spotlight>,
+    #[serde(default)]
+    pub directional_light: Vec<DirectionalLight>,
+    #[serde(default)]
+    pub object: Vec<Object>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    pub position: [f32; 3],
+    pub look_at: [f32; 3],
+    #[serde(default = "default_up")]
+    pub up: [f32; 3],
+    pub vfov_deg: f32,
+    pub resolution: [u32; 2],
+    #[serde(default = "one")]
+    pub exposure: f32,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Medium {
+    /// 1/m per channel.
+    pub sigma_s: [f32; 3],
+    /// 1/m per channel.
+    pub sigma_t: [f32; 3],
+    #[serde(default)]
+    pub phase: Phase,
+}
+
+impl Default for Medium {
+    fn default() -> Self {
+        Medium { sigma_s: [0.0; 3], sigma_t: [0.0; 3], phase: Phase::Isotropic }
+    }
+}
+
+#[derive(Debug, Default, Deserialize, Clone, Copy)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Phase {
+    #[default]
+    Isotropic,
+    HenyeyGreenstein { g: f32 },
+    Rayleigh,
+    /// `1 + 9 cos^16(a/2)` of the 2002 paper, normalised.
+    Dobashi2002,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Spotlight {
+    pub position: [f32; 3],
+    pub direction: [f32; 3],
+    pub up: Option<[f32; 3]>,
+    pub cutoff_deg: f32,
+    pub beam_deg: Option<f32>,
+    /// W/sr per channel.
+    pub intensity: [f32; 3],
+    pub light_map: Option<PathBuf>,
+    pub shadow_map_resolution: Option<u32>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DirectionalLight {
+    pub direction: [f32; 3],
+    pub up: Option<[f32; 3]>,
+    /// W/m^2 per channel, on a surface facing the light.
+    pub irradiance: [f32; 3],
+    pub origin: Option<[f32; 3]>,
+    pub light_map: Option<PathBuf>,
+    /// Width and height of the window the light map covers, metres.
+    pub size: Option<[f32; 2]>,
+    pub shadow_map_resolution: Option<u32>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Object {
+    Sphere(SphereObject),
+    Box(BoxObject),
+    Quad(QuadObject),
+    Mesh(MeshObject),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SphereObject {
+    pub center: [f32; 3],
+    pub radius: f32,
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoxObject {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+/// The rectangle `center +- u/2 +- v/2`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QuadObject {
+    pub center: [f32; 3],
+    pub u: [f32; 3],
+    pub v: [f32; 3],
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshObject {
+    pub file: PathBuf,
+    #[serde(default = "one")]
+    pub scale: f32,
+    #[serde(default)]
+    pub translate: [f32; 3],
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+fn default_up() -> [f32; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn one() -> f32 {
+    1.0
+}
+fn default_albedo() -> [f32; 3] {
+    [0.8; 3]
+}
+
+/// A scene ready for the kernels: every buffer they read, plus what the host
+/// needs to write the image.
+#[derive(Debug, Clone)]
+pub struct SceneData {
+    pub params: FrameParams,
+    pub lights: Vec<GpuLight>,
+    pub spheres: Vec<GpuSphere>,
+    pub triangles: Vec<GpuTriangle>,
+    pub light_map: Vec<Vec4>,
+    pub exposure: f32,
+}
+
+impl SceneData {
+    pub fn width(&self) -> u32 {
+        self.params.width
+    }
+    pub fn height(&self) -> u32 {
+        self.params.height
+    }
+    pub fn pixel_count(&self) -> u32 {
+        self.params.width * self.params.height
+    }
+    pub fn has_geometry(&self) -> bool {
+        !self.spheres.is_empty() || !self.triangles.is_empty()
+    }
+    /// Turns shadow maps off (every light then sees every point), for scenes
+    /// with nothing to cast a shadow.
+    pub fn without_shadow_maps(&mut self) {
+        for l in &mut self.lights {
+            l.shadow_resolution = 0;
+            l.shadow_offset = 0;
+        }
+        self.params.shadow_texel_count = 0;
+    }
+}
+
+/// Reads, validates and converts a scene file. Relative paths inside it are
+/// taken relative to the file's folder.
+pub fn load(path: &Path) -> Result<SceneData> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the scene file", path.display()))?;
+    let file: SceneFile = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    build(&file, base).map_err(|e| anyhow!("{}: {}", path.display(), e))
+}
+
+/// One validation failure: the field's path and what was expected.
+fn invalid(field: &str, expected: &str, got: impl std::fmt::Debug) -> anyhow::Error {
+    anyhow!("{field}: expected {expected}, got {got:?}")
+}
+
+fn finite3(field: &str, v: [f32; 3]) -> Result<Vec3> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(Vec3::from(v))
+    } else {
+        Err(invalid(field, "three finite numbers", v))
+    }
+}
+
+fn unit3(field: &str, v: [f32; 3]) -> Result<Vec3> {
+    let v3 = finite3(field, v)?;
+    let len = v3.length();
+    if !(len > 1e-12) || !len.is_finite() {
+        return Err(invalid(field, "a non-zero direction", v));
+    }
+    Ok(v3 / len)
+}
+
+fn non_negative3(field: &str, v: [f32; 3]) -> Result<Vec3> {
+    if v.iter().all(|x| x.is_finite() && *x >= 0.0) {
+        Ok(Vec3::from(v))
+    } else {
+        Err(invalid(field, "three finite non-negative numbers", v))
+    }
+}
+
+fn albedo(field: &str, v: [f32; 3]) -> Result<Vec4> {
+    if v.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x)) {
+        Ok(Vec3::from(v).extend(0.0))
+    } else {
+        Err(invalid(field, "three numbers in [0, 1]", v))
+    }
+}
+
+fn shadow_resolution(field: &str, r: Option<u32>) -> Result<u32> {
+    match r {
+        None => Ok(DEFAULT_SHADOW_MAP_RESOLUTION),
+        Some(r) if (1..=8192).contains(&r) => Ok(r),
+        Some(r) => Err(invalid(field, "a resolution in 1..=8192", r)),
+    }
+}
+
+/// An orthonormal light frame: `z` along the light, `x` to its right, `y`
+/// down, seen from behind the light with `up` up (so a light map's first row
+/// lands at the top, like a slide projector's). Without an `up`, it is +y, or
+/// -z for a light that points straight up or down.
+fn light_frame(field: &str, z: Vec3, up: Option<[f32; 3]>) -> Result<(Vec3, Vec3)> {
+    let up = match up {
+        Some(up) => unit3(&format!("{field}.up"), up)?,
+        None if z.y.abs() > 0.999 => Vec3::NEG_Z,
+        None => Vec3::Y,
+    };
+    let x = z.cross(up);
+    if x.length() < 1e-4 {
+        return Err(invalid(&format!("{field}.up"), "an up vector not parallel to the direction", up));
+    }
+    let x = x.normalize();
+    Ok((x, z.cross(x)))
+}
+
+/// Decodes an image into linear-light texels (sRGB transfer undone).
+fn load_light_map(field: &str, base: &Path, file: &Path) -> Result<(u32, u32, Vec<Vec4>)> {
+    let path = base.join(file);
+    let img = image::open(&path).map_err(|e| anyhow!("{field}: cannot read light map '{}': {e}", path.display()))?;
+    let img = img.to_rgb32f();
+    let texels = img
+        .pixels()
+        .map(|p| Vec4::new(srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2]), 1.0))
+        .collect();
+    Ok((img.width(), img.height(), texels))
+}
+
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn push_quad(tris: &mut Vec<GpuTriangle>, a: Vec3, b: Vec3, c: Vec3, d: Vec3, albedo: Vec4) {
+    tris.push(GpuTriangle { v0: a.extend(1.0), v1: b.extend(1.0), v2: c.extend(1.0), albedo });
+    tris.push(GpuTriangle { v0: a.extend(1.0), v1: c.extend(1.0), v2: d.extend(1.0), albedo });
+}
+
+fn load_mesh(field: &str, base: &Path, m: &MeshObject, albedo: Vec4, tris: &mut Vec<GpuTriangle>) -> Result<()> {
+    let path = base.join(&m.file);
+    let (models, _) = tobj::load_obj(&path, &tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() })
+        .map_err(|e| anyhow!("{field}.file: cannot read mesh '{}': {e}", path.display()))?;
+    let translate = finite3(&format!("{field}.translate"), m.translate)?;
+    if !(m.scale.is_finite() && m.scale > 0.0) {
+        return Err(invalid(&format!("{field}.scale"), "a positive number", m.scale));
+    }
+    let before = tris.len();
+    for model in models {
+        let p = &model.mesh.positions;
+        let vertex = |i: u32| Vec3::new(p[3 * i as usize], p[3 * i as usize + 1], p[3 * i as usize + 2]) * m.scale + translate;
+        for f in model.mesh.indices.chunks_exact(3) {
+            tris.push(GpuTriangle {
+                v0: vertex(f[0]).extend(1.0),
+                v1: vertex(f[1]).extend(1.0),
+                v2: vertex(f[2]).extend(1.0),
+                albedo,
+            });
+        }
+    }
+    if tris.len() == before {
+        return Err(anyhow!("{field}.file: mesh '{}' has no triangles", path.display()));
+    }
+    Ok(())
+}
+
+/// Axis-aligned bounds of all geometry (spheres and triangles).
+fn bounds(spheres: &[GpuSphere], tris: &[GpuTriangle]) -> Option<(Vec3, Vec3)> {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for s in spheres {
+        let c = s.center_radius.truncate();
+        lo = lo.min(c - s.center_radius.w);
+        hi = hi.max(c + s.center_radius.w);
+    }
+    for t in tris {
+        for v in [t.v0, t.v1, t.v2] {
+            lo = lo.min(v.truncate());
+            hi = hi.max(v.truncate());
+        }
+    }
+    (lo.x <= hi.x).then_some((lo, hi))
+}
+
+/// Validates a parsed scene and converts it to kernel buffers.
+pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
+    // Camera.
+    let cam = &file.camera;
+    let [w, h] = cam.resolution;
+    if w == 0 || h == 0 {
+        bail!(invalid("camera.resolution", "two positive pixel counts", cam.resolution));
+    }
+    if (w as u64) * (h as u64) > u32::MAX as u64 / 4 {
+        bail!(invalid("camera.resolution", "at most 2^30 pixels", cam.resolution));
+    }
+    if !(cam.vfov_deg > 0.0 && cam.vfov_deg < 180.0) {
+        bail!(invalid("camera.vfov_deg", "an angle in (0, 180) degrees", cam.vfov_deg));
+    }
+    if !(cam.exposure.is_finite() && cam.exposure > 0.0) {
+        bail!(invalid("camera.exposure", "a positive number", cam.exposure));
+    }
+    let position = finite3("camera.position", cam.position)?;
+    let look_at = finite3("camera.look_at", cam.look_at)?;
+    let forward = unit3("camera.look_at", (look_at - position).into())
+        .map_err(|_| invalid("camera.look_at", "a point different from camera.position", cam.look_at))?;
+    let up = unit3("camera.up", cam.up)?;
+    let right = forward.cross(up);
+    if right.length() < 1e-4 {
+        bail!(invalid("camera.up", "an up vector not parallel to the view direction", cam.up));
+    }
+    let right = right.normalize();
+    let true_up = right.cross(forward);
+    let tan_half = (cam.vfov_deg.to_radians() * 0.5).tan();
+    let aspect = w as f32 / h as f32;
+
+    // Medium.
+    let m = &file.medium;
+    let sigma_s = non_negative3("medium.sigma_s", m.sigma_s)?;
+    let sigma_t = non_negative3("medium.sigma_t", m.sigma_t)?;
+    if sigma_s.cmpgt(sigma_t).any() {
+        bail!(invalid("medium.sigma_s", "no channel above medium.sigma_t (scattering is part of extinction)", m.sigma_s));
+    }
+    let (phase_kind, phase_g) = match m.phase {
+        Phase::Isotropic => (PHASE_ISOTROPIC, 0.0),
+        Phase::Rayleigh => (PHASE_RAYLEIGH, 0.0),
+        Phase::Dobashi2002 => (PHASE_DOBASHI, 0.0),
+        Phase::HenyeyGreenstein { g } => {
+            if !(g > -1.0 && g < 1.0) {
+                bail!(invalid("medium.phase.g", "a number in (-1, 1)", g));
+            }
+            (PHASE_HENYEY_GREENSTEIN, g)
+        }
+    };
+
+    // Objects.
+    let mut spheres = Vec::new();
+    let mut triangles = Vec::new();
+    for (i, obj) in file.object.iter().enumerate() {
+        let field = format!("object[{i}]");
+        match obj {
+            Object::Sphere(s) => {
+                let c = finite3(&format!("{field}.center"), s.center)?;
+                if !(s.radius.is_finite() && s.radius > 0.0) {
+                    bail!(invalid(&format!("{field}.radius"), "a positive number of metres", s.radius));
+                }
+                let albedo = albedo(&format!("{field}.albedo"), s.albedo)?;
+                spheres.push(GpuSphere { center_radius: c.extend(s.radius), albedo });
+            }
+            Object::Box(b) => {
+                let lo = finite3(&format!("{field}.min"), b.min)?;
+                let hi = finite3(&format!("{field}.max"), b.max)?;
+                if lo.cmpge(hi).any() {
+                    bail!(invalid(&format!("{field}.max"), "every coordinate above min's", b.max));
+                }
+                let a = albedo(&format!("{field}.albedo"), b.albedo)?;
+                let c = |x: bool, y: bool, z: bool| {
+                    Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
+                };
+                let (f, t) = (false, true);
+                push_quad(&mut triangles, c(f, f, f), c(t, f, f), c(t, t, f), c(f, t, f), a);
+                push_quad(&mut triangles, c(f, f, t), c(t, f, t), c(t, t, t), c(f, t, t), a);
+                push_quad(&mut triangles, c(f, f, f), c(f, t, f), c(f, t, t), c(f, f, t), a);
+                push_quad(&mut triangles, c(t, f, f), c(t, t, f), c(t, t, t), c(t, f, t), a);
+                push_quad(&mut triangles, c(f, f, f), c(t, f, f), c(t, f, t), c(f, f, t), a);
+                push_quad(&mut triangles, c(f, t, f), c(t, t, f), c(t, t, t), c(f, t, t), a);
+            }
+            Object::Quad(q) => {
+                let c = finite3(&format!("{field}.center"), q.center)?;
+                let u = finite3(&format!("{field}.u"), q.u)?;
+                let v = finite3(&format!("{field}.v"), q.v)?;
+                if u.cross(v).length() < 1e-12 {
+                    bail!(invalid(&format!("{field}.v"), "an edge not parallel to u and both non-zero", q.v));
+                }
+                let a = albedo(&format!("{field}.albedo"), q.albedo)?;
+                let (hu, hv) = (u * 0.5, v * 0.5);
+                push_quad(&mut triangles, c - hu - hv, c + hu - hv, c + hu + hv, c - hu + hv, a);
+            }
+            Object::Mesh(mesh) => {
+                let a = albedo(&format!("{field}.albedo"), mesh.albedo)?;
+                load_mesh(&field, base, mesh, a, &mut triangles)?;
+            }
+        }
+    }
+    let scene_bounds = bounds(&spheres, &triangles);
+
+    // Lights.
+    let mut lights = Vec::new();
+    let mut light_map = Vec::new();
+    let mut shadow_texels = 0u32;
+    for (i, s) in file.spotlight.iter().enumerate() {
+        let field = format!("spotlight[{i}]");
+        let pos = finite3(&format!("{field}.position"), s.position)?;
+        let z = unit3(&format!("{field}.direction"), s.direction)?;
+        let (x, y) = light_frame(&field, z, s.up)?;
+        if !(s.cutoff_deg > 0.0 && s.cutoff_deg < 90.0) {
+            bail!(invalid(&format!("{field}.cutoff_deg"), "an angle in (0, 90) degrees", s.cutoff_deg));
+        }
+        let beam = s.beam_deg.unwrap_or(s.cutoff_deg);
+        if !(beam > 0.0 && beam <= s.cutoff_deg) {
+            bail!(invalid(&format!("{field}.beam_deg"), "an angle in (0, cutoff_deg] degrees", beam));
+        }
+        let power = non_negative3(&format!("{field}.intensity"), s.intensity)?;
+        let res = shadow_resolution(&format!("{field}.shadow_map_resolution"), s.shadow_map_resolution)?;
+        let mut light = GpuLight {
+            position: pos.extend(1.0),
+            axis_x: x.extend(0.0),
+            axis_y: y.extend(0.0),
+            axis_z: z.extend(0.0),
+            power: power.extend(0.0),
+            kind: LIGHT_SPOT,
+            cutoff: s.cutoff_deg.to_radians(),
+            beam: beam.to_radians(),
+            tan_cutoff: s.cutoff_deg.to_radians().tan(),
+            shadow_offset: shadow_texels,
+            shadow_resolution: res,
+            ..Default::default()
+        };
+        if let Some(file) = &s.light_map {
+            let (mw, mh, texels) = load_light_map(&format!("{field}.light_map"), base, file)?;
+            light.light_map_offset = light_map.len() as u32;
+            light.light_map_width = mw;
+            light.light_map_height = mh;
+            light_map.extend(texels);
+        }
+        shadow_texels = shadow_texels
+            .checked_add(res * res)
+            .ok_or_else(|| invalid(&format!("{field}.shadow_map_resolution"), "fewer shadow-map texels in all", res))?;
+        lights.push(light);
+    }
+    for (i, d) in file.directional_light.iter().enumerate() {
+        let field = format!("directional_light[{i}]");
+        let z = unit3(&format!("{field}.direction"), d.direction)?;
+        let (x, y) = light_frame(&field, z, d.up)?;
+        let power = non_negative3(&format!("{field}.irradiance"), d.irradiance)?;
+        let res = shadow_resolution(&format!("{field}.shadow_map_resolution"), d.shadow_map_resolution)?;
+        // Without an explicit entry plane, the light enters the medium where
+        // it first meets the scene's bounding sphere.
+        let (center, radius) = match scene_bounds {
+            Some((lo, hi)) => ((lo + hi) * 0.5, ((hi - lo) * 0.5).length().max(1e-3)),
+            None => (Vec3::ZERO, 1.0),
+        };
+        let origin = match d.origin {
+            Some(o) => finite3(&format!("{field}.origin"), o)?,
+            None => center - z * radius,
+        };
+        let mut light = GpuLight {
+            position: origin.extend(1.0),
+            axis_x: x.extend(0.0),
+            axis_y: y.extend(0.0),
+            axis_z: z.extend(0.0),
+            power: power.extend(0.0),
+            kind: LIGHT_DIRECTIONAL,
+            half_extent_x: radius,
+            half_extent_y: radius,
+            shadow_offset: shadow_texels,
+            shadow_resolution: res,
+            ..Default::default()
+        };
+        if let Some(size) = d.size {
+            if !(size.iter().all(|s| s.is_finite() && *s > 0.0)) {
+                bail!(invalid(&format!("{field}.size"), "two positive sizes in metres", size));
+            }
+            light.half_extent_x = size[0] * 0.5;
+            light.half_extent_y = size[1] * 0.5;
+            light.bounded = 1;
+        }
+        if let Some(file) = &d.light_map {
+            if d.size.is_none() {
+                bail!(invalid(&format!("{field}.size"), "the window's [width, height] in metres when a light_map is given", "nothing"));
+            }
+            let (mw, mh, texels) = load_light_map(&format!("{field}.light_map"), base, file)?;
+            light.light_map_offset = light_map.len() as u32;
+            light.light_map_width = mw;
+            light.light_map_height = mh;
+            light_map.extend(texels);
+        }
+        shadow_texels = shadow_texels
+            .checked_add(res * res)
+            .ok_or_else(|| invalid(&format!("{field}.shadow_map_resolution"), "fewer shadow-map texels in all", res))?;
+        lights.push(light);
+    }
+
+    let params = FrameParams {
+        camera_position: position.extend(1.0),
+        camera_forward: forward.extend(0.0),
+        camera_right: (right * tan_half * aspect).extend(0.0),
+        camera_up: (true_up * tan_half).extend(0.0),
+        sigma_t: sigma_t.extend(0.0),
+        sigma_s: sigma_s.extend(0.0),
+        width: w,
+        height: h,
+        light_count: lights.len() as u32,
+        sphere_count: spheres.len() as u32,
+        triangle_count: triangles.len() as u32,
+        shadow_texel_count: shadow_texels,
+        phase_kind,
+        phase_g,
+    };
+    let mut data = SceneData { params, lights, spheres, triangles, light_map, exposure: cam.exposure };
+    if !data.has_geometry() {
+        data.without_shadow_maps();
+    }
+    Ok(data)
+}

@@ -1,0 +1,271 @@
+//! Lights: spotlight cones, light maps (projective textures), shadow maps, and
+//! the light that reaches a point of the medium or of a surface.
+
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
+
+use crate::geometry::trace_nearest;
+use crate::types::{FrameParams, GpuLight, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL};
+use crate::glam::{Vec3, Vec4, Vec4Swizzles};
+
+/// Stored in a shadow-map texel whose ray hits nothing.
+pub const SHADOW_FAR: f32 = f32::MAX;
+
+/// Beer-Lambert transmittance `exp(-sigma_t d)` per channel (the `exp(-rho kappa s)`
+/// factors of eq. 1 and eq. 3 of the 2002 paper); `sigma_t` in 1/m, `distance` in m.
+pub fn transmittance(sigma_t: Vec4, distance: f32) -> Vec4 {
+    Vec4::new(
+        (-sigma_t.x * distance).exp(),
+        (-sigma_t.y * distance).exp(),
+        (-sigma_t.z * distance).exp(),
+        1.0,
+    )
+}
+
+/// `p` in the light's frame: `(x along axis_x, y along axis_y, z along axis_z)`,
+/// metres, relative to the light's position (spot) or entry-plane centre
+/// (directional).
+pub fn light_local(light: &GpuLight, p: Vec3) -> Vec3 {
+    let d = p - light.position.xyz();
+    Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()))
+}
+
+/// The spotlight cone's angular profile at `local` (a point in the light's
+/// frame): 1 inside the beam angle, 0 outside the cutoff, linear in the angle
+/// between them. The hard-edge test is done on tangents (`r <= z tan(cutoff)`),
+/// which keeps its accuracy for cutoffs near 0 where `cos(cutoff)` rounds to 1.
+pub fn cone_falloff(light: &GpuLight, local: Vec3) -> f32 {
+    if local.z <= 0.0 {
+        return 0.0;
+    }
+    let r = (local.x * local.x + local.y * local.y).sqrt();
+    if r > local.z * light.tan_cutoff {
+        return 0.0;
+    }
+    if light.beam >= light.cutoff {
+        return 1.0;
+    }
+    let angle = r.atan2(local.z);
+    ((light.cutoff - angle) / (light.cutoff - light.beam)).clamp(0.0, 1.0)
+}
+
+/// Bilinear lookup in a light map stored row by row (row 0 at `v = 0`), with
+/// texel centres at `(i + 0.5) / width`, clamped to the edge texels.
+pub fn sample_light_map(texels: &[Vec4], offset: u32, width: u32, height: u32, u: f32, v: f32) -> Vec4 {
+    let fx = (u * width as f32 - 0.5).clamp(0.0, (width - 1) as f32);
+    let fy = (v * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
+    let x0 = fx.floor();
+    let y0 = fy.floor();
+    let tx = fx - x0;
+    let ty = fy - y0;
+    let x0 = x0 as u32;
+    let y0 = y0 as u32;
+    let x1 = (x0 + 1).min(width - 1);
+    let y1 = (y0 + 1).min(height - 1);
+    let row0 = offset + y0 * width;
+    let row1 = offset + y1 * width;
+    let top = texels[(row0 + x0) as usize] * (1.0 - tx) + texels[(row0 + x1) as usize] * tx;
+    let bottom = texels[(row1 + x0) as usize] * (1.0 - tx) + texels[(row1 + x1) as usize] * tx;
+    top * (1.0 - ty) + bottom * ty
+}
+
+/// Light-map / shadow-map coordinates `(u, v)` in [0, 1] of a point given in
+/// the light's frame. Spot: `uv = 0.5 + 0.5 (x, y) / (z tan(cutoff))`;
+/// directional: `uv = 0.5 + 0.5 (x / half_extent_x, y / half_extent_y)`.
+pub fn light_uv(light: &GpuLight, local: Vec3) -> (f32, f32) {
+    if light.kind == LIGHT_DIRECTIONAL {
+        (0.5 + 0.5 * local.x / light.half_extent_x, 0.5 + 0.5 * local.y / light.half_extent_y)
+    } else {
+        let s = 0.5 / (local.z * light.tan_cutoff);
+        (0.5 + local.x * s, 0.5 + local.y * s)
+    }
+}
+
+/// What the light emits toward `local` before any attenuation or shadowing:
+/// radiant intensity in W/sr (spot: `I_l` of eq. 2, cone profile times light
+/// map) or irradiance in W/m^2 (directional: light map over the window).
+pub fn emitted(light: &GpuLight, light_map: &[Vec4], local: Vec3) -> Vec4 {
+    let mut strength = 1.0;
+    if light.kind == LIGHT_DIRECTIONAL {
+        if local.z < 0.0 {
+            return Vec4::ZERO;
+        }
+    } else {
+        strength = cone_falloff(light, local);
+        if strength <= 0.0 {
+            return Vec4::ZERO;
+        }
+    }
+    let (u, v) = light_uv(light, local);
+    if light.kind == LIGHT_DIRECTIONAL && light.bounded != 0 && (u < 0.0 || u > 1.0 || v < 0.0 || v > 1.0) {
+        return Vec4::ZERO;
+    }
+    let mut color = light.power * strength;
+    if light.light_map_width > 0 {
+        color *= sample_light_map(light_map, light.light_map_offset, light.light_map_width, light.light_map_height, u, v);
+    }
+    color
+}
+
+/// World-space ray of shadow-map texel `texel` (row-major, `res x res`) of a
+/// light: origin and unit direction. Spot: from the light through the texel
+/// centre on the `z = 1` plane of the frustum that covers the cone.
+/// Directional: from the texel centre on the entry plane along the light.
+pub fn shadow_texel_ray(light: &GpuLight, texel: u32) -> (Vec3, Vec3) {
+    let res = light.shadow_resolution;
+    let i = texel % res;
+    let j = texel / res;
+    let a = 2.0 * (i as f32 + 0.5) / res as f32 - 1.0;
+    let b = 2.0 * (j as f32 + 0.5) / res as f32 - 1.0;
+    let (x, y, z) = (light.axis_x.xyz(), light.axis_y.xyz(), light.axis_z.xyz());
+    if light.kind == LIGHT_DIRECTIONAL {
+        let origin = light.position.xyz() + x * (a * light.half_extent_x) + y * (b * light.half_extent_y);
+        (origin, z)
+    } else {
+        let dir = (z + x * (a * light.tan_cutoff) + y * (b * light.tan_cutoff)).normalize();
+        (light.position.xyz(), dir)
+    }
+}
+
+/// Shadow-map texel kernel: the distance from the light (spot, metres along the
+/// texel's ray) or from its entry plane (directional) to the nearest surface,
+/// or `SHADOW_FAR`. `index` runs over the texels of all lights in order.
+pub fn shadow_map_texel(
+    index: u32,
+    params: &FrameParams,
+    lights: &[GpuLight],
+    spheres: &[GpuSphere],
+    triangles: &[GpuTriangle],
+) -> f32 {
+    let mut l = 0;
+    while l < params.light_count as usize {
+        let light = lights[l];
+        let count = light.shadow_resolution * light.shadow_resolution;
+        if index >= light.shadow_offset && index < light.shadow_offset + count {
+            let (origin, dir) = shadow_texel_ray(&light, index - light.shadow_offset);
+            let hit = trace_nearest(
+                origin,
+                dir,
+                0.0,
+                SHADOW_FAR,
+                spheres,
+                params.sphere_count,
+                triangles,
+                params.triangle_count,
+            );
+            return hit.distance.min(SHADOW_FAR);
+        }
+        l += 1;
+    }
+    SHADOW_FAR
+}
+
+/// Depth tolerance of the shadow test, metres. A shadow-map texel stores the
+/// depth along its centre ray; a point anywhere in the texel's footprint
+/// (`footprint` metres wide) on a surface tilted by `theta` to the light can
+/// differ from it by up to `footprint * tan(theta)`. The bias is one footprint
+/// plus that slope term (capped at 10 footprints, i.e. grazing at 84 deg), plus
+/// 1e-4 of the distance for f32 rounding of the depths themselves.
+pub fn shadow_bias(footprint: f32, cos_incidence: f32, distance: f32) -> f32 {
+    let c = cos_incidence.abs().clamp(1e-3, 1.0);
+    let tan = ((1.0 - c * c).sqrt() / c).min(10.0);
+    footprint * (1.0 + tan) + 1e-4 * distance
+}
+
+/// The shadow test `H` of eq. 2 (2002 paper): 1 if `p` (given also in the
+/// light's frame as `local`) sees the light according to the light's shadow
+/// map, 0 otherwise. `cos_incidence` is the cosine between the surface normal
+/// and the direction to the light (1 for points in the medium).
+pub fn shadow_visibility(light: &GpuLight, shadow: &[f32], p: Vec3, local: Vec3, cos_incidence: f32) -> f32 {
+    let res = light.shadow_resolution;
+    if res == 0 {
+        return 1.0;
+    }
+    let (u, v) = light_uv(light, local);
+    if u < 0.0 || u >= 1.0 || v < 0.0 || v >= 1.0 {
+        // Outside the shadow map: outside the cone or the window, already dark.
+        return 1.0;
+    }
+    let i = ((u * res as f32) as u32).min(res - 1);
+    let j = ((v * res as f32) as u32).min(res - 1);
+    let stored = shadow[(light.shadow_offset + j * res + i) as usize];
+    let (distance, footprint) = if light.kind == LIGHT_DIRECTIONAL {
+        (local.z, 2.0 * light.half_extent_x.max(light.half_extent_y) / res as f32)
+    } else {
+        let d = (p - light.position.xyz()).length();
+        // Texel width at distance d, widened off-axis by 1/cos^2 of the angle.
+        let cos2 = local.z * local.z / (d * d).max(1e-30);
+        (d, d * 2.0 * light.tan_cutoff / (res as f32 * cos2.max(1e-3)))
+    };
+    if distance - shadow_bias(footprint, cos_incidence, distance) > stored {
+        0.0
+    } else {
+        1.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spot(cutoff_deg: f32, beam_deg: f32) -> GpuLight {
+        GpuLight {
+            position: Vec4::ZERO,
+            axis_x: Vec4::X,
+            axis_y: Vec4::Y,
+            axis_z: Vec4::Z,
+            power: Vec4::ONE,
+            cutoff: cutoff_deg.to_radians(),
+            beam: beam_deg.to_radians(),
+            tan_cutoff: cutoff_deg.to_radians().tan(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn cone_profile_is_hard_or_linear_in_angle() {
+        let hard = spot(30.0, 30.0);
+        let at = |deg: f32| Vec3::new(deg.to_radians().tan(), 0.0, 1.0);
+        assert_eq!(cone_falloff(&hard, at(29.9)), 1.0);
+        assert_eq!(cone_falloff(&hard, at(30.1)), 0.0);
+        assert_eq!(cone_falloff(&hard, Vec3::new(0.0, 0.0, -1.0)), 0.0);
+        let soft = spot(30.0, 20.0);
+        assert_eq!(cone_falloff(&soft, at(10.0)), 1.0);
+        assert!((cone_falloff(&soft, at(25.0)) - 0.5).abs() < 1e-5);
+        // A 0.01 degree cone still has an inside: cos(cutoff) would round to 1.
+        let narrow = spot(0.01, 0.01);
+        assert_eq!(cone_falloff(&narrow, at(0.005)), 1.0);
+        assert_eq!(cone_falloff(&narrow, at(0.02)), 0.0);
+    }
+
+    #[test]
+    fn light_map_is_bilinear_between_texel_centres() {
+        // 2x1 map: black, white. Texel centres at u = 0.25 and 0.75.
+        let texels = [Vec4::ZERO, Vec4::ONE];
+        assert_eq!(sample_light_map(&texels, 0, 2, 1, 0.25, 0.5), Vec4::ZERO);
+        assert_eq!(sample_light_map(&texels, 0, 2, 1, 0.5, 0.5), Vec4::splat(0.5));
+        assert_eq!(sample_light_map(&texels, 0, 2, 1, 0.0, 0.5), Vec4::ZERO);
+        assert_eq!(sample_light_map(&texels, 0, 2, 1, 1.0, 0.5), Vec4::ONE);
+        // Far outside [0,1]: clamped, never out of bounds.
+        assert_eq!(sample_light_map(&texels, 0, 2, 1, -7.0, 99.0), Vec4::ZERO);
+    }
+
+    #[test]
+    fn shadow_texel_rays_cover_the_cone() {
+        let mut light = spot(45.0, 45.0);
+        light.shadow_resolution = 2;
+        // Texel (0,0) looks toward -x, -y at half the cone's tangent.
+        let (o, d) = shadow_texel_ray(&light, 0);
+        assert_eq!(o, Vec3::ZERO);
+        let expected = Vec3::new(-0.5, -0.5, 1.0).normalize();
+        assert!((d - expected).length() < 1e-6);
+    }
+
+    #[test]
+    fn bias_grows_toward_grazing_and_stays_finite() {
+        let b0 = shadow_bias(0.01, 1.0, 10.0);
+        assert!((b0 - (0.01 + 1e-3)).abs() < 1e-7);
+        let grazing = shadow_bias(0.01, 0.0, 10.0);
+        assert!((grazing - (0.11 + 1e-3)).abs() < 1e-6);
+    }
+}

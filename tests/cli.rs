@@ -1,0 +1,193 @@
+//! The `slicelight` binary: a good render writes its images and stats; bad
+//! input gets a message naming the file and the field, a non-zero exit, and
+//! no output file.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const GOOD: &str = r#"
+[camera]
+position = [0.0, 1.0, 5.0]
+look_at = [0.0, 0.5, 0.0]
+vfov_deg = 45.0
+resolution = [48, 32]
+
+[medium]
+sigma_s = [0.05, 0.05, 0.05]
+sigma_t = [0.1, 0.1, 0.1]
+
+[[spotlight]]
+position = [0.0, 3.0, 0.0]
+direction = [0.0, -1.0, 0.0]
+cutoff_deg = 40.0
+intensity = [10.0, 10.0, 10.0]
+shadow_map_resolution = 64
+
+[[object]]
+type = "sphere"
+center = [0.0, 0.5, 0.0]
+radius = 0.5
+"#;
+
+struct Run {
+    code: i32,
+    stderr: String,
+    dir: tempfile::TempDir,
+}
+
+impl Run {
+    fn out(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+}
+
+/// Writes `scene` as `scene.toml` in a fresh folder and runs
+/// `slicelight render scene.toml -o out.png -o out.exr --stats stats.json --backend cpu`.
+fn render(scene: &str) -> Run {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("scene.toml"), scene).unwrap();
+    run_in(dir, &["render", "scene.toml", "-o", "out.png", "-o", "out.exr", "--stats", "stats.json", "--backend", "cpu"])
+}
+
+fn run_in(dir: tempfile::TempDir, args: &[&str]) -> Run {
+    let out = Command::new(env!("CARGO_BIN_EXE_slicelight")).args(args).current_dir(dir.path()).output().unwrap();
+    Run { code: out.status.code().unwrap_or(-1), stderr: String::from_utf8_lossy(&out.stderr).into_owned(), dir }
+}
+
+fn assert_rejected(run: &Run, needles: &[&str]) {
+    assert_ne!(run.code, 0, "expected failure, stderr: {}", run.stderr);
+    for n in needles {
+        assert!(run.stderr.contains(n), "stderr lacks {n:?}: {}", run.stderr);
+    }
+    for f in ["out.png", "out.exr", "stats.json"] {
+        assert!(!run.out(f).exists(), "{f} was written despite the error");
+    }
+}
+
+#[test]
+fn good_scene_writes_png_exr_and_stats() {
+    let run = render(GOOD);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let png = image::open(run.out("out.png")).unwrap();
+    assert_eq!((png.width(), png.height()), (48, 32));
+    let exr = image::open(run.out("out.exr")).unwrap().to_rgb32f();
+    assert!(exr.pixels().any(|p| p[0] > 0.0), "the EXR is all black");
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(run.out("stats.json")).unwrap()).unwrap();
+    assert_eq!(stats["backend"], "cpu");
+    let passes = stats["passes"].as_array().unwrap();
+    let names: Vec<_> = passes.iter().map(|p| p["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["shadow_maps", "surface"]);
+    assert!(passes.iter().all(|p| p["ran"] == true && p["seconds"].as_f64().unwrap() >= 0.0));
+}
+
+#[test]
+fn missing_scene_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = run_in(dir, &["render", "nowhere.toml", "-o", "out.png", "--backend", "cpu"]);
+    assert_rejected(&run, &["nowhere.toml", "cannot read the scene file"]);
+}
+
+#[test]
+fn malformed_toml() {
+    let run = render("[camera\nposition = [0, 0, 0]");
+    assert_rejected(&run, &["scene.toml", "line 1"]);
+}
+
+#[test]
+fn unknown_field() {
+    let run = render(&GOOD.replace("vfov_deg = 45.0", "vfov_deg = 45.0\nfocal_length = 3.0"));
+    assert_rejected(&run, &["scene.toml", "unknown field `focal_length`"]);
+}
+
+#[test]
+fn missing_mesh() {
+    let run = render(&format!("{GOOD}\n[[object]]\ntype = \"mesh\"\nfile = \"teapot.obj\"\n"));
+    assert_rejected(&run, &["scene.toml", "object[1].file", "teapot.obj"]);
+}
+
+#[test]
+fn missing_light_map() {
+    let run = render(&GOOD.replace("shadow_map_resolution = 64", "shadow_map_resolution = 64\nlight_map = \"slide.png\""));
+    assert_rejected(&run, &["scene.toml", "spotlight[0].light_map", "slide.png"]);
+}
+
+#[test]
+fn negative_coefficient() {
+    let run = render(&GOOD.replace("sigma_t = [0.1, 0.1, 0.1]", "sigma_t = [0.1, -0.1, 0.1]"));
+    assert_rejected(&run, &["scene.toml", "medium.sigma_t", "non-negative"]);
+}
+
+#[test]
+fn scattering_above_extinction() {
+    let run = render(&GOOD.replace("sigma_s = [0.05, 0.05, 0.05]", "sigma_s = [0.5, 0.05, 0.05]"));
+    assert_rejected(&run, &["scene.toml", "medium.sigma_s"]);
+}
+
+#[test]
+fn zero_sized_resolution() {
+    let run = render(&GOOD.replace("resolution = [48, 32]", "resolution = [0, 32]"));
+    assert_rejected(&run, &["scene.toml", "camera.resolution", "positive"]);
+}
+
+#[test]
+fn zero_length_direction() {
+    let run = render(&GOOD.replace("direction = [0.0, -1.0, 0.0]", "direction = [0.0, 0.0, 0.0]"));
+    assert_rejected(&run, &["scene.toml", "spotlight[0].direction", "non-zero"]);
+}
+
+#[test]
+fn camera_looking_at_itself() {
+    let run = render(&GOOD.replace("look_at = [0.0, 0.5, 0.0]", "look_at = [0.0, 1.0, 5.0]"));
+    assert_rejected(&run, &["scene.toml", "camera.look_at"]);
+}
+
+#[test]
+fn cutoff_outside_range() {
+    for bad in ["95.0", "0.0", "90.0", "-10.0"] {
+        let run = render(&GOOD.replace("cutoff_deg = 40.0", &format!("cutoff_deg = {bad}")));
+        assert_rejected(&run, &["scene.toml", "spotlight[0].cutoff_deg", "(0, 90)"]);
+    }
+}
+
+#[test]
+fn unknown_output_format() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("scene.toml"), GOOD).unwrap();
+    let run = run_in(dir, &["render", "scene.toml", "-o", "out.png", "-o", "out.jpg", "--backend", "cpu"]);
+    assert_rejected(&run, &["out.jpg", ".png", ".exr"]);
+}
+
+#[test]
+fn failed_render_keeps_an_existing_output() {
+    // The old image survives a failing run: nothing is half-written over it.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("scene.toml"), GOOD.replace("radius = 0.5", "radius = -1.0")).unwrap();
+    std::fs::write(dir.path().join("keep.png"), b"old").unwrap();
+    let run = run_in(dir, &["render", "scene.toml", "-o", "keep.png", "--backend", "cpu"]);
+    assert_ne!(run.code, 0);
+    assert!(run.stderr.contains("object[0].radius"), "{}", run.stderr);
+    assert_eq!(std::fs::read(run.out("keep.png")).unwrap(), b"old");
+    assert!(no_temp_files(run.dir.path()));
+}
+
+fn no_temp_files(dir: &Path) -> bool {
+    std::fs::read_dir(dir).unwrap().all(|e| {
+        let name = e.unwrap().file_name();
+        !name.to_string_lossy().starts_with(".tmp")
+    })
+}
+
+#[test]
+fn compare_reports_rms_and_max() {
+    let run = render(GOOD);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let out = Command::new(env!("CARGO_BIN_EXE_slicelight"))
+        .args(["compare", "out.exr", "out.exr", "--diff", "diff.png"])
+        .current_dir(run.dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("rms_relative     0.000000"), "{text}");
+    assert!(run.out("diff.png").exists());
+}

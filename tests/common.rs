@@ -1,0 +1,17 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+/// The workspace root (the folder holding `scenes/`).
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+}
+
+/// Loads a scene from a TOML string written to a fresh temporary folder.
+pub fn scene_from_str(toml: &str) -> slicelight::scene::SceneData {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, toml).unwrap();
+    slicelight::scene::load(&path).unwrap()
+}

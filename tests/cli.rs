@@ -76,7 +76,7 @@ fn good_scene_writes_png_exr_and_stats() {
     assert_eq!(stats["backend"], "cpu");
     let passes = stats["passes"].as_array().unwrap();
     let names: Vec<_> = passes.iter().map(|p| p["name"].as_str().unwrap()).collect();
-    assert_eq!(names, ["shadow_maps", "surface"]);
+    assert_eq!(names, ["shadow_maps", "surface", "shafts"]);
     assert!(passes.iter().all(|p| p["ran"] == true && p["seconds"].as_f64().unwrap() >= 0.0));
 }
 

@@ -4,7 +4,7 @@
 use glam::Vec4;
 use indicatif::{ParallelProgressIterator, ProgressBar};
 use rayon::prelude::*;
-use slicelight_shaders::{light, surface};
+use slicelight_shaders::{light, shafts, surface};
 
 use crate::scene::SceneData;
 
@@ -26,4 +26,14 @@ pub fn surface(data: &SceneData, shadow: &[f32], progress: &ProgressBar) -> Vec<
         .progress_with(progress.clone())
         .map(|i| surface::surface_pixel(i, p, &data.lights, &data.spheres, &data.triangles, &data.light_map, shadow))
         .collect()
+}
+
+/// `shafts_kernel` on the CPU: adds in-scattered light to the surface image
+/// in place; `w` becomes the number of `H I_l` samples evaluated.
+pub fn shafts(data: &SceneData, shadow: &[f32], image: &mut [Vec4], progress: &ProgressBar) {
+    let p = &data.params;
+    image.par_iter_mut().enumerate().progress_with(progress.clone()).for_each(|(i, px)| {
+        let s = shafts::shafts_pixel(i as u32, p, &data.lights, &data.light_map, shadow, &data.tables, px.w);
+        *px = shafts::add_to_surface(*px, s);
+    });
 }

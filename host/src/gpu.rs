@@ -17,6 +17,7 @@ const SPIRV: &[u8] = include_bytes!(env!("SLICELIGHT_SPV"));
 pub const KERNELS: &[(&str, &[u32])] = &[
     ("shadow_map_kernel", &[0, 1, 2, 3, 5]),
     ("surface_kernel", &[0, 1, 2, 3, 4, 5, 6]),
+    ("shafts_kernel", &[0, 1, 4, 5, 6, 7]),
 ];
 
 const BINDING_SHADOW: usize = 5;
@@ -125,7 +126,9 @@ impl GpuContext {
             self.storage("triangles", bytemuck::cast_slice(&data.triangles))?,
             self.storage("light maps", bytemuck::cast_slice(&data.light_map))?,
             self.storage("shadow maps", &shadow_bytes)?,
-            self.storage("image", &vec![0u8; data.pixel_count() as usize * std::mem::size_of::<Vec4>()])?,
+            // Until the surface pass runs, no pixel sees a surface.
+            self.storage("image", bytemuck::cast_slice(&vec![crate::render::no_surface(); data.pixel_count() as usize]))?,
+            self.storage("shaft tables", bytemuck::cast_slice(&data.tables))?,
         ];
         let bind_groups = KERNELS
             .iter()
@@ -203,6 +206,11 @@ impl GpuFrame<'_> {
     pub fn read_shadow(&self, texels: usize) -> Result<Vec<f32>> {
         let bytes = self.read(BINDING_SHADOW)?;
         Ok(bytemuck::cast_slice(&bytes[..texels * 4]).to_vec())
+    }
+
+    /// Replaces the image buffer's contents (for testing a kernel that reads it).
+    pub fn write_image(&self, pixels: &[Vec4]) {
+        self.ctx.queue.write_buffer(&self.buffers[BINDING_OUTPUT], 0, bytemuck::cast_slice(pixels));
     }
 
     pub fn read_image(&self, pixels: usize) -> Result<Vec<Vec4>> {

@@ -32,12 +32,18 @@ enum Command {
         /// No progress bar.
         #[arg(short, long)]
         quiet: bool,
+        #[command(flatten)]
+        shafts: ShaftOverrides,
     },
     /// Render the f64 reference (shadow rays against the real geometry, no maps or tables).
     Reference {
         scene: PathBuf,
         #[arg(short, long = "output", required = true)]
         output: Vec<PathBuf>,
+        /// Stop doubling the ray-march samples when the image changes by less
+        /// than this RMS, relative to its peak.
+        #[arg(long, default_value_t = 2e-4)]
+        tolerance: f64,
     },
     /// Print the RMS and max difference of IMAGE against REFERENCE.
     Compare {
@@ -50,6 +56,34 @@ enum Command {
         #[arg(long)]
         diff: Option<PathBuf>,
     },
+}
+
+/// Command-line overrides of the scene's `[shafts]` settings.
+#[derive(clap::Args, Default, Clone)]
+struct ShaftOverrides {
+    /// Sample planes (eq. 5).
+    #[arg(long)]
+    planes: Option<u32>,
+    /// Sub-sample planes per plane interval (eq. 9).
+    #[arg(long)]
+    subplanes: Option<u32>,
+    /// exact: evaluate the phase and attenuation functions; tables: the paper's lookup tables.
+    #[arg(long, value_enum)]
+    mode: Option<scene::ShaftMode>,
+    /// Do not offset the planes per pixel.
+    #[arg(long)]
+    no_jitter: bool,
+}
+
+impl ShaftOverrides {
+    fn apply(&self, data: &mut scene::SceneData) -> Result<()> {
+        let mut s = data.shafts;
+        s.planes = self.planes.unwrap_or(s.planes);
+        s.subplanes = self.subplanes.unwrap_or(s.subplanes);
+        s.mode = self.mode.unwrap_or(s.mode);
+        s.jitter &= !self.no_jitter;
+        data.configure_shafts(s).map_err(|e| anyhow!("command line: --{}", e.to_string().replace('_', "-")))
+    }
 }
 
 fn main() {
@@ -76,9 +110,10 @@ fn write_outputs(outputs: &[PathBuf], pixels: &[Vec4], data: &scene::SceneData) 
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Render { scene, output, backend, stats, quiet } => {
+        Command::Render { scene, output, backend, stats, quiet, shafts } => {
             check_outputs(&output)?;
-            let data = scene::load(&scene)?;
+            let mut data = scene::load(&scene)?;
+            shafts.apply(&mut data)?;
             let backend = Backend::open(backend)?;
             eprintln!("backend: {} on {}", backend.name(), backend.device());
             let show = !quiet && std::io::stderr().is_terminal();
@@ -91,6 +126,14 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
             eprintln!("  total        {:>9.3} s", st.total_seconds);
+            if st.shaft_samples_naive > 0 {
+                eprintln!(
+                    "  shaft samples {} of a naive {} ({:.1}%)",
+                    st.shaft_samples,
+                    st.shaft_samples_naive,
+                    100.0 * st.shaft_samples as f64 / st.shaft_samples_naive as f64
+                );
+            }
             write_outputs(&output, &pixels, &data)?;
             if let Some(path) = stats {
                 let json = serde_json::to_vec_pretty(&st)?;
@@ -98,12 +141,12 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Reference { scene, output } => {
+        Command::Reference { scene, output, tolerance } => {
             check_outputs(&output)?;
             let data = scene::load(&scene)?;
             let t = Instant::now();
-            let image = reference::render(&data);
-            eprintln!("reference: {:.3} s", t.elapsed().as_secs_f64());
+            let (image, samples) = reference::render_converged(&data, tolerance);
+            eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
             write_outputs(&output, &pixels, &data)
         }

@@ -3,9 +3,13 @@
 //! pixel positions with the kernels and nothing of their method, so the
 //! difference between the two is the method's error.
 //!
-//! It renders the same quantity as the kernels' passes that exist so far: the
-//! attenuated surface radiance `I_o exp(-sigma_t T)` (eq. 1, first term, of the
-//! 2002 shafts-of-light paper), at pixel centres.
+//! It renders eq. 1 of the 2002 shafts-of-light paper at pixel centres: the
+//! attenuated surface radiance `I_o exp(-sigma_t T)` plus the in-scattered
+//! light of eq. 2, integrated by a stratified ray march (jittered samples, f64
+//! sums, a shadow ray per sample and light) over the same range as the
+//! shafts pass: from the eye to the surface or to the far end of the scene's
+//! bounds (`depth_far`), whichever is nearer. The sample count doubles until
+//! the image stops changing (see `render_converged`).
 
 use glam::{DVec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
@@ -122,13 +126,19 @@ fn light_map(data: &SceneData, light: &GpuLight, u: f64, v: f64) -> DVec3 {
     top * (1.0 - ty) + bottom * ty
 }
 
-/// Attenuated surface radiance at one pixel centre, f64.
-pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
+fn camera_ray(data: &SceneData, x: u32, y: u32) -> (DVec3, DVec3) {
     let p = &data.params;
     let ndc_x = 2.0 * (x as f64 + 0.5) / p.width as f64 - 1.0;
     let ndc_y = 1.0 - 2.0 * (y as f64 + 0.5) / p.height as f64;
     let o = d3(p.camera_position);
     let d = (d3(p.camera_forward) + d3(p.camera_right) * ndc_x + d3(p.camera_up) * ndc_y).normalize();
+    (o, d)
+}
+
+/// Attenuated surface radiance at one pixel centre, f64.
+pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
+    let p = &data.params;
+    let (o, d) = camera_ray(data, x, y);
     let Some(hit) = nearest(data, o, d, 0.0, f64::INFINITY) else {
         return DVec3::ZERO;
     };
@@ -164,8 +174,116 @@ pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
     radiance * (-sigma_t * hit.t).exp()
 }
 
-/// The whole reference image, rgb in f64, row-major.
-pub fn render(data: &SceneData) -> Vec<DVec3> {
+/// Phase functions in f64, from their closed forms (normalised, 1/sr).
+fn phase(data: &SceneData, cos: f64) -> f64 {
+    use slicelight_shaders::types::{PHASE_DOBASHI, PHASE_HENYEY_GREENSTEIN, PHASE_RAYLEIGH};
+    let pi = std::f64::consts::PI;
+    match data.params.phase_kind {
+        PHASE_HENYEY_GREENSTEIN => {
+            let g = data.params.phase_g as f64;
+            (1.0 - g * g) / (4.0 * pi * (1.0 + g * g - 2.0 * g * cos).powf(1.5))
+        }
+        PHASE_RAYLEIGH => 3.0 * (1.0 + cos * cos) / (16.0 * pi),
+        PHASE_DOBASHI => (1.0 + 9.0 * (0.5 * (1.0 + cos)).powi(8)) / (8.0 * pi),
+        _ => 1.0 / (4.0 * pi),
+    }
+}
+
+/// Hash of (pixel, sample) to [0, 1): the jitter of the stratified samples.
+fn jitter(pixel: u32, sample: u32, round: u32) -> f64 {
+    let mut h = (pixel as u64) << 32 | sample as u64;
+    h ^= (round as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    h ^= h >> 31;
+    (h >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// In-scattered radiance at one pixel centre (eq. 2, summed over lights),
+/// with `samples` stratified samples over the ray, f64. Every sample casts
+/// a shadow ray to every light that lights it.
+pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, samples: u32) -> DVec3 {
+    let p = &data.params;
+    let sigma_s = d3(p.sigma_s);
+    if sigma_s == DVec3::ZERO {
+        return DVec3::ZERO;
+    }
+    let sigma_t = d3(p.sigma_t);
+    let (o, d) = camera_ray(data, x, y);
+    let cos_view = d.dot(d3(p.camera_forward));
+    let t_surface = nearest(data, o, d, 0.0, f64::INFINITY).map_or(f64::INFINITY, |h| h.t);
+    let t0 = p.depth_near as f64 / cos_view;
+    let t1 = (p.depth_far as f64 / cos_view).min(t_surface);
+    if t1 <= t0 {
+        return DVec3::ZERO;
+    }
+    let dt = (t1 - t0) / samples as f64;
+    let pixel = y * p.width + x;
+    let mut sum = DVec3::ZERO;
+    for k in 0..samples {
+        let t = t0 + (k as f64 + jitter(pixel, k, samples)) * dt;
+        let point = o + d * t;
+        for light in &data.lights {
+            let rel = point - d3(light.position);
+            let local = DVec3::new(rel.dot(d3(light.axis_x)), rel.dot(d3(light.axis_y)), rel.dot(d3(light.axis_z)));
+            let e = emitted(data, light, local);
+            if e == DVec3::ZERO {
+                continue;
+            }
+            let (to_light, distance, falloff) = if light.kind == LIGHT_DIRECTIONAL {
+                (-d3(light.axis_z), local.z, 1.0)
+            } else {
+                let s = rel.length();
+                // The kernels' point light has radius LIGHT_RADIUS in 1/s^2.
+                let r = s.max(slicelight_shaders::shafts::LIGHT_RADIUS as f64);
+                (-rel / s.max(1e-300), s, 1.0 / (r * r))
+            };
+            if !sees_light(data, point, to_light, distance) {
+                continue;
+            }
+            let attenuation = (-sigma_t * (distance + t)).exp();
+            sum += e * sigma_s * attenuation * (phase(data, to_light.dot(d)) * falloff);
+        }
+    }
+    sum * dt
+}
+
+/// The whole reference image (surface + in-scattering with `samples` samples
+/// per ray), rgb in f64, row-major.
+pub fn render_with(data: &SceneData, samples: u32) -> Vec<DVec3> {
+    let w = data.width();
+    (0..data.pixel_count())
+        .into_par_iter()
+        .map(|i| surface_pixel(data, i % w, i / w) + inscatter_pixel(data, i % w, i / w, samples))
+        .collect()
+}
+
+/// The reference at convergence: the ray-march sample count starts at 64 and
+/// doubles until the image changes by less than `tolerance` RMS, relative to
+/// its peak (or 65536 samples are reached). Returns the image and the final
+/// sample count.
+pub fn render_converged(data: &SceneData, tolerance: f64) -> (Vec<DVec3>, u32) {
+    let mut samples = 64;
+    let mut image = render_with(data, samples);
+    if !data.scatters() {
+        return (image, 0);
+    }
+    while samples < 65536 {
+        samples *= 2;
+        let next = render_with(data, samples);
+        let peak = next.iter().map(|p| p.max_element()).fold(1e-300, f64::max);
+        let sum2: f64 = next.iter().zip(&image).map(|(a, b)| (*a - *b).length_squared()).sum();
+        let change = (sum2 / (3 * next.len()) as f64).sqrt() / peak;
+        image = next;
+        if change < tolerance {
+            break;
+        }
+    }
+    (image, samples)
+}
+
+/// The reference image's surface term alone (no in-scattering), rgb in f64.
+pub fn render_surfaces(data: &SceneData) -> Vec<DVec3> {
     let w = data.width();
     (0..data.pixel_count()).into_par_iter().map(|i| surface_pixel(data, i % w, i / w)).collect()
 }

@@ -79,6 +79,10 @@ pub struct RenderStats {
     pub passes: Vec<PassStats>,
     /// Wall time of all passes, including uploads and read-back on the GPU.
     pub total_seconds: f64,
+    /// `H I_l` samples the shafts pass evaluated, and the naive count
+    /// `pixels x planes x sub-planes x lights` without clipping or culling.
+    pub shaft_samples: u64,
+    pub shaft_samples_naive: u64,
 }
 
 /// What the scene needs, decided before anything runs.
@@ -99,6 +103,21 @@ pub fn plan(data: &SceneData) -> Vec<PassStats> {
     } else {
         format!("{lights} light(s), {} shadow-map texels", shadow_texels)
     };
+    let visible = data.lights.iter().filter(|l| l.in_view != 0).count();
+    let (shafts_run, shafts_reason) = if !data.scatters() {
+        (false, "the medium does not scatter (sigma_s = 0)".to_string())
+    } else if visible == 0 {
+        (false, format!("no light's volume is in view ({lights} light(s))"))
+    } else {
+        let s = &data.shafts;
+        (
+            true,
+            format!(
+                "{visible} of {lights} light(s) in view, {} planes x {} sub-planes, {:?} mode",
+                s.planes, s.subplanes, s.mode
+            ),
+        )
+    };
     vec![
         pass("shadow_maps", shadow_texels > 0, shadow_reason, shadow_texels),
         pass(
@@ -107,11 +126,12 @@ pub fn plan(data: &SceneData) -> Vec<PassStats> {
             if data.has_geometry() { "surfaces seen through the medium (eq. 1, first term)".into() } else { "no geometry".into() },
             data.pixel_count(),
         ),
+        pass("shafts", shafts_run, shafts_reason, data.pixel_count()),
     ]
 }
 
 /// A pixel whose view ray meets no surface.
-fn no_surface() -> Vec4 {
+pub fn no_surface() -> Vec4 {
     Vec4::new(0.0, 0.0, 0.0, slicelight_shaders::surface::MISS_DISTANCE)
 }
 
@@ -142,6 +162,7 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
                 match pass.name {
                     "shadow_maps" => shadow = cpu::shadow_maps(data, &pb),
                     "surface" => image = cpu::surface(data, &shadow, &pb),
+                    "shafts" => cpu::shafts(data, &shadow, &mut image, &pb),
                     other => unreachable!("pass {other} has no CPU path"),
                 }
                 pass.seconds = t.elapsed().as_secs_f64();
@@ -157,6 +178,7 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
                 let entry = match pass.name {
                     "shadow_maps" => "shadow_map_kernel",
                     "surface" => "surface_kernel",
+                    "shafts" => "shafts_kernel",
                     other => unreachable!("pass {other} has no GPU kernel"),
                 };
                 frame.run(entry, pass.invocations as u32)?;
@@ -172,7 +194,17 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
         }
     };
     pb.finish_and_clear();
+    let shafts_ran = passes.iter().any(|p| p.name == "shafts" && p.ran);
+    let shaft_samples = if shafts_ran { image.iter().map(|p| p.w as u64).sum() } else { 0 };
+    let s = &data.shafts;
+    let shaft_samples_naive = if shafts_ran {
+        data.pixel_count() as u64 * s.planes as u64 * s.subplanes as u64 * data.lights.len() as u64
+    } else {
+        0
+    };
     let stats = RenderStats {
+        shaft_samples,
+        shaft_samples_naive,
         backend: backend.name(),
         device: backend.device(),
         width: data.width(),

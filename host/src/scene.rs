@@ -26,6 +26,50 @@ pub struct SceneFile {
     pub directional_light: Vec<DirectionalLight>,
     #[serde(default)]
     pub object: Vec<Object>,
+    #[serde(default)]
+    pub shafts: Shafts,
+}
+
+/// Settings of the shafts-of-light pass (in-scattering by slice accumulation).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Shafts {
+    /// Sample planes `n` (eq. 5).
+    pub planes: u32,
+    /// Sub-sample planes per plane interval `m` (eq. 9).
+    pub subplanes: u32,
+    /// `exact` evaluates the phase and attenuation functions; `tables` looks
+    /// them up in the paper's 1D `F` and 2D `h` tables.
+    pub mode: ShaftMode,
+    /// Offset the plane lattice per pixel by a 4x4 ordered dither.
+    pub jitter: bool,
+    /// Integrate the `1/s^2` of eq. 3 exactly over each interval.
+    pub analytic_inverse_square: bool,
+    /// Nodes of the phase table over [0, 180] degrees.
+    pub phase_table_size: u32,
+    /// Nodes of the attenuation table `h(s, t)` along `s` and `t`.
+    pub h_table_size: [u32; 2],
+}
+
+impl Default for Shafts {
+    fn default() -> Self {
+        Shafts {
+            planes: 30,
+            subplanes: 6,
+            mode: ShaftMode::Exact,
+            jitter: true,
+            analytic_inverse_square: true,
+            phase_table_size: 256,
+            h_table_size: [256, 256],
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ShaftMode {
+    Exact,
+    Tables,
 }
 
 #[derive(Debug, Deserialize)]
@@ -166,7 +210,11 @@ pub struct SceneData {
     pub spheres: Vec<GpuSphere>,
     pub triangles: Vec<GpuTriangle>,
     pub light_map: Vec<Vec4>,
+    /// The shafts pass's tables (`F` then `h`), empty in exact mode.
+    pub tables: Vec<Vec4>,
     pub exposure: f32,
+    /// The settings the shafts pass was configured with.
+    pub shafts: Shafts,
 }
 
 impl SceneData {
@@ -182,6 +230,85 @@ impl SceneData {
     pub fn has_geometry(&self) -> bool {
         !self.spheres.is_empty() || !self.triangles.is_empty()
     }
+    /// Whether the medium scatters light at all (in any channel).
+    pub fn scatters(&self) -> bool {
+        self.params.sigma_s.truncate().max_element() > 0.0
+    }
+
+    /// Applies shaft settings: validates them, sets the plane depth range, the
+    /// table ranges and the lights' `in_view` flags, and fills the tables.
+    /// The error names the field within `[shafts]`.
+    pub fn configure_shafts(&mut self, s: Shafts) -> Result<()> {
+        if !(1..=100_000).contains(&s.planes) {
+            bail!(invalid("planes", "a plane count in 1..=100000", s.planes));
+        }
+        if !(1..=1024).contains(&s.subplanes) {
+            bail!(invalid("subplanes", "a sub-plane count in 1..=1024", s.subplanes));
+        }
+        if !(2..=65536).contains(&s.phase_table_size) {
+            bail!(invalid("phase_table_size", "a table size in 2..=65536", s.phase_table_size));
+        }
+        if !s.h_table_size.iter().all(|n| (2..=4096).contains(n)) {
+            bail!(invalid("h_table_size", "two table sizes in 2..=4096", s.h_table_size));
+        }
+        let p = &mut self.params;
+        p.plane_count = s.planes;
+        p.subplane_count = s.subplanes;
+        p.shaft_mode = match s.mode {
+            ShaftMode::Exact => slicelight_shaders::shafts::MODE_EXACT,
+            ShaftMode::Tables => slicelight_shaders::shafts::MODE_TABLES,
+        };
+        p.jitter = s.jitter as u32;
+        p.analytic_inverse_square = s.analytic_inverse_square as u32;
+        let camera = p.camera_position.truncate();
+        let forward = p.camera_forward.truncate();
+        // Depth range of the planes: everything that can scatter light toward
+        // the camera lies within the bounds of the geometry and the lights.
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        if let Some((a, b)) = bounds(&self.spheres, &self.triangles) {
+            lo = a;
+            hi = b;
+        }
+        for l in &self.lights {
+            lo = lo.min(l.position.truncate());
+            hi = hi.max(l.position.truncate());
+        }
+        let corners: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][(i >> 2) & 1]))
+            .collect();
+        let depths = corners.iter().map(|c| (*c - camera).dot(forward));
+        let near = depths.clone().fold(f32::INFINITY, f32::min).max(0.0);
+        let far = depths.fold(f32::NEG_INFINITY, f32::max).max(near + 1e-3);
+        p.depth_near = near;
+        p.depth_far = far;
+        // The h table spans every light-to-point and eye-to-point distance
+        // in the bounds; the widest view ray (through an image corner) is
+        // the longest for a given depth.
+        let corner_cos = forward.dot((p.camera_forward + p.camera_right + p.camera_up).truncate().normalize());
+        p.h_t_max = far / corner_cos.max(1e-3);
+        p.h_s_max = self
+            .lights
+            .iter()
+            .flat_map(|l| corners.iter().map(move |c| (*c - l.position.truncate()).length()))
+            .fold(1e-3, f32::max);
+        p.phase_table_size = s.phase_table_size;
+        p.h_table_s = s.h_table_size[0];
+        p.h_table_t = s.h_table_size[1];
+        let params = *p;
+        for l in &mut self.lights {
+            l.in_view = light_in_view(&params, l) as u32;
+        }
+        self.tables = if s.mode == ShaftMode::Tables {
+            let n = params.phase_table_size + params.h_table_s * params.h_table_t;
+            (0..n).map(|k| slicelight_shaders::shafts::table_entry(&params, k)).collect()
+        } else {
+            Vec::new()
+        };
+        self.shafts = s;
+        Ok(())
+    }
+
     /// Turns shadow maps off (every light then sees every point), for scenes
     /// with nothing to cast a shadow.
     pub fn without_shadow_maps(&mut self) {
@@ -549,10 +676,54 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         shadow_texel_count: shadow_texels,
         phase_kind,
         phase_g,
+        // Filled in by `configure_shafts`.
+        ..Default::default()
     };
-    let mut data = SceneData { params, lights, spheres, triangles, light_map, exposure: cam.exposure };
+    let mut data = SceneData {
+        params,
+        lights,
+        spheres,
+        triangles,
+        light_map,
+        tables: Vec::new(),
+        exposure: cam.exposure,
+        shafts: file.shafts,
+    };
     if !data.has_geometry() {
         data.without_shadow_maps();
     }
+    data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;
     Ok(data)
+}
+
+/// Whether a light's volume can be seen: the part of a spotlight's cone
+/// within reach of the view frustum (cut at the far end of the plane range) is
+/// bounded by a sphere, which is tested against the frustum's four side planes.
+/// Conservative: a light that is out of view may be kept, a light in view is
+/// never dropped. Directional lights are always kept.
+fn light_in_view(p: &FrameParams, l: &GpuLight) -> bool {
+    if l.kind == LIGHT_DIRECTIONAL {
+        return true;
+    }
+    let camera = p.camera_position.truncate();
+    let (f, r, u) = (p.camera_forward.truncate(), p.camera_right.truncate(), p.camera_up.truncate());
+    let apex = l.position.truncate();
+    let axis = l.axis_z.truncate();
+    // Every point the planes sample lies in the frustum up to depth_far, the
+    // convex hull of the camera and the four far corners.
+    let far_corners = [f + r + u, f + r - u, f - r + u, f - r - u].map(|c| camera + c * p.depth_far);
+    let reach = far_corners.iter().map(|c| (*c - apex).length()).fold((camera - apex).length(), f32::max);
+    // A ball around the spherical sector {angle <= cutoff, |x - apex| <= reach}.
+    let k = 0.5 * reach;
+    let (sin, cos) = l.cutoff.sin_cos();
+    let rim = ((reach * cos - k).powi(2) + (reach * sin).powi(2)).sqrt();
+    let radius = k.max(rim).max(reach - k);
+    let center = apex + axis * k;
+    // Side planes through the camera, normals turned to point inward.
+    let sides = [(f - r).cross(u), (f + r).cross(u), (f - u).cross(r), (f + u).cross(r)];
+    sides.iter().all(|n| {
+        let n = n.normalize();
+        let n = if n.dot(f) < 0.0 { -n } else { n };
+        (center - camera).dot(n) >= -radius
+    })
 }

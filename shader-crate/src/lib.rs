@@ -17,11 +17,13 @@
 //! | 4 | light-map texels of all lights | `Vec4` |
 //! | 5 | shadow-map depths of all lights | `f32` |
 //! | 6 | output image (rgb radiance, w = hit distance) | `Vec4` |
+//! | 7 | shaft tables: phase `F`, then attenuation `h` | `Vec4` |
 #![cfg_attr(target_arch = "spirv", no_std)]
 
 pub mod geometry;
 pub mod light;
 pub mod phase;
+pub mod shafts;
 pub mod surface;
 pub mod types;
 
@@ -74,5 +76,25 @@ pub fn surface_kernel(
     if index < params.width * params.height {
         output[index as usize] =
             surface::surface_pixel(index, params, lights, spheres, triangles, light_map, shadow);
+    }
+}
+
+#[spirv(compute(threads(64)))]
+pub fn shafts_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] params: &[FrameParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] light_map: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] shadow: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] output: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] tables: &[Vec4],
+) {
+    let index = flat_index(id, groups);
+    let params = &params[0];
+    if index < params.width * params.height {
+        let surface = output[index as usize];
+        let shafts = shafts::shafts_pixel(index, params, lights, light_map, shadow, tables, surface.w);
+        output[index as usize] = shafts::add_to_surface(surface, shafts);
     }
 }

@@ -33,6 +33,27 @@ pub struct FrameParams {
     pub phase_kind: u32,
     /// Henyey-Greenstein asymmetry `g` (only for `PHASE_HENYEY_GREENSTEIN`).
     pub phase_g: f32,
+    /// Shafts: number of sample planes `n` (eq. 5).
+    pub plane_count: u32,
+    /// Shafts: sub-sample planes per plane interval `m` (eq. 9).
+    pub subplane_count: u32,
+    /// Shafts: `shafts::MODE_EXACT` or `shafts::MODE_TABLES`.
+    pub shaft_mode: u32,
+    /// Shafts: 1 to offset the plane lattice per pixel by an ordered dither.
+    pub jitter: u32,
+    /// Shafts: depth range (along the view direction, metres) the planes span.
+    pub depth_near: f32,
+    pub depth_far: f32,
+    /// Shafts: nodes of the phase table `F(alpha)` over [0, pi].
+    pub phase_table_size: u32,
+    /// Shafts: nodes of the attenuation table `h(s, t)` along `s` and `t`.
+    pub h_table_s: u32,
+    pub h_table_t: u32,
+    /// Shafts: the `h` table covers `[0, h_s_max] x [0, h_t_max]` metres.
+    pub h_s_max: f32,
+    pub h_t_max: f32,
+    /// Shafts: 1 to integrate the `1/s^2` of eq. 3 exactly over each interval.
+    pub analytic_inverse_square: u32,
 }
 
 pub const PHASE_ISOTROPIC: u32 = 0;
@@ -85,6 +106,10 @@ pub struct GpuLight {
     /// 1 when light-map and shadow-map coverage outside the rectangle is dark
     /// (directional light through a window); 0 for an unbounded beam.
     pub bounded: u32,
+    /// 1 if the light's volume may be seen by the camera (the shafts pass
+    /// skips the others).
+    pub in_view: u32,
+    pub _pad: [u32; 3],
 }
 
 /// A sphere with a diffuse albedo.
@@ -121,8 +146,8 @@ mod pod {
     pod!(super::FrameParams, super::GpuLight, super::GpuSphere, super::GpuTriangle);
 
     const _: () = {
-        assert!(core::mem::size_of::<super::FrameParams>() == 6 * 16 + 32);
-        assert!(core::mem::size_of::<super::GpuLight>() == 5 * 16 + 48);
+        assert!(core::mem::size_of::<super::FrameParams>() == 6 * 16 + 80);
+        assert!(core::mem::size_of::<super::GpuLight>() == 5 * 16 + 64);
         assert!(core::mem::size_of::<super::GpuSphere>() == 32);
         assert!(core::mem::size_of::<super::GpuTriangle>() == 64);
     };

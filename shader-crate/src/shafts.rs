@@ -1,0 +1,505 @@
+//! Shafts of light: single scattering from every light along each view ray,
+//! with shadows (eq. 2-3 of the 2002 shafts-of-light paper), integrated by
+//! slice accumulation over sample planes parallel to the screen (eq. 5) with
+//! sub-sample planes averaging `H I_l` over each plane interval (eq. 7-9).
+//!
+//! Beyond the paper:
+//! - each view ray is clipped to each light's volume (the cone, or the
+//!   window's prism) analytically, and the planes' intervals to that range
+//!   and to the visible surface, so no sample is spent where no light is;
+//! - the `1/s^2` of eq. 3 is integrated exactly over each interval (it is the
+//!   one factor that varies fast near a light), the rest sampled once per
+//!   interval, as the paper samples `g` once per plane;
+//! - the plane lattice can be offset per pixel by an ordered (Bayer) dither,
+//!   which turns banding into a fine, regular pattern.
+
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
+
+use crate::glam::{Vec3, Vec4, Vec4Swizzles};
+use crate::light::{emitted, light_local, shadow_visibility, transmittance};
+use crate::phase;
+use crate::surface::camera_ray;
+use crate::types::{FrameParams, GpuLight, LIGHT_DIRECTIONAL};
+use core::f32::consts::PI;
+
+/// A point light is treated as a ball of this radius (metres) in the `1/s^2`
+/// factor, so that a view ray through the light gives a large but finite
+/// radiance instead of an infinite one. The reference uses the same bound.
+pub const LIGHT_RADIUS: f32 = 1e-3;
+
+/// Shaft rendering settings, read from `FrameParams`.
+pub const MODE_EXACT: u32 = 0;
+/// The paper's tables: `F(alpha)` (1D) and `h(s, t)` (2D).
+pub const MODE_TABLES: u32 = 1;
+
+/// The interval `[t_lo, t_hi]` of a view ray `o + t d` (d unit) inside a
+/// spotlight's cone, intersected with `[t_min, t_max]`; empty if `lo >= hi`.
+///
+/// Inside the cone of half-angle `theta` means `z >= 0` and
+/// `cos^2(theta) (x^2 + y^2) - sin^2(theta) z^2 <= 0` in the light's frame;
+/// written with `cos^2` and `sin^2` the coefficients stay accurate for angles
+/// near 0 and near 90 degrees. A single nappe with `theta < 90` degrees is
+/// convex, so the set is one interval: the quadratic's roots and the `z = 0`
+/// crossing split the ray into at most four pieces, and each piece is tested
+/// at its midpoint.
+pub fn clip_to_cone(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
+    let q = light_local(light, o);
+    let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
+    let (sin, cos) = light.cutoff.sin_cos();
+    let (c2, s2) = (cos * cos, sin * sin);
+    let a = c2 * (v.x * v.x + v.y * v.y) - s2 * v.z * v.z;
+    let b = 2.0 * (c2 * (q.x * v.x + q.y * v.y) - s2 * q.z * v.z);
+    let c = c2 * (q.x * q.x + q.y * q.y) - s2 * q.z * q.z;
+    // Breakpoints inside (t_min, t_max), at most three.
+    let mut cuts = [t_max; 3];
+    let mut n = 0;
+    let disc = b * b - 4.0 * a * c;
+    if a.abs() > 1e-12 * (b.abs() + c.abs()) && disc >= 0.0 {
+        let root = disc.sqrt();
+        let qq = -0.5 * (b + if b >= 0.0 { root } else { -root });
+        if qq != 0.0 {
+            cuts[0] = qq / a;
+            cuts[1] = c / qq;
+            n = 2;
+        } else {
+            cuts[0] = 0.0;
+            n = 1;
+        }
+    } else if b != 0.0 {
+        cuts[0] = -c / b;
+        n = 1;
+    }
+    if v.z != 0.0 {
+        cuts[n] = -q.z / v.z;
+        n += 1;
+    }
+    // Sort the (up to three) breakpoints and clamp them into the range.
+    let mut i = 0;
+    while i < 3 {
+        if i >= n {
+            cuts[i] = t_max;
+        }
+        cuts[i] = cuts[i].clamp(t_min, t_max);
+        i += 1;
+    }
+    if cuts[0] > cuts[1] {
+        let t = cuts[0];
+        cuts[0] = cuts[1];
+        cuts[1] = t;
+    }
+    if cuts[1] > cuts[2] {
+        let t = cuts[1];
+        cuts[1] = cuts[2];
+        cuts[2] = t;
+    }
+    if cuts[0] > cuts[1] {
+        let t = cuts[0];
+        cuts[0] = cuts[1];
+        cuts[1] = t;
+    }
+    let mut lo = t_max;
+    let mut hi = t_min;
+    let mut start = t_min;
+    let mut k = 0;
+    while k < 4 {
+        let end = if k < 3 { cuts[k] } else { t_max };
+        if end > start {
+            let t = 0.5 * (start + end);
+            let z = q.z + t * v.z;
+            let g = (a * t + b) * t + c;
+            if z >= 0.0 && g <= 0.0 {
+                lo = lo.min(start);
+                hi = hi.max(end);
+            }
+        }
+        start = start.max(end);
+        k += 1;
+    }
+    (lo, hi)
+}
+
+/// The interval of a view ray inside a directional light's lit volume: past
+/// its entry plane (`z >= 0`) and, for a window, inside the window's prism
+/// `|x| <= half_extent_x`, `|y| <= half_extent_y`; intersected with
+/// `[t_min, t_max]`.
+pub fn clip_to_beam(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
+    let q = light_local(light, o);
+    let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
+    let (mut lo, mut hi) = slab(q.z, v.z, 0.0, f32::MAX, t_min, t_max);
+    if light.bounded != 0 {
+        let (lx, hx) = slab(q.x, v.x, -light.half_extent_x, light.half_extent_x, lo, hi);
+        let (ly, hy) = slab(q.y, v.y, -light.half_extent_y, light.half_extent_y, lx, hx);
+        lo = ly;
+        hi = hy;
+    }
+    (lo, hi)
+}
+
+/// `[t_min, t_max]` intersected with `{t : lo <= q + t v <= hi}`.
+fn slab(q: f32, v: f32, lo: f32, hi: f32, t_min: f32, t_max: f32) -> (f32, f32) {
+    if v.abs() < 1e-30 {
+        if q >= lo && q <= hi {
+            return (t_min, t_max);
+        }
+        return (t_max, t_min);
+    }
+    let inv = 1.0 / v;
+    let mut ta = (lo - q) * inv;
+    let mut tb = (hi - q) * inv;
+    if ta > tb {
+        let t = ta;
+        ta = tb;
+        tb = t;
+    }
+    (ta.max(t_min), tb.min(t_max))
+}
+
+/// `integral_a^b dt / s(t)^2` along the ray, exactly, where
+/// `s(t)^2 = h^2 + (t - t_c)^2` is the squared distance to a point at
+/// distance `h` from the ray, closest at `t_c`; `h` is raised to
+/// `LIGHT_RADIUS` (see there). Unit 1/m.
+///
+/// `atan(x_b) - atan(x_a)` is taken as one `atan` of the difference formula
+/// where the two are close, so short intervals far from the light keep
+/// their digits.
+pub fn inverse_square_integral(a: f32, b: f32, t_c: f32, h: f32) -> f32 {
+    let h = h.max(LIGHT_RADIUS);
+    let xa = (a - t_c) / h;
+    let xb = (b - t_c) / h;
+    let den = 1.0 + xa * xb;
+    let angle = if den > 0.0 {
+        ((xb - xa) / den).atan()
+    } else {
+        xb.atan() - xa.atan()
+    };
+    angle / h
+}
+
+/// 4x4 Bayer matrix entry for pixel `(x, y)`, in (0, 1): the plane offset of
+/// the ordered dither.
+/// The entry is the bit-reversed interleaving of `x ^ y` and `y`, which
+/// spreads consecutive ranks as far apart in the 4x4 tile as possible.
+pub fn bayer4(x: u32, y: u32) -> f32 {
+    let v = x ^ y;
+    let rank = ((v & 1) << 3) | ((y & 1) << 2) | (((v >> 1) & 1) << 1) | ((y >> 1) & 1);
+    (rank as f32 + 0.5) / 16.0
+}
+
+/// Phase table lookup: `F(alpha)` on `size` nodes over `alpha` in `[0, pi]`,
+/// linear between nodes (the 2002 paper's 1D texture).
+pub fn phase_from_table(tables: &[Vec4], size: u32, cos_alpha: f32) -> f32 {
+    let alpha = cos_alpha.clamp(-1.0, 1.0).acos();
+    let f = (alpha / PI * (size - 1) as f32).clamp(0.0, (size - 1) as f32);
+    let i = (f.floor() as u32).min(size - 2);
+    let w = f - i as f32;
+    tables[i as usize].x * (1.0 - w) + tables[(i + 1) as usize].x * w
+}
+
+/// Attenuation table lookup: `h(s, t)` per channel on an `ns x nt` grid over
+/// `[0, s_max] x [0, t_max]` (nodes at the cell ends), bilinear, clamped to the
+/// table's edge outside it (eq. 6 of the 2002 paper). `offset` is where the
+/// table starts in `tables`.
+pub fn attenuation_from_table(tables: &[Vec4], offset: u32, ns: u32, nt: u32, s_max: f32, t_max: f32, s: f32, t: f32) -> Vec4 {
+    let fs = (s / s_max * (ns - 1) as f32).clamp(0.0, (ns - 1) as f32);
+    let ft = (t / t_max * (nt - 1) as f32).clamp(0.0, (nt - 1) as f32);
+    let i = (fs.floor() as u32).min(ns - 2);
+    let j = (ft.floor() as u32).min(nt - 2);
+    let (ws, wt) = (fs - i as f32, ft - j as f32);
+    let at = offset + j * ns + i;
+    let a = tables[at as usize] * (1.0 - ws) + tables[(at + 1) as usize] * ws;
+    let b = tables[(at + ns) as usize] * (1.0 - ws) + tables[(at + ns + 1) as usize] * ws;
+    a * (1.0 - wt) + b * wt
+}
+
+/// The smooth part of the attenuation that the `h` table holds, per channel:
+/// `sigma_s exp(-sigma_t (s + t))`, times `1/max(s, LIGHT_RADIUS)^2` unless
+/// the `1/s^2` is integrated analytically. Unit 1/m (or 1/m^3 with `1/s^2`).
+pub fn attenuation(params: &FrameParams, s: f32, t: f32, with_inverse_square: bool) -> Vec4 {
+    let mut h = params.sigma_s * transmittance(params.sigma_t, s + t);
+    if with_inverse_square {
+        let r = s.max(LIGHT_RADIUS);
+        h /= r * r;
+    }
+    Vec4::new(h.x, h.y, h.z, 0.0)
+}
+
+/// Table entry `k` of the shaft tables: the phase table's `phase_table_size`
+/// nodes first (`F` in `x`), then the `h` table row by row. The host fills the
+/// tables with this function on the CPU, so the values are the very ones the
+/// exact mode computes at the nodes.
+pub fn table_entry(params: &FrameParams, k: u32) -> Vec4 {
+    let nf = params.phase_table_size;
+    if k < nf {
+        let alpha = PI * k as f32 / (nf - 1) as f32;
+        let f = phase::evaluate(params.phase_kind, alpha.cos(), params.phase_g);
+        return Vec4::new(f, f, f, 0.0);
+    }
+    let k = k - nf;
+    let (i, j) = (k % params.h_table_s, k / params.h_table_s);
+    let s = params.h_s_max * i as f32 / (params.h_table_s - 1) as f32;
+    let t = params.h_t_max * j as f32 / (params.h_table_t - 1) as f32;
+    attenuation(params, s, t, params.analytic_inverse_square == 0)
+}
+
+/// In-scattered radiance along the view ray of one pixel, W/(m^2 sr) per
+/// channel, in `xyz`; `w` holds the number of `H I_l` samples evaluated.
+/// `surface_distance` is the distance to the visible surface (the surface
+/// pass's `w`), where the integral ends.
+///
+/// For each light and each plane interval `[a, b]` (clipped as described in
+/// the module docs), eq. 7: `I_s += J_i g_i`, with `J_i` the mean of `H I_l`
+/// over `m` sub-planes in the interval (eq. 9) and `g_i` the rest of eq. 3
+/// integrated over the interval:
+/// `sigma_s p(alpha) exp(-sigma_t (s + t)) * integral_a^b dt / s^2` at the
+/// interval's middle (spotlights), `sigma_s p(alpha) exp(-sigma_t (z + t)) (b - a)`
+/// (directional lights, `z` the distance travelled from the entry plane).
+pub fn shafts_pixel(
+    index: u32,
+    params: &FrameParams,
+    lights: &[GpuLight],
+    light_map: &[Vec4],
+    shadow: &[f32],
+    tables: &[Vec4],
+    surface_distance: f32,
+) -> Vec4 {
+    let x = index % params.width;
+    let y = index / params.width;
+    let (o, d) = camera_ray(params, x, y);
+    let cos_view = d.dot(params.camera_forward.xyz());
+    let planes = params.plane_count;
+    let sub = params.subplane_count;
+    let dz = (params.depth_far - params.depth_near) / planes as f32;
+    let offset = if params.jitter != 0 { bayer4(x, y) - 0.5 } else { 0.0 };
+    let t_near = params.depth_near / cos_view;
+    let t_far = (params.depth_far / cos_view).min(surface_distance);
+    let mut radiance = Vec4::ZERO;
+    let mut samples = 0u32;
+    let mut l = 0;
+    while l < params.light_count as usize {
+        let light = lights[l];
+        let directional = light.kind == LIGHT_DIRECTIONAL;
+        let (lo, hi) = if light.in_view == 0 {
+            (t_far, t_near)
+        } else if directional {
+            clip_to_beam(&light, o, d, t_near, t_far)
+        } else {
+            clip_to_cone(&light, o, d, t_near, t_far)
+        };
+        if lo < hi {
+            // Closest approach of the ray to a spotlight, for the exact 1/s^2.
+            let to_light = light.position.xyz() - o;
+            let t_c = to_light.dot(d);
+            let h = (to_light - d * t_c).length();
+            // Plane intervals [z_k, z_k + dz] in depth, shifted by the dither.
+            let k0 = ((lo * cos_view - params.depth_near) / dz - offset).floor().max(-1.0) as i32;
+            let k1 = ((hi * cos_view - params.depth_near) / dz - offset).ceil().min(planes as f32 + 1.0) as i32;
+            let mut k = k0;
+            while k < k1 {
+                let z0 = params.depth_near + (k as f32 + offset) * dz;
+                let a = (z0 / cos_view).max(lo);
+                let b = ((z0 + dz) / cos_view).min(hi);
+                if b > a {
+                    // Eq. 9: J = mean of H I_l over the sub-planes.
+                    let mut j_sum = Vec4::ZERO;
+                    let mut j = 0;
+                    while j < sub {
+                        let u = a + (b - a) * (j as f32 + 0.5) / sub as f32;
+                        let p = o + d * u;
+                        let local = light_local(&light, p);
+                        let e = emitted(&light, light_map, local);
+                        if e.x > 0.0 || e.y > 0.0 || e.z > 0.0 {
+                            j_sum += e * shadow_visibility(&light, shadow, p, local, 1.0);
+                        }
+                        j += 1;
+                    }
+                    samples += sub;
+                    let j_mean = j_sum / sub as f32;
+                    // g at the interval's middle.
+                    let t_mid = 0.5 * (a + b);
+                    let p = o + d * t_mid;
+                    let (to_l, s) = if directional {
+                        (-light.axis_z.xyz(), light_local(&light, p).z)
+                    } else {
+                        let v = light.position.xyz() - p;
+                        let s = v.length().max(LIGHT_RADIUS);
+                        (v / s, s)
+                    };
+                    // Phase angle between the light's travel direction and
+                    // the direction toward the eye.
+                    let cos_alpha = to_l.dot(d);
+                    let g = if directional {
+                        let f = phase::evaluate(params.phase_kind, cos_alpha, params.phase_g);
+                        attenuation(params, s, t_mid, false) * (f * (b - a))
+                    } else {
+                        let f = if params.shaft_mode == MODE_TABLES {
+                            phase_from_table(tables, params.phase_table_size, cos_alpha)
+                        } else {
+                            phase::evaluate(params.phase_kind, cos_alpha, params.phase_g)
+                        };
+                        let analytic = params.analytic_inverse_square != 0;
+                        let h_st = if params.shaft_mode == MODE_TABLES {
+                            attenuation_from_table(
+                                tables,
+                                params.phase_table_size,
+                                params.h_table_s,
+                                params.h_table_t,
+                                params.h_s_max,
+                                params.h_t_max,
+                                s,
+                                t_mid,
+                            )
+                        } else {
+                            attenuation(params, s, t_mid, !analytic)
+                        };
+                        let length = if analytic { inverse_square_integral(a, b, t_c, h) } else { b - a };
+                        h_st * (f * length)
+                    };
+                    radiance += j_mean * g;
+                }
+                k += 1;
+            }
+        }
+        l += 1;
+    }
+    Vec4::new(radiance.x, radiance.y, radiance.z, samples as f32)
+}
+
+/// The full image of eq. 1: the attenuated surface radiance (the surface
+/// pass's rgb) plus the in-scattered radiance; `w` becomes the shafts pass's
+/// sample count.
+pub fn add_to_surface(surface: Vec4, shafts: Vec4) -> Vec4 {
+    Vec4::new(surface.x + shafts.x, surface.y + shafts.y, surface.z + shafts.z, shafts.w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small deterministic generator (64-bit LCG) for test rays.
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f32 {
+            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((self.0 >> 40) as f32) / (1u64 << 24) as f32
+        }
+        fn signed(&mut self) -> f32 {
+            2.0 * self.next() - 1.0
+        }
+    }
+
+    fn spot(cutoff_deg: f32) -> GpuLight {
+        let c = cutoff_deg.to_radians();
+        GpuLight {
+            position: Vec4::new(0.3, 2.0, -1.0, 1.0),
+            axis_x: Vec4::X,
+            axis_y: Vec4::NEG_Z,
+            axis_z: Vec4::NEG_Y,
+            cutoff: c,
+            beam: c,
+            tan_cutoff: c.tan(),
+            ..Default::default()
+        }
+    }
+
+    /// Inside the cone, decided in f64 from the angle to the axis.
+    fn inside(light: &GpuLight, p: Vec3) -> bool {
+        let v = (p - light.position.xyz()).as_dvec3();
+        let axis = light.axis_z.xyz().as_dvec3();
+        let along = v.dot(axis);
+        along > 0.0 && (v - axis * along).length().atan2(along) <= light.cutoff as f64
+    }
+
+    #[test]
+    fn cone_clipping_matches_brute_force_membership() {
+        let mut rng = Lcg(7);
+        for cutoff in [0.5f32, 10.0, 30.0, 60.0, 85.0, 89.9] {
+            let light = spot(cutoff);
+            for _ in 0..300 {
+                let o = Vec3::new(rng.signed() * 4.0, rng.signed() * 4.0, rng.signed() * 4.0);
+                // Aim near the light often, so that narrow cones get hit.
+                let target = light.position.xyz() + Vec3::new(rng.signed(), -3.0 * rng.next(), rng.signed()) * 0.5;
+                let d = (target - o).normalize();
+                let (lo, hi) = clip_to_cone(&light, o, d, 0.0, 20.0);
+                // Every sample strictly inside [lo, hi] (away from the ends
+                // by f32 rounding of the roots) is in the cone, and every
+                // sample outside is not.
+                let eps = 1e-3;
+                for k in 0..400 {
+                    let t = 20.0 * (k as f32 + 0.5) / 400.0;
+                    let p = o + d * t;
+                    if lo < hi && t > lo + eps && t < hi - eps {
+                        assert!(inside(&light, p), "cutoff {cutoff}: t={t} in [{lo},{hi}] but outside");
+                    }
+                    if !(lo < hi) || t < lo - eps || t > hi + eps {
+                        assert!(!inside(&light, p), "cutoff {cutoff}: t={t} outside [{lo},{hi}] but inside");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn ray_along_the_axis_and_from_the_apex() {
+        let light = spot(20.0);
+        let o = light.position.xyz();
+        let (lo, hi) = clip_to_cone(&light, o, Vec3::NEG_Y, 0.0, 10.0);
+        assert_eq!((lo, hi), (0.0, 10.0));
+        // Pointing away from the cone.
+        let (lo, hi) = clip_to_cone(&light, o, Vec3::Y, 0.0, 10.0);
+        assert!(lo >= hi);
+    }
+
+    #[test]
+    fn inverse_square_integral_matches_quadrature() {
+        let cases = [(0.0f32, 1.0f32, 0.5f32, 0.2f32), (0.0, 10.0, 3.0, 1e-3), (5.0, 5.01, 0.0, 2.0), (100.0, 101.0, 0.0, 0.1), (0.0, 2.0, 1.0, 1e-6)];
+        for (a, b, tc, h) in cases {
+            let hh = (h as f64).max(LIGHT_RADIUS as f64);
+            // The antiderivative in f64 is exact; compare f32 to it.
+            let exact = (((b - tc) as f64 / hh).atan() - ((a - tc) as f64 / hh).atan()) / hh;
+            let got = inverse_square_integral(a, b, tc, h) as f64;
+            assert!((got - exact).abs() <= 1e-5 * exact.abs() + 1e-12, "{a} {b} {tc} {h}: {got} vs {exact}");
+        }
+    }
+
+    #[test]
+    fn bayer_offsets_are_the_sixteen_levels() {
+        let mut seen = [false; 16];
+        for y in 0..4 {
+            for x in 0..4 {
+                seen[(bayer4(x, y) * 16.0) as usize] = true;
+            }
+        }
+        assert!(seen.iter().all(|s| *s));
+    }
+
+    #[test]
+    fn tables_are_exact_at_nodes_and_clamped_outside() {
+        let params = FrameParams {
+            sigma_s: Vec4::new(0.1, 0.2, 0.3, 0.0),
+            sigma_t: Vec4::new(0.2, 0.3, 0.4, 0.0),
+            phase_kind: crate::types::PHASE_HENYEY_GREENSTEIN,
+            phase_g: 0.7,
+            phase_table_size: 64,
+            h_table_s: 16,
+            h_table_t: 8,
+            h_s_max: 15.0,
+            h_t_max: 7.0,
+            analytic_inverse_square: 1,
+            ..Default::default()
+        };
+        let n = params.phase_table_size + params.h_table_s * params.h_table_t;
+        let tables: Vec<Vec4> = (0..n).map(|k| table_entry(&params, k)).collect();
+        let alpha = PI * 5.0 / 63.0;
+        let f = phase_from_table(&tables, 64, alpha.cos());
+        let exact = phase::henyey_greenstein(alpha.cos(), 0.7);
+        assert!((f - exact).abs() < 1e-4 * exact);
+        let h = attenuation_from_table(&tables, 64, 16, 8, 15.0, 7.0, 3.0, 2.0);
+        let e = attenuation(&params, 3.0, 2.0, false);
+        assert!((h - e).abs().max_element() < 1e-6);
+        // Outside the table: the edge value, finite.
+        let far = attenuation_from_table(&tables, 64, 16, 8, 15.0, 7.0, 1e5, -3.0);
+        assert_eq!(far, attenuation_from_table(&tables, 64, 16, 8, 15.0, 7.0, 15.0, 0.0));
+        assert!(far.is_finite());
+    }
+}

@@ -719,11 +719,15 @@ fn light_in_view(p: &FrameParams, l: &GpuLight) -> bool {
     let rim = ((reach * cos - k).powi(2) + (reach * sin).powi(2)).sqrt();
     let radius = k.max(rim).max(reach - k);
     let center = apex + axis * k;
-    // Side planes through the camera, normals turned to point inward.
+    // Side planes through the camera, normals turned to point inward, and
+    // the plane through the camera facing forward (nothing behind the eye
+    // is seen).
     let sides = [(f - r).cross(u), (f + r).cross(u), (f - u).cross(r), (f + u).cross(r)];
-    sides.iter().all(|n| {
-        let n = n.normalize();
-        let n = if n.dot(f) < 0.0 { -n } else { n };
-        (center - camera).dot(n) >= -radius
-    })
+    let in_front = (center - camera).dot(f.normalize()) >= -radius;
+    in_front
+        && sides.iter().all(|n| {
+            let n = n.normalize();
+            let n = if n.dot(f) < 0.0 { -n } else { n };
+            (center - camera).dot(n) >= -radius
+        })
 }

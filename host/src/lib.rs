@@ -2,6 +2,7 @@
 //! image output. The render binary (`src/main.rs`) and the tests in the
 //! top-level `tests/` folder use it.
 
+pub mod bench;
 pub mod cpu;
 pub mod gpu;
 pub mod metrics;

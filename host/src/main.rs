@@ -4,7 +4,7 @@ use anyhow::{anyhow, Context, Result};
 use clap::{Parser, Subcommand};
 use glam::{DVec3, Vec4};
 use slicelight::render::{Backend, BackendChoice};
-use slicelight::{metrics, output, reference, render, scene};
+use slicelight::{bench, metrics, output, reference, render, scene};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -44,6 +44,25 @@ enum Command {
         /// than this RMS, relative to its peak.
         #[arg(long, default_value_t = 2e-4)]
         tolerance: f64,
+    },
+    /// Time against error of the shafts pass over its settings: CSV and PNG plots.
+    Bench {
+        /// Scene files (default: the paper's Fig. 6 and Fig. 7 scenes and the stained-glass window).
+        scenes: Vec<PathBuf>,
+        /// Backends to time (give it more than once).
+        #[arg(long, value_enum, default_values = ["cpu"])]
+        backend: Vec<BackendChoice>,
+        /// Renders per configuration; the median time is reported.
+        #[arg(long, default_value_t = 5)]
+        repeats: usize,
+        /// Error is measured at every STRIDE-th pixel centre in x and y.
+        #[arg(long, default_value_t = 4)]
+        stride: u32,
+        /// A shorter sweep (3 plane counts, 3 sub-plane counts, 2 table sizes).
+        #[arg(long)]
+        quick: bool,
+        #[arg(long, default_value = "bench")]
+        out_dir: PathBuf,
     },
     /// Print the RMS and max difference of IMAGE against REFERENCE.
     Compare {
@@ -149,6 +168,17 @@ fn run(cli: Cli) -> Result<()> {
             eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
             write_outputs(&output, &pixels, &data)
+        }
+        Command::Bench { scenes, backend, repeats, stride, quick, out_dir } => {
+            let scenes = if scenes.is_empty() {
+                ["fig6_sphere", "fig7_stage", "stained_glass"].iter().map(|s| PathBuf::from(format!("scenes/{s}.toml"))).collect()
+            } else {
+                scenes
+            };
+            let opts = bench::Options { scenes, backends: backend, repeats, stride, quick, out_dir: out_dir.clone() };
+            bench::run(&opts)?;
+            eprintln!("wrote {0}/bench.csv, {0}/error_vs_planes.png, {0}/error_vs_subplanes.png, {0}/time_vs_error.png", out_dir.display());
+            Ok(())
         }
         Command::Compare { image, reference, exposure, diff } => {
             let (w, h, a) = read_linear(&image)?;

@@ -248,38 +248,44 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, samples: u32) -> DVec3 
     sum * dt
 }
 
-/// The whole reference image (surface + in-scattering with `samples` samples
-/// per ray), rgb in f64, row-major.
-pub fn render_with(data: &SceneData, samples: u32) -> Vec<DVec3> {
+/// The reference (surface + in-scattering with `samples` samples per ray) at
+/// the given pixel indices (row-major), rgb in f64.
+pub fn render_at(data: &SceneData, pixels: &[u32], samples: u32) -> Vec<DVec3> {
     let w = data.width();
-    (0..data.pixel_count())
-        .into_par_iter()
-        .map(|i| surface_pixel(data, i % w, i / w) + inscatter_pixel(data, i % w, i / w, samples))
+    pixels
+        .par_iter()
+        .map(|&i| surface_pixel(data, i % w, i / w) + inscatter_pixel(data, i % w, i / w, samples))
         .collect()
 }
 
-/// The reference at convergence: the ray-march sample count starts at 64 and
-/// doubles until the image changes by less than `tolerance` RMS, relative to
-/// its peak (or 65536 samples are reached). Returns the image and the final
-/// sample count.
-pub fn render_converged(data: &SceneData, tolerance: f64) -> (Vec<DVec3>, u32) {
+/// The reference at convergence at the given pixels: the ray-march sample
+/// count starts at 64 and doubles until the values change by less than
+/// `tolerance` RMS, relative to their peak (or 65536 samples are reached).
+/// Returns the values and the final sample count.
+pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> (Vec<DVec3>, u32) {
     let mut samples = 64;
-    let mut image = render_with(data, samples);
+    let mut image = render_at(data, pixels, samples);
     if !data.scatters() {
         return (image, 0);
     }
     while samples < 65536 {
         samples *= 2;
-        let next = render_with(data, samples);
+        let next = render_at(data, pixels, samples);
         let peak = next.iter().map(|p| p.max_element()).fold(1e-300, f64::max);
         let sum2: f64 = next.iter().zip(&image).map(|(a, b)| (*a - *b).length_squared()).sum();
-        let change = (sum2 / (3 * next.len()) as f64).sqrt() / peak;
+        let change = (sum2 / (3 * next.len().max(1)) as f64).sqrt() / peak;
         image = next;
         if change < tolerance {
             break;
         }
     }
     (image, samples)
+}
+
+/// The whole reference image at convergence (see `render_converged_at`).
+pub fn render_converged(data: &SceneData, tolerance: f64) -> (Vec<DVec3>, u32) {
+    let all: Vec<u32> = (0..data.pixel_count()).collect();
+    render_converged_at(data, &all, tolerance)
 }
 
 /// The reference image's surface term alone (no in-scattering), rgb in f64.

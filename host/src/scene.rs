@@ -49,6 +49,9 @@ pub struct Shafts {
     pub phase_table_size: u32,
     /// Nodes of the attenuation table `h(s, t)` along `s` and `t`.
     pub h_table_size: [u32; 2],
+    /// Round the tables and each plane's contribution to 8 bits, as the
+    /// 2002 paper's hardware did (for reproducing its Fig. 4 trade-off).
+    pub quantize_8bit: bool,
 }
 
 impl Default for Shafts {
@@ -61,6 +64,7 @@ impl Default for Shafts {
             analytic_inverse_square: true,
             phase_table_size: 256,
             h_table_size: [256, 256],
+            quantize_8bit: false,
         }
     }
 }
@@ -295,13 +299,22 @@ impl SceneData {
         p.phase_table_size = s.phase_table_size;
         p.h_table_s = s.h_table_size[0];
         p.h_table_t = s.h_table_size[1];
+        p.quantize_8bit = s.quantize_8bit as u32;
+        p.quantize_scale = self.exposure;
         let params = *p;
         for l in &mut self.lights {
             l.in_view = light_in_view(&params, l) as u32;
         }
         self.tables = if s.mode == ShaftMode::Tables {
             let n = params.phase_table_size + params.h_table_s * params.h_table_t;
-            (0..n).map(|k| slicelight_shaders::shafts::table_entry(&params, k)).collect()
+            let mut t: Vec<Vec4> = (0..n).map(|k| slicelight_shaders::shafts::table_entry(&params, k)).collect();
+            if s.quantize_8bit {
+                // 8-bit textures: each table scaled to its own maximum.
+                let (f, h) = t.split_at_mut(params.phase_table_size as usize);
+                quantize_table(f);
+                quantize_table(h);
+            }
+            t
         } else {
             Vec::new()
         };
@@ -694,6 +707,14 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     }
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;
     Ok(data)
+}
+
+/// Rounds a table to 256 levels of its own largest entry (per channel).
+fn quantize_table(t: &mut [Vec4]) {
+    let max = t.iter().fold(Vec4::ZERO, |m, v| m.max(*v)).max(Vec4::splat(1e-30));
+    for v in t {
+        *v = ((*v / max) * 255.0).round() / 255.0 * max;
+    }
 }
 
 /// Whether a light's volume can be seen: the part of a spotlight's cone

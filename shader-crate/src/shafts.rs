@@ -355,7 +355,12 @@ pub fn shafts_pixel(
                         let length = if analytic { inverse_square_integral(a, b, t_c, h) } else { b - a };
                         h_st * (f * length)
                     };
-                    radiance += j_mean * g;
+                    let contribution = j_mean * g;
+                    radiance += if params.quantize_8bit != 0 {
+                        quantize_8bit(contribution, params.quantize_scale)
+                    } else {
+                        contribution
+                    };
                 }
                 k += 1;
             }
@@ -363,6 +368,13 @@ pub fn shafts_pixel(
         l += 1;
     }
     Vec4::new(radiance.x, radiance.y, radiance.z, samples as f32)
+}
+
+/// Rounds a radiance to the nearest of 256 frame-buffer levels, where level
+/// 255 is radiance `1 / scale` (the 2002 paper blended 8-bit planes).
+pub fn quantize_8bit(v: Vec4, scale: f32) -> Vec4 {
+    let q = |c: f32| (c * scale * 255.0 + 0.5).floor().clamp(0.0, 255.0) / (255.0 * scale);
+    Vec4::new(q(v.x), q(v.y), q(v.z), v.w)
 }
 
 /// The full image of eq. 1: the attenuated surface radiance (the surface

@@ -54,6 +54,13 @@ pub struct FrameParams {
     pub h_t_max: f32,
     /// Shafts: 1 to integrate the `1/s^2` of eq. 3 exactly over each interval.
     pub analytic_inverse_square: u32,
+    /// Shafts: 1 to round each interval's contribution to 8 bits of the
+    /// frame buffer, as the 2002 paper's blending hardware did.
+    pub quantize_8bit: u32,
+    /// Radiance that maps to 1.0 in the frame buffer is `1 / quantize_scale`
+    /// (the PNG exposure).
+    pub quantize_scale: f32,
+    pub _pad: [u32; 2],
 }
 
 pub const PHASE_ISOTROPIC: u32 = 0;
@@ -146,7 +153,7 @@ mod pod {
     pod!(super::FrameParams, super::GpuLight, super::GpuSphere, super::GpuTriangle);
 
     const _: () = {
-        assert!(core::mem::size_of::<super::FrameParams>() == 6 * 16 + 80);
+        assert!(core::mem::size_of::<super::FrameParams>() == 6 * 16 + 96);
         assert!(core::mem::size_of::<super::GpuLight>() == 5 * 16 + 64);
         assert!(core::mem::size_of::<super::GpuSphere>() == 32);
         assert!(core::mem::size_of::<super::GpuTriangle>() == 64);

@@ -96,13 +96,16 @@ pub fn emitted(light: &GpuLight, light_map: &[Vec4], local: Vec3) -> Vec4 {
             return Vec4::ZERO;
         }
     }
-    let (u, v) = light_uv(light, local);
-    if light.kind == LIGHT_DIRECTIONAL && light.bounded != 0 && (u < 0.0 || u > 1.0 || v < 0.0 || v > 1.0) {
-        return Vec4::ZERO;
-    }
     let mut color = light.power * strength;
-    if light.light_map_width > 0 {
-        color *= sample_light_map(light_map, light.light_map_offset, light.light_map_width, light.light_map_height, u, v);
+    // The projective coordinates cost a division: only for a window or a map.
+    if light.bounded != 0 || light.light_map_width > 0 {
+        let (u, v) = light_uv(light, local);
+        if light.kind == LIGHT_DIRECTIONAL && light.bounded != 0 && (u < 0.0 || u > 1.0 || v < 0.0 || v > 1.0) {
+            return Vec4::ZERO;
+        }
+        if light.light_map_width > 0 {
+            color *= sample_light_map(light_map, light.light_map_offset, light.light_map_width, light.light_map_height, u, v);
+        }
     }
     color
 }
@@ -167,16 +170,20 @@ pub fn shadow_map_texel(
 /// plus that slope term (capped at 10 footprints, i.e. grazing at 84 deg), plus
 /// 1e-4 of the distance for f32 rounding of the depths themselves.
 pub fn shadow_bias(footprint: f32, cos_incidence: f32, distance: f32) -> f32 {
+    if cos_incidence >= 1.0 {
+        // A point in the medium (or a surface facing the light): no slope.
+        return footprint + 1e-4 * distance;
+    }
     let c = cos_incidence.abs().clamp(1e-3, 1.0);
     let tan = ((1.0 - c * c).sqrt() / c).min(10.0);
     footprint * (1.0 + tan) + 1e-4 * distance
 }
 
-/// The shadow test `H` of eq. 2 (2002 paper): 1 if `p` (given also in the
-/// light's frame as `local`) sees the light according to the light's shadow
-/// map, 0 otherwise. `cos_incidence` is the cosine between the surface normal
+/// The shadow test `H` of eq. 2 (2002 paper): 1 if the point at `local` in
+/// the light's frame sees the light according to the light's shadow map, 0
+/// otherwise. `cos_incidence` is the cosine between the surface normal
 /// and the direction to the light (1 for points in the medium).
-pub fn shadow_visibility(light: &GpuLight, shadow: &[f32], p: Vec3, local: Vec3, cos_incidence: f32) -> f32 {
+pub fn shadow_visibility(light: &GpuLight, shadow: &[f32], local: Vec3, cos_incidence: f32) -> f32 {
     let res = light.shadow_resolution;
     if res == 0 {
         return 1.0;
@@ -192,7 +199,8 @@ pub fn shadow_visibility(light: &GpuLight, shadow: &[f32], p: Vec3, local: Vec3,
     let (distance, footprint) = if light.kind == LIGHT_DIRECTIONAL {
         (local.z, 2.0 * light.half_extent_x.max(light.half_extent_y) / res as f32)
     } else {
-        let d = (p - light.position.xyz()).length();
+        // The frame is orthonormal: the distance to the light is |local|.
+        let d = local.length();
         // Texel width at distance d, widened off-axis by 1/cos^2 of the angle.
         let cos2 = local.z * local.z / (d * d).max(1e-30);
         (d, d * 2.0 * light.tan_cutoff / (res as f32 * cos2.max(1e-3)))

@@ -287,6 +287,9 @@ pub fn shafts_pixel(
             clip_to_cone(&light, o, d, t_near, t_far)
         };
         if lo < hi {
+            // The ray in the light's frame: local(t) = q + v t.
+            let q = light_local(&light, o);
+            let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
             // Closest approach of the ray to a spotlight, for the exact 1/s^2.
             let to_light = light.position.xyz() - o;
             let t_c = to_light.dot(d);
@@ -305,11 +308,10 @@ pub fn shafts_pixel(
                     let mut j = 0;
                     while j < sub {
                         let u = a + (b - a) * (j as f32 + 0.5) / sub as f32;
-                        let p = o + d * u;
-                        let local = light_local(&light, p);
+                        let local = q + v * u;
                         let e = emitted(&light, light_map, local);
                         if e.x > 0.0 || e.y > 0.0 || e.z > 0.0 {
-                            j_sum += e * shadow_visibility(&light, shadow, p, local, 1.0);
+                            j_sum += e * shadow_visibility(&light, shadow, local, 1.0);
                         }
                         j += 1;
                     }
@@ -317,13 +319,12 @@ pub fn shafts_pixel(
                     let j_mean = j_sum / sub as f32;
                     // g at the interval's middle.
                     let t_mid = 0.5 * (a + b);
-                    let p = o + d * t_mid;
                     let (to_l, s) = if directional {
-                        (-light.axis_z.xyz(), light_local(&light, p).z)
+                        (-light.axis_z.xyz(), (q + v * t_mid).z)
                     } else {
-                        let v = light.position.xyz() - p;
-                        let s = v.length().max(LIGHT_RADIUS);
-                        (v / s, s)
+                        let to_apex = to_light - d * t_mid;
+                        let s = to_apex.length().max(LIGHT_RADIUS);
+                        (to_apex / s, s)
                     };
                     // Phase angle between the light's travel direction and
                     // the direction toward the eye.

@@ -51,7 +51,7 @@ pub fn direct_radiance(
         if cos_incidence > 0.0 {
             let color = emitted(&light, light_map, local);
             if color.x > 0.0 || color.y > 0.0 || color.z > 0.0 {
-                let visible = shadow_visibility(&light, shadow, p, local, cos_incidence);
+                let visible = shadow_visibility(&light, shadow, local, cos_incidence);
                 irradiance += color * transmittance(params.sigma_t, distance) * (visible * cos_incidence * falloff);
             }
         }

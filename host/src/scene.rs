@@ -12,7 +12,9 @@ use slicelight_shaders::types::{
 };
 use std::path::{Path, PathBuf};
 
-pub const DEFAULT_SHADOW_MAP_RESOLUTION: u32 = 1024;
+/// Measured on the Fig. 7 stage at 720x480 (surface term against shadow rays):
+/// 512 costs 0.05 % RMS of the 8-bit range, a quarter of the time of 1024.
+pub const DEFAULT_SHADOW_MAP_RESOLUTION: u32 = 512;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -2,7 +2,8 @@
 # Installs what slicelight needs and a fresh machine lacks: the pinned Rust-GPU
 # nightly (from rust-toolchain.toml) and, on Debian/Ubuntu, a Vulkan loader
 # with lavapipe (Mesa's Vulkan device on the CPU) so the GPU backend and the
-# GPU-vs-CPU tests run without a GPU. Safe to run again: it skips what is there.
+# GPU-vs-CPU tests run without a GPU, and the DejaVu fonts for the benchmark's
+# plots. Safe to run again: it skips what is there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -15,14 +16,18 @@ fi
 have_vulkan() {
     ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1 && ldconfig -p | grep -q 'libvulkan\.so\.1'
 }
-if ! have_vulkan; then
+missing=()
+have_vulkan || missing+=(mesa-vulkan-drivers libvulkan1)
+# The font of `slicelight bench`'s plot labels.
+[ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || missing+=(fonts-dejavu-core)
+if [ ${#missing[@]} -gt 0 ]; then
     if command -v apt-get >/dev/null 2>&1; then
-        echo "setup: installing the Vulkan loader and lavapipe (mesa-vulkan-drivers)" >&2
+        echo "setup: installing ${missing[*]}" >&2
         sudo_cmd=""
         [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
         $sudo_cmd apt-get update -qq
-        DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+        DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${missing[@]}" >/dev/null
     else
-        echo "setup: no Vulkan driver found and no apt-get; install a Vulkan driver (or use --backend cpu)" >&2
+        echo "setup: missing ${missing[*]} and no apt-get: install a Vulkan driver (or use --backend cpu) and the DejaVu fonts" >&2
     fi
 fi

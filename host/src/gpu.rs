@@ -30,6 +30,8 @@ pub struct GpuContext {
     pub adapter: wgpu::AdapterInfo,
     pipelines: HashMap<&'static str, wgpu::ComputePipeline>,
     max_binding_bytes: u64,
+    /// Largest image band, bytes: `max_binding_bytes` unless lowered.
+    band_limit_bytes: u64,
 }
 
 impl GpuContext {
@@ -78,6 +80,7 @@ impl GpuContext {
             adapter: info,
             pipelines,
             max_binding_bytes: limits.max_storage_buffer_binding_size as u64,
+            band_limit_bytes: limits.max_storage_buffer_binding_size as u64,
         })
     }
 
@@ -110,6 +113,19 @@ impl GpuContext {
         Ok(buffer)
     }
 
+    /// Lowers the image band size (to test the banding on small images).
+    pub fn limit_band_bytes(&mut self, bytes: u64) {
+        self.band_limit_bytes = bytes.min(self.max_binding_bytes);
+    }
+
+    /// Pixels per band: the whole image if one buffer can hold it, else as
+    /// many whole rows as fit.
+    pub fn band_pixels(&self, data: &SceneData) -> u32 {
+        let fit = (self.band_limit_bytes / std::mem::size_of::<Vec4>() as u64).min(u32::MAX as u64) as u32;
+        let rows = (fit / data.width()).max(1);
+        data.pixel_count().min(rows * data.width())
+    }
+
     /// Uploads a scene's buffers. `shadow` gives the shadow maps' contents
     /// (from another backend, for equivalence tests); otherwise they are left
     /// for `shadow_map_kernel` to fill.
@@ -119,15 +135,18 @@ impl GpuContext {
             Some(s) => bytemuck::cast_slice(s).to_vec(),
             None => vec![0u8; shadow_len],
         };
+        let mut params = data.params;
+        params.band_start = 0;
+        params.band_pixels = self.band_pixels(data);
         let buffers = vec![
-            self.storage("params", bytemuck::bytes_of(&data.params))?,
+            self.storage("params", bytemuck::bytes_of(&params))?,
             self.storage("lights", bytemuck::cast_slice(&data.lights))?,
             self.storage("spheres", bytemuck::cast_slice(&data.spheres))?,
             self.storage("triangles", bytemuck::cast_slice(&data.triangles))?,
             self.storage("light maps", bytemuck::cast_slice(&data.light_map))?,
             self.storage("shadow maps", &shadow_bytes)?,
             // Until the surface pass runs, no pixel sees a surface.
-            self.storage("image", bytemuck::cast_slice(&vec![crate::render::no_surface(); data.pixel_count() as usize]))?,
+            self.storage("image", bytemuck::cast_slice(&vec![crate::render::no_surface(); self.band_pixels(data) as usize]))?,
             self.storage("shaft tables", bytemuck::cast_slice(&data.tables))?,
         ];
         let bind_groups = KERNELS
@@ -206,6 +225,16 @@ impl GpuFrame<'_> {
     pub fn read_shadow(&self, texels: usize) -> Result<Vec<f32>> {
         let bytes = self.read(BINDING_SHADOW)?;
         Ok(bytemuck::cast_slice(&bytes[..texels * 4]).to_vec())
+    }
+
+    /// Points the image kernels at pixels `start .. start + count` (a band of
+    /// whole rows) and clears the image buffer to "no surface".
+    pub fn set_band(&self, data: &SceneData, start: u32, count: u32) {
+        let mut params = data.params;
+        params.band_start = start;
+        params.band_pixels = count;
+        self.ctx.queue.write_buffer(&self.buffers[0], 0, bytemuck::bytes_of(&params));
+        self.write_image(&vec![crate::render::no_surface(); count as usize]);
     }
 
     /// Replaces the image buffer's contents (for testing a kernel that reads it).

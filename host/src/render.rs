@@ -171,26 +171,39 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
         }
         Backend::Gpu(ctx) => {
             let frame = ctx.upload(data, None)?;
-            let mut ran_any = false;
-            for pass in passes.iter_mut().filter(|p| p.ran) {
+            let entry = |name: &str| match name {
+                "shadow_maps" => "shadow_map_kernel",
+                "surface" => "surface_kernel",
+                "shafts" => "shafts_kernel",
+                other => unreachable!("pass {other} has no GPU kernel"),
+            };
+            // Shadow maps once; the image passes band by band when the image
+            // is larger than one device buffer.
+            for pass in passes.iter_mut().filter(|p| p.ran && p.name == "shadow_maps") {
                 pb.set_message(pass.name);
                 let t = Instant::now();
-                let entry = match pass.name {
-                    "shadow_maps" => "shadow_map_kernel",
-                    "surface" => "surface_kernel",
-                    "shafts" => "shafts_kernel",
-                    other => unreachable!("pass {other} has no GPU kernel"),
-                };
-                frame.run(entry, pass.invocations as u32)?;
+                frame.run(entry(pass.name), pass.invocations as u32)?;
                 pass.seconds = t.elapsed().as_secs_f64();
                 pb.inc(pass.invocations);
-                ran_any = true;
             }
-            if ran_any {
-                frame.read_image(pixels)?
-            } else {
-                vec![no_surface(); pixels]
+            let band = ctx.band_pixels(data);
+            let mut image = Vec::with_capacity(pixels);
+            let mut start = 0;
+            while start < data.pixel_count() {
+                let count = band.min(data.pixel_count() - start);
+                // Uploads and read-back count in the total time, not in a pass's.
+                frame.set_band(data, start, count);
+                for pass in passes.iter_mut().filter(|p| p.ran && p.name != "shadow_maps") {
+                    pb.set_message(pass.name);
+                    let t = Instant::now();
+                    frame.run(entry(pass.name), count)?;
+                    pass.seconds += t.elapsed().as_secs_f64();
+                    pb.inc(count as u64);
+                }
+                image.extend(frame.read_image(count as usize)?);
+                start += count;
             }
+            image
         }
     };
     pb.finish_and_clear();

@@ -691,6 +691,8 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         shadow_texel_count: shadow_texels,
         phase_kind,
         phase_g,
+        band_start: 0,
+        band_pixels: w * h,
         // Filled in by `configure_shafts`.
         ..Default::default()
     };

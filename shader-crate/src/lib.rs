@@ -16,7 +16,7 @@
 //! | 3 | triangles | `GpuTriangle` |
 //! | 4 | light-map texels of all lights | `Vec4` |
 //! | 5 | shadow-map depths of all lights | `f32` |
-//! | 6 | output image (rgb radiance, w = hit distance) | `Vec4` |
+//! | 6 | output image, or a band of its rows (rgb radiance, w = hit distance) | `Vec4` |
 //! | 7 | shaft tables: phase `F`, then attenuation `h` | `Vec4` |
 #![cfg_attr(target_arch = "spirv", no_std)]
 
@@ -73,9 +73,9 @@ pub fn surface_kernel(
 ) {
     let index = flat_index(id, groups);
     let params = &params[0];
-    if index < params.width * params.height {
+    if index < params.band_pixels {
         output[index as usize] =
-            surface::surface_pixel(index, params, lights, spheres, triangles, light_map, shadow);
+            surface::surface_pixel(params.band_start + index, params, lights, spheres, triangles, light_map, shadow);
     }
 }
 
@@ -92,9 +92,10 @@ pub fn shafts_kernel(
 ) {
     let index = flat_index(id, groups);
     let params = &params[0];
-    if index < params.width * params.height {
+    if index < params.band_pixels {
         let surface = output[index as usize];
-        let shafts = shafts::shafts_pixel(index, params, lights, light_map, shadow, tables, surface.w);
+        let pixel = params.band_start + index;
+        let shafts = shafts::shafts_pixel(pixel, params, lights, light_map, shadow, tables, surface.w);
         output[index as usize] = shafts::add_to_surface(surface, shafts);
     }
 }

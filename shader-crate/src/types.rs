@@ -60,7 +60,11 @@ pub struct FrameParams {
     /// Radiance that maps to 1.0 in the frame buffer is `1 / quantize_scale`
     /// (the PNG exposure).
     pub quantize_scale: f32,
-    pub _pad: [u32; 2],
+    /// The image kernels write pixels `band_start .. band_start + band_pixels`
+    /// (row-major) into an output buffer of `band_pixels` elements; the host
+    /// splits images larger than one device buffer into such bands.
+    pub band_start: u32,
+    pub band_pixels: u32,
 }
 
 pub const PHASE_ISOTROPIC: u32 = 0;

@@ -277,3 +277,26 @@ fn a_light_behind_the_camera_is_culled() {
     let data = common::scene_from_str(&stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 30.0, [0.0, 1.5, 6.0], ISO));
     assert_eq!(data.lights[0].in_view, 1);
 }
+
+#[test]
+fn eight_bit_mode_reproduces_the_papers_plane_count_trade_off() {
+    // The 2002 paper's Fig. 4: with 8-bit tables and 8-bit blending, error
+    // falls with more planes until rounding each plane's contribution
+    // dominates, then rises again (the paper chose 30 planes).
+    let data = fig6_small();
+    let (refimg, _) = reference::render_converged(&data, 2e-4);
+    let err = |n: u32| {
+        let mut d = data.clone();
+        let mut s = d.shafts;
+        s.planes = n;
+        s.subplanes = 1;
+        s.mode = ShaftMode::Tables;
+        s.jitter = false;
+        s.quantize_8bit = true;
+        d.configure_shafts(s).unwrap();
+        error(&d, &refimg).rms_8bit_percent
+    };
+    let (few, paper, many) = (err(5), err(30), err(120));
+    println!("8-bit mode, rms % of 8-bit range: 5 planes {few:.3}, 30 planes {paper:.3}, 120 planes {many:.3}");
+    assert!(paper < few && paper < many, "{few} {paper} {many}");
+}

@@ -188,6 +188,7 @@ fn compare_reports_rms_and_max() {
         .unwrap();
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("rms_relative     0.000000"), "{text}");
+    assert!(text.contains("rms_relative     0.0000e0"), "{text}");
+    assert!(text.contains("max_8bit_percent 0.0000"), "{text}");
     assert!(run.out("diff.png").exists());
 }

@@ -187,8 +187,8 @@ fn run(cli: Cli) -> Result<()> {
                 return Err(anyhow!("{} is {w}x{h} but {} is {rw}x{rh}", image.display(), reference.display()));
             }
             let d = metrics::difference(&a, &b, exposure);
-            println!("rms_relative     {:.6}", d.rms_relative);
-            println!("max_relative     {:.6}", d.max_relative);
+            println!("rms_relative     {:.4e}", d.rms_relative);
+            println!("max_relative     {:.4e}", d.max_relative);
             println!("rms_8bit_percent {:.4}", d.rms_8bit_percent);
             println!("max_8bit_percent {:.4}", d.max_8bit_percent);
             if let Some(path) = diff {

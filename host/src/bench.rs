@@ -70,7 +70,11 @@ pub fn sweep(quick: bool) -> Vec<Config> {
     let tables: &[u32] = if quick { &[16, 256] } else { &[16, 64, 256] };
     let mut v = Vec::new();
     for &n in planes {
-        v.push(Config { series: "planes", planes: n, ..base });
+        v.push(Config {
+            series: "planes",
+            planes: n,
+            ..base
+        });
         // The paper's hardware: 8-bit tables, 8-bit blending of each plane,
         // no sub-planes, no dither. The 1/s^2 stays analytic: an 8-bit h table
         // that includes it is all zeros but its first column (1/s^2 spans six
@@ -87,12 +91,25 @@ pub fn sweep(quick: bool) -> Vec<Config> {
         });
     }
     for &m in subs {
-        v.push(Config { series: "subplanes", subplanes: m, ..base });
+        v.push(Config {
+            series: "subplanes",
+            subplanes: m,
+            ..base
+        });
     }
     for &t in tables {
-        v.push(Config { series: "tables", mode: ShaftMode::Tables, table_size: t, ..base });
+        v.push(Config {
+            series: "tables",
+            mode: ShaftMode::Tables,
+            table_size: t,
+            ..base
+        });
     }
-    v.push(Config { series: "no-jitter", jitter: false, ..base });
+    v.push(Config {
+        series: "no-jitter",
+        jitter: false,
+        ..base
+    });
     v
 }
 
@@ -282,30 +299,64 @@ const COLORS: [RGBColor; 6] = [
 type Series = (String, Vec<(f64, f64)>);
 
 /// A log-x, linear-y line plot with one line per series.
-fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[Series]) -> Result<()> {
-    let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let xs = series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
-    let (x0, x1) = xs.clone().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
-    let y1 = series.iter().flat_map(|s| s.1.iter().map(|p| p.1)).fold(0.0, f64::max) * 1.1 + 1e-9;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 24))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d((x0 * 0.8..x1 * 1.25).log_scale().with_key_points(vec![1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]), 0.0..y1)?;
-    chart.configure_mesh().x_desc(x_label).y_desc(y_label).label_style(("sans-serif", 15)).draw()?;
-    for (i, (name, pts)) in series.iter().enumerate() {
-        let color = COLORS[i % COLORS.len()];
-        chart
-            .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
-            .label(name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+const PLOT_SIZE: (u32, u32) = (900, 600);
+
+/// Draws into an RGB buffer with `draw` and writes it as a PNG, whole or not at all.
+fn save_plot(path: &Path, draw: impl FnOnce(DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>) -> Result<()> {
+    let (w, h) = PLOT_SIZE;
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, PLOT_SIZE).into_drawing_area();
+        root.fill(&WHITE)?;
+        draw(root.clone())?;
+        root.present()?;
     }
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).label_font(("sans-serif", 15)).draw()?;
-    root.present()?;
-    Ok(())
+    let img = image::RgbImage::from_raw(w, h, buf).expect("buffer sized for the plot");
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)?;
+    crate::output::write_atomically(path, png.get_ref())
+}
+
+fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[Series]) -> Result<()> {
+    save_plot(path, |root| {
+        let xs = series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
+        let (x0, x1) = xs
+            .clone()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        let y1 = series.iter().flat_map(|s| s.1.iter().map(|p| p.1)).fold(0.0, f64::max) * 1.1 + 1e-9;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 24))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(
+                (x0 * 0.8..x1 * 1.25)
+                    .log_scale()
+                    .with_key_points(vec![1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]),
+                0.0..y1,
+            )?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .label_style(("sans-serif", 15))
+            .draw()?;
+        for (i, (name, pts)) in series.iter().enumerate() {
+            let color = COLORS[i % COLORS.len()];
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
+                .label(name.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .draw()?;
+        Ok(())
+    })
 }
 
 fn plot(dir: &Path, rows: &[Row]) -> Result<()> {
@@ -346,39 +397,44 @@ fn plot(dir: &Path, rows: &[Row]) -> Result<()> {
     )?;
 
     // Time against error, every configuration, Pareto front per group.
-    let path = dir.join("time_vs_error.png");
-    let root = BitMapBackend::new(&path, (900, 600)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (t0, t1) = rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r.median_seconds), b.max(r.median_seconds)));
-    let e1 = rows.iter().map(|r| r.rms_8bit_percent).fold(0.0, f64::max) * 1.1 + 1e-9;
-    let mut chart = ChartBuilder::on(&root)
-        .caption("Run time against error (lines: Pareto fronts)", ("sans-serif", 24))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(70)
-        .build_cartesian_2d((t0 * 0.8..t1 * 1.25).log_scale(), 0.0..e1)?;
-    chart
-        .configure_mesh()
-        .x_desc("median render time, s")
-        .y_desc("RMS error, % of 8-bit range")
-        .label_style(("sans-serif", 15))
-        .draw()?;
-    for (i, (scene, backend)) in groups.iter().enumerate() {
-        let color = COLORS[i % COLORS.len()];
-        let pts: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|r| &r.scene == scene && r.backend == *backend)
-            .map(|r| (r.median_seconds, r.rms_8bit_percent))
-            .collect();
+    save_plot(&dir.join("time_vs_error.png"), |root| {
+        let (t0, t1) = rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
+            (a.min(r.median_seconds), b.max(r.median_seconds))
+        });
+        let e1 = rows.iter().map(|r| r.rms_8bit_percent).fold(0.0, f64::max) * 1.1 + 1e-9;
+        let mut chart = ChartBuilder::on(&root)
+            .caption("Run time against error (lines: Pareto fronts)", ("sans-serif", 24))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((t0 * 0.8..t1 * 1.25).log_scale(), 0.0..e1)?;
         chart
-            .draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?
-            .label(format!("{scene} ({backend})"))
-            .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
-        chart.draw_series(LineSeries::new(pareto(&pts), color.stroke_width(2)))?;
-    }
-    chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).label_font(("sans-serif", 15)).draw()?;
-    root.present()?;
-    Ok(())
+            .configure_mesh()
+            .x_desc("median render time, s")
+            .y_desc("RMS error, % of 8-bit range")
+            .label_style(("sans-serif", 15))
+            .draw()?;
+        for (i, (scene, backend)) in groups.iter().enumerate() {
+            let color = COLORS[i % COLORS.len()];
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| &r.scene == scene && r.backend == *backend)
+                .map(|r| (r.median_seconds, r.rms_8bit_percent))
+                .collect();
+            chart
+                .draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?
+                .label(format!("{scene} ({backend})"))
+                .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
+            chart.draw_series(LineSeries::new(pareto(&pts), color.stroke_width(2)))?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .draw()?;
+        Ok(())
+    })
 }
 
 #[cfg(test)]

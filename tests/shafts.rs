@@ -300,3 +300,19 @@ fn eight_bit_mode_reproduces_the_papers_plane_count_trade_off() {
     println!("8-bit mode, rms % of 8-bit range: 5 planes {few:.3}, 30 planes {paper:.3}, 120 planes {many:.3}");
     assert!(paper < few && paper < many, "{few} {paper} {many}");
 }
+
+#[test]
+fn an_8192_by_8192_image() {
+    // 67 M pixels: 1 GiB of f32 RGBA for the image on the CPU backend. Two
+    // planes of one sub-plane keep it to seconds; the point is that nothing
+    // overflows (pixel indices, sample counts) and every pixel is finite. The
+    // GPU path's bands are tested in equivalence.rs.
+    let text = std::fs::read_to_string(common::root().join("scenes/fig6_sphere.toml")).unwrap();
+    let data = common::scene_from_str(&text.replace("resolution = [720, 480]", "resolution = [8192, 8192]"));
+    let data = with_shafts(&data, 2, 1, ShaftMode::Exact, true);
+    let (img, stats) = render::render(&data, &Backend::Cpu, false).unwrap();
+    assert_eq!(img.len(), 8192 * 8192);
+    assert!(stats.shaft_samples > 0);
+    assert_finite(&img, "8192x8192");
+    assert!(img.iter().any(|p| p.x > 0.0), "nothing is lit");
+}

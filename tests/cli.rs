@@ -192,3 +192,11 @@ fn compare_reports_rms_and_max() {
     assert!(text.contains("max_8bit_percent 0.0000"), "{text}");
     assert!(run.out("diff.png").exists());
 }
+
+#[test]
+fn bad_shaft_settings() {
+    let run = render(&format!("{GOOD}\n[shafts]\nplanes = 0\n"));
+    assert_rejected(&run, &["scene.toml", "shafts.planes", "1..=100000"]);
+    let run = render(&format!("{GOOD}\n[shafts]\nmode = \"fast\"\n"));
+    assert_rejected(&run, &["scene.toml", "mode", "exact", "tables"]);
+}

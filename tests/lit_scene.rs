@@ -193,3 +193,30 @@ fn empty_scene_runs_no_pass() {
     assert!(stats.passes.iter().all(|p| p.invocations == 0));
     assert!(img.iter().all(|p| p.truncate() == glam::Vec3::ZERO));
 }
+
+/// Every scene shipped in scenes/ loads, plans and renders (at a sixteenth
+/// of its pixels, with its assets found relative to the file) to a finite,
+/// non-black image.
+#[test]
+fn every_shipped_scene_renders() {
+    let dir = common::root().join("scenes");
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().and_then(|e| e.to_str()) != Some("toml") {
+            continue;
+        }
+        let mut data = slicelight::scene::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+        // A coarser pixel grid over the same view.
+        data.params.width /= 4;
+        data.params.height /= 4;
+        data.params.band_pixels = data.params.width * data.params.height;
+        let (img, stats) = render::render(&data, &Backend::Cpu, false).unwrap();
+        let lit = img.iter().filter(|p| p.truncate().max_element() > 0.0).count();
+        assert!(img.iter().all(|p| p.truncate().is_finite()), "{}: not finite", path.display());
+        assert!(lit > img.len() / 20, "{}: only {lit} pixels lit", path.display());
+        println!("{}: {:?}", path.display(), stats.passes.iter().map(|p| (p.name, p.ran)).collect::<Vec<_>>());
+        count += 1;
+    }
+    assert!(count >= 4, "found {count} scenes");
+}

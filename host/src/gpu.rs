@@ -24,6 +24,22 @@ const BINDING_SHADOW: usize = 5;
 const MIN_BUFFER_BYTES: u64 = std::mem::size_of::<slicelight_shaders::types::GpuLight>() as u64;
 const BINDING_OUTPUT: usize = 6;
 
+/// Runs `f` inside validation and out-of-memory error scopes, so that what
+/// wgpu reports becomes an error naming `what` instead of a panic in wgpu's
+/// default handler.
+fn checked<T>(device: &wgpu::Device, what: &str, f: impl FnOnce() -> T) -> Result<T> {
+    let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let value = f();
+    if let Some(e) = pollster::block_on(validation.pop()) {
+        bail!("{what}: {e}");
+    }
+    if let Some(e) = pollster::block_on(oom.pop()) {
+        bail!("{what}: out of device memory: {e}");
+    }
+    Ok(value)
+}
+
 pub struct GpuContext {
     device: wgpu::Device,
     queue: wgpu::Queue,
@@ -56,24 +72,26 @@ impl GpuContext {
             ..Default::default()
         }))
         .with_context(|| format!("cannot open device {}", info.name))?;
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("slicelight kernels"),
-            source: wgpu::util::make_spirv(SPIRV),
-        });
-        let pipelines = KERNELS
-            .iter()
-            .map(|&(name, _)| {
-                let p = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(name),
-                    layout: None,
-                    module: &module,
-                    entry_point: Some(name),
-                    compilation_options: Default::default(),
-                    cache: None,
-                });
-                (name, p)
-            })
-            .collect();
+        let pipelines = checked(&device, "building the kernels", || {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("slicelight kernels"),
+                source: wgpu::util::make_spirv(SPIRV),
+            });
+            KERNELS
+                .iter()
+                .map(|&(name, _)| {
+                    let p = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(name),
+                        layout: None,
+                        module: &module,
+                        entry_point: Some(name),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    });
+                    (name, p)
+                })
+                .collect::<HashMap<_, _>>()
+        })?;
         Ok(GpuContext {
             device,
             queue,
@@ -101,12 +119,14 @@ impl GpuContext {
                 self.max_binding_bytes >> 20
             );
         }
-        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
+        let buffer = checked(&self.device, label, || {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        })?;
         if !bytes.is_empty() {
             self.queue.write_buffer(&buffer, 0, bytes);
         }
@@ -146,22 +166,38 @@ impl GpuContext {
             self.storage("light maps", bytemuck::cast_slice(&data.light_map))?,
             self.storage("shadow maps", &shadow_bytes)?,
             // Until the surface pass runs, no pixel sees a surface.
-            self.storage("image", bytemuck::cast_slice(&vec![crate::render::no_surface(); self.band_pixels(data) as usize]))?,
+            self.storage(
+                "image",
+                bytemuck::cast_slice(&vec![crate::render::no_surface(); self.band_pixels(data) as usize]),
+            )?,
             self.storage("shaft tables", bytemuck::cast_slice(&data.tables))?,
         ];
-        let bind_groups = KERNELS
-            .iter()
-            .map(|&(name, bindings)| {
-                let entries: Vec<_> = bindings
-                    .iter()
-                    .map(|&i| wgpu::BindGroupEntry { binding: i, resource: buffers[i as usize].as_entire_binding() })
-                    .collect();
-                let layout = self.pipelines[name].get_bind_group_layout(0);
-                let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(name), layout: &layout, entries: &entries });
-                (name, group)
-            })
-            .collect();
-        Ok(GpuFrame { ctx: self, buffers, bind_groups })
+        let bind_groups = checked(&self.device, "binding the scene's buffers", || {
+            KERNELS
+                .iter()
+                .map(|&(name, bindings)| {
+                    let entries: Vec<_> = bindings
+                        .iter()
+                        .map(|&i| wgpu::BindGroupEntry {
+                            binding: i,
+                            resource: buffers[i as usize].as_entire_binding(),
+                        })
+                        .collect();
+                    let layout = self.pipelines[name].get_bind_group_layout(0);
+                    let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some(name),
+                        layout: &layout,
+                        entries: &entries,
+                    });
+                    (name, group)
+                })
+                .collect::<HashMap<_, _>>()
+        })?;
+        Ok(GpuFrame {
+            ctx: self,
+            buffers,
+            bind_groups,
+        })
     }
 }
 
@@ -185,14 +221,16 @@ impl GpuFrame<'_> {
         let max = self.ctx.device.limits().max_compute_workgroups_per_dimension;
         let gx = groups.min(max);
         let gy = groups.div_ceil(gx);
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &self.bind_groups[entry], &[]);
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
-        self.ctx.queue.submit([encoder.finish()]);
+        checked(&self.ctx.device, entry, || {
+            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &self.bind_groups[entry], &[]);
+                pass.dispatch_workgroups(gx, gy, 1);
+            }
+            self.ctx.queue.submit([encoder.finish()]);
+        })?;
         self.ctx
             .device
             .poll(wgpu::PollType::wait_indefinitely())
@@ -216,9 +254,15 @@ impl GpuFrame<'_> {
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        self.ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| anyhow!("device lost: {e}"))?;
+        self.ctx
+            .device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| anyhow!("device lost: {e}"))?;
         rx.recv()?.map_err(|e| anyhow!("cannot map the result buffer: {e}"))?;
-        let bytes = slice.get_mapped_range().map_err(|e| anyhow!("cannot read the result buffer: {e}"))?.to_vec();
+        let bytes = slice
+            .get_mapped_range()
+            .map_err(|e| anyhow!("cannot read the result buffer: {e}"))?
+            .to_vec();
         Ok(bytes)
     }
 
@@ -239,7 +283,9 @@ impl GpuFrame<'_> {
 
     /// Replaces the image buffer's contents (for testing a kernel that reads it).
     pub fn write_image(&self, pixels: &[Vec4]) {
-        self.ctx.queue.write_buffer(&self.buffers[BINDING_OUTPUT], 0, bytemuck::cast_slice(pixels));
+        self.ctx
+            .queue
+            .write_buffer(&self.buffers[BINDING_OUTPUT], 0, bytemuck::cast_slice(pixels));
     }
 
     pub fn read_image(&self, pixels: usize) -> Result<Vec<Vec4>> {

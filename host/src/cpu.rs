@@ -28,7 +28,7 @@ pub fn shadow_maps(data: &SceneData, progress: &ProgressBar) -> Vec<f32> {
     let p = &data.params;
     let mut out = vec![0.0; p.shadow_texel_count as usize];
     for_each_invocation(&mut out, progress, |i, v| {
-        *v = light::shadow_map_texel(i, p, &data.lights, &data.spheres, &data.triangles)
+        *v = light::shadow_map_texel(i, p, &data.lights, &data.spheres, &data.triangles, &data.groups)
     });
     out
 }
@@ -38,7 +38,7 @@ pub fn surface(data: &SceneData, shadow: &[f32], progress: &ProgressBar) -> Vec<
     let p = &data.params;
     let mut out = vec![Vec4::ZERO; data.pixel_count() as usize];
     for_each_invocation(&mut out, progress, |i, v| {
-        *v = surface::surface_pixel(i, p, &data.lights, &data.spheres, &data.triangles, &data.light_map, shadow)
+        *v = surface::surface_pixel(i, p, &data.lights, &data.spheres, &data.triangles, &data.groups, &data.light_map, shadow)
     });
     out
 }

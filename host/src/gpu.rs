@@ -15,8 +15,8 @@ const SPIRV: &[u8] = include_bytes!(env!("SLICELIGHT_SPV"));
 /// binding listed here that a kernel does not declare (or the reverse) fails
 /// at pipeline creation, in the equivalence tests.
 pub const KERNELS: &[(&str, &[u32])] = &[
-    ("shadow_map_kernel", &[0, 1, 2, 3, 5]),
-    ("surface_kernel", &[0, 1, 2, 3, 4, 5, 6]),
+    ("shadow_map_kernel", &[0, 1, 2, 3, 5, 8]),
+    ("surface_kernel", &[0, 1, 2, 3, 4, 5, 6, 8]),
     ("shafts_kernel", &[0, 1, 4, 5, 6, 7]),
 ];
 
@@ -171,6 +171,7 @@ impl GpuContext {
                 bytemuck::cast_slice(&vec![crate::render::no_surface(); self.band_pixels(data) as usize]),
             )?,
             self.storage("shaft tables", bytemuck::cast_slice(&data.tables))?,
+            self.storage("triangle groups", bytemuck::cast_slice(&data.groups))?,
         ];
         let bind_groups = checked(&self.device, "binding the scene's buffers", || {
             KERNELS

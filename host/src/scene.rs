@@ -7,7 +7,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use glam::{Vec3, Vec4};
 use serde::Deserialize;
 use slicelight_shaders::types::{
-    FrameParams, GpuLight, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL, LIGHT_SPOT, PHASE_DOBASHI,
+    FrameParams, GpuLight, GpuSphere, GpuTriangle, GpuTriangleGroup, LIGHT_DIRECTIONAL, LIGHT_SPOT, PHASE_DOBASHI,
     PHASE_HENYEY_GREENSTEIN, PHASE_ISOTROPIC, PHASE_RAYLEIGH,
 };
 use std::path::{Path, PathBuf};
@@ -215,6 +215,8 @@ pub struct SceneData {
     pub lights: Vec<GpuLight>,
     pub spheres: Vec<GpuSphere>,
     pub triangles: Vec<GpuTriangle>,
+    /// One group of consecutive triangles per object, with its bounds.
+    pub groups: Vec<GpuTriangleGroup>,
     pub light_map: Vec<Vec4>,
     /// The shafts pass's tables (`F` then `h`), empty in exact mode.
     pub tables: Vec<Vec4>,
@@ -460,6 +462,28 @@ fn load_mesh(field: &str, base: &Path, m: &MeshObject, albedo: Vec4, tris: &mut 
     Ok(())
 }
 
+/// The group of `triangles[first..]` with its bounding box, padded by 1e-4
+/// of its extent (plus 1e-6 of its distance from the origin) so that a flat
+/// quad's box has a thickness f32 rounding cannot slip through.
+fn triangle_group(triangles: &[GpuTriangle], first: usize) -> GpuTriangleGroup {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for t in &triangles[first..] {
+        for v in [t.v0, t.v1, t.v2] {
+            lo = lo.min(v.truncate());
+            hi = hi.max(v.truncate());
+        }
+    }
+    let pad = (hi - lo).max_element() * 1e-4 + 1e-6 * (1.0 + lo.abs().max(hi.abs()).max_element());
+    GpuTriangleGroup {
+        bounds_min: (lo - Vec3::splat(pad)).extend(0.0),
+        bounds_max: (hi + Vec3::splat(pad)).extend(0.0),
+        first_triangle: first as u32,
+        triangle_count: (triangles.len() - first) as u32,
+        _pad: [0; 2],
+    }
+}
+
 /// Axis-aligned bounds of all geometry (spheres and triangles).
 fn bounds(spheres: &[GpuSphere], tris: &[GpuTriangle]) -> Option<(Vec3, Vec3)> {
     let mut lo = Vec3::splat(f32::INFINITY);
@@ -531,8 +555,10 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     // Objects.
     let mut spheres = Vec::new();
     let mut triangles = Vec::new();
+    let mut groups = Vec::new();
     for (i, obj) in file.object.iter().enumerate() {
         let field = format!("object[{i}]");
+        let first = triangles.len();
         match obj {
             Object::Sphere(s) => {
                 let c = finite3(&format!("{field}.center"), s.center)?;
@@ -575,6 +601,9 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
                 let a = albedo(&format!("{field}.albedo"), mesh.albedo)?;
                 load_mesh(&field, base, mesh, a, &mut triangles)?;
             }
+        }
+        if triangles.len() > first {
+            groups.push(triangle_group(&triangles, first));
         }
     }
     let scene_bounds = bounds(&spheres, &triangles);
@@ -688,6 +717,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         light_count: lights.len() as u32,
         sphere_count: spheres.len() as u32,
         triangle_count: triangles.len() as u32,
+        group_count: groups.len() as u32,
         shadow_texel_count: shadow_texels,
         phase_kind,
         phase_g,
@@ -701,6 +731,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         lights,
         spheres,
         triangles,
+        groups,
         light_map,
         tables: Vec::new(),
         exposure: cam.exposure,

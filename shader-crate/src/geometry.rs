@@ -3,7 +3,7 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use crate::types::{GpuSphere, GpuTriangle};
+use crate::types::{GpuSphere, GpuTriangle, GpuTriangleGroup};
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Returned by the intersection functions when nothing is hit (the largest
@@ -77,7 +77,24 @@ pub fn ray_triangle(origin: Vec3, dir: Vec3, v0: Vec3, v1: Vec3, v2: Vec3, t_min
     }
 }
 
-/// The nearest hit of a ray with all spheres and triangles, closer than `t_max`.
+/// Whether the ray `origin + t dir` meets the box `[lo, hi]` for some `t` in
+/// `[t_min, t_max]` (slab test). Axes along which `dir` is 0 give infinite
+/// slab distances, which `min`/`max` order correctly. The one case that
+/// yields a NaN (`0 * inf`: the origin exactly on a face, the ray parallel to
+/// it) may report a miss; the host pads every box beyond its triangles, so
+/// such a ray cannot meet any of them.
+pub fn ray_hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_min: f32, t_max: f32) -> bool {
+    let a = (lo - origin) * inv_dir;
+    let b = (hi - origin) * inv_dir;
+    let near = a.x.min(b.x).max(a.y.min(b.y)).max(a.z.min(b.z)).max(t_min);
+    let far = a.x.max(b.x).min(a.y.max(b.y)).min(a.z.max(b.z)).min(t_max);
+    near <= far
+}
+
+/// The nearest hit of a ray with all spheres and triangles, closer than
+/// `t_max`. Triangles are visited group by group (one group per scene
+/// object); a group whose bounding box the ray misses, or meets only beyond
+/// the nearest hit so far, is skipped whole.
 pub fn trace_nearest(
     origin: Vec3,
     dir: Vec3,
@@ -86,7 +103,8 @@ pub fn trace_nearest(
     spheres: &[GpuSphere],
     sphere_count: u32,
     triangles: &[GpuTriangle],
-    triangle_count: u32,
+    groups: &[GpuTriangleGroup],
+    group_count: u32,
 ) -> Hit {
     let mut hit = Hit {
         distance: NO_HIT,
@@ -107,18 +125,27 @@ pub fn trace_nearest(
         }
         i += 1;
     }
-    let mut j = 0;
-    while j < triangle_count as usize {
-        let tri = triangles[j];
-        let (v0, v1, v2) = (tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz());
-        let t = ray_triangle(origin, dir, v0, v1, v2, t_min);
-        if t < best {
-            best = t;
-            hit.distance = t;
-            hit.normal = (v1 - v0).cross(v2 - v0).normalize();
-            hit.albedo = tri.albedo;
+    let inv_dir = Vec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
+    let mut g = 0;
+    while g < group_count as usize {
+        let group = groups[g];
+        if ray_hits_box(origin, inv_dir, group.bounds_min.xyz(), group.bounds_max.xyz(), t_min, best) {
+            let mut j = group.first_triangle as usize;
+            let end = j + group.triangle_count as usize;
+            while j < end {
+                let tri = triangles[j];
+                let (v0, v1, v2) = (tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz());
+                let t = ray_triangle(origin, dir, v0, v1, v2, t_min);
+                if t < best {
+                    best = t;
+                    hit.distance = t;
+                    hit.normal = (v1 - v0).cross(v2 - v0).normalize();
+                    hit.albedo = tri.albedo;
+                }
+                j += 1;
+            }
         }
-        j += 1;
+        g += 1;
     }
     hit
 }
@@ -145,6 +172,22 @@ mod tests {
         let c = Vec3::new(0.0, 0.0, 1.0e5);
         let t = ray_sphere(Vec3::ZERO, Vec3::Z, c, 1.0, 0.0);
         assert!((t - (1.0e5 - 1.0)).abs() < 0.016, "t = {t}");
+    }
+
+    #[test]
+    fn box_test_is_conservative_for_flat_boxes_and_axis_rays() {
+        // A flat box (a quad's bounds, padded as the host pads them) met
+        // head-on, and a ray along an axis that runs inside a slab.
+        let (lo, hi) = (Vec3::new(-1.0, -1.0, 2.99999), Vec3::new(1.0, 1.0, 3.00001));
+        let inv = |d: Vec3| Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+        assert!(ray_hits_box(Vec3::ZERO, inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
+        assert!(!ray_hits_box(Vec3::new(2.0, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
+        // Hit only beyond t_max: skipped.
+        assert!(!ray_hits_box(Vec3::ZERO, inv(Vec3::Z), lo, hi, 0.0, 2.0));
+        // A zero direction component (inverse infinite) with the origin
+        // inside that slab, and outside it.
+        assert!(ray_hits_box(Vec3::new(0.5, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
+        assert!(!ray_hits_box(Vec3::new(1.5, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
     }
 
     #[test]

@@ -18,6 +18,7 @@
 //! | 5 | shadow-map depths of all lights | `f32` |
 //! | 6 | output image, or a band of its rows (rgb radiance, w = hit distance) | `Vec4` |
 //! | 7 | shaft tables: phase `F`, then attenuation `h` | `Vec4` |
+//! | 8 | triangle groups (bounding boxes of the objects' triangle runs) | `GpuTriangleGroup` |
 #![cfg_attr(target_arch = "spirv", no_std)]
 
 pub mod geometry;
@@ -31,7 +32,7 @@ pub use spirv_std::glam;
 
 use crate::glam::{UVec3, Vec4};
 use spirv_std::spirv;
-use types::{FrameParams, GpuLight, GpuSphere, GpuTriangle};
+use types::{FrameParams, GpuLight, GpuSphere, GpuTriangle, GpuTriangleGroup};
 
 /// Threads per workgroup of every kernel; the host sizes its dispatches by it.
 pub const WORKGROUP_SIZE: u32 = 64;
@@ -51,11 +52,12 @@ pub fn shadow_map_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[GpuSphere],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[GpuTriangle],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] shadow: &mut [f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] triangle_groups: &[GpuTriangleGroup],
 ) {
     let index = flat_index(id, groups);
     let params = &params[0];
     if index < params.shadow_texel_count {
-        shadow[index as usize] = light::shadow_map_texel(index, params, lights, spheres, triangles);
+        shadow[index as usize] = light::shadow_map_texel(index, params, lights, spheres, triangles, triangle_groups);
     }
 }
 
@@ -70,12 +72,21 @@ pub fn surface_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] light_map: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] shadow: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] output: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] triangle_groups: &[GpuTriangleGroup],
 ) {
     let index = flat_index(id, groups);
     let params = &params[0];
     if index < params.band_pixels {
-        output[index as usize] =
-            surface::surface_pixel(params.band_start + index, params, lights, spheres, triangles, light_map, shadow);
+        output[index as usize] = surface::surface_pixel(
+            params.band_start + index,
+            params,
+            lights,
+            spheres,
+            triangles,
+            triangle_groups,
+            light_map,
+            shadow,
+        );
     }
 }
 

@@ -5,7 +5,7 @@
 use spirv_std::num_traits::Float;
 
 use crate::geometry::trace_nearest;
-use crate::types::{FrameParams, GpuLight, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL};
+use crate::types::{FrameParams, GpuLight, GpuSphere, GpuTriangle, GpuTriangleGroup, LIGHT_DIRECTIONAL};
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Stored in a shadow-map texel whose ray hits nothing.
@@ -139,6 +139,7 @@ pub fn shadow_map_texel(
     lights: &[GpuLight],
     spheres: &[GpuSphere],
     triangles: &[GpuTriangle],
+    groups: &[GpuTriangleGroup],
 ) -> f32 {
     let mut l = 0;
     while l < params.light_count as usize {
@@ -154,7 +155,8 @@ pub fn shadow_map_texel(
                 spheres,
                 params.sphere_count,
                 triangles,
-                params.triangle_count,
+                groups,
+                params.group_count,
             );
             return hit.distance.min(SHADOW_FAR);
         }

@@ -4,7 +4,7 @@
 
 use crate::geometry::{trace_nearest, NO_HIT};
 use crate::light::{emitted, light_local, shadow_visibility, transmittance};
-use crate::types::{FrameParams, GpuLight, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL};
+use crate::types::{FrameParams, GpuLight, GpuSphere, GpuTriangle, GpuTriangleGroup, LIGHT_DIRECTIONAL};
 use core::f32::consts::FRAC_1_PI;
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
 
@@ -71,6 +71,7 @@ pub fn surface_pixel(
     lights: &[GpuLight],
     spheres: &[GpuSphere],
     triangles: &[GpuTriangle],
+    groups: &[GpuTriangleGroup],
     light_map: &[Vec4],
     shadow: &[f32],
 ) -> Vec4 {
@@ -85,7 +86,8 @@ pub fn surface_pixel(
         spheres,
         params.sphere_count,
         triangles,
-        params.triangle_count,
+        groups,
+        params.group_count,
     );
     if hit.distance == NO_HIT {
         return Vec4::new(0.0, 0.0, 0.0, MISS_DISTANCE);

@@ -65,6 +65,9 @@ pub struct FrameParams {
     /// splits images larger than one device buffer into such bands.
     pub band_start: u32,
     pub band_pixels: u32,
+    /// Number of triangle groups (one per scene object made of triangles).
+    pub group_count: u32,
+    pub _pad: [u32; 3],
 }
 
 pub const PHASE_ISOTROPIC: u32 = 0;
@@ -143,6 +146,19 @@ pub struct GpuTriangle {
     pub albedo: Vec4,
 }
 
+/// A run of consecutive triangles (one scene object) and its bounding box:
+/// a ray that misses the box skips all of them.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct GpuTriangleGroup {
+    /// Box corners, metres (w unused).
+    pub bounds_min: Vec4,
+    pub bounds_max: Vec4,
+    pub first_triangle: u32,
+    pub triangle_count: u32,
+    pub _pad: [u32; 2],
+}
+
 #[cfg(not(target_arch = "spirv"))]
 mod pod {
     // SAFETY: every type here is `repr(C)`, `Copy`, made only of `f32`/`u32`/`Vec4`
@@ -154,10 +170,11 @@ mod pod {
             unsafe impl bytemuck::Pod for $t {}
         )*};
     }
-    pod!(super::FrameParams, super::GpuLight, super::GpuSphere, super::GpuTriangle);
+    pod!(super::FrameParams, super::GpuLight, super::GpuSphere, super::GpuTriangle, super::GpuTriangleGroup);
 
     const _: () = {
-        assert!(core::mem::size_of::<super::FrameParams>() == 6 * 16 + 96);
+        assert!(core::mem::size_of::<super::FrameParams>() == 6 * 16 + 112);
+        assert!(core::mem::size_of::<super::GpuTriangleGroup>() == 48);
         assert!(core::mem::size_of::<super::GpuLight>() == 5 * 16 + 64);
         assert!(core::mem::size_of::<super::GpuSphere>() == 32);
         assert!(core::mem::size_of::<super::GpuTriangle>() == 64);

@@ -106,12 +106,13 @@ impl GpuContext {
         format!("{} ({:?}, {:?})", self.adapter.name, self.adapter.device_type, self.adapter.backend)
     }
 
-    fn storage(&self, label: &str, bytes: &[u8]) -> Result<wgpu::Buffer> {
+    /// A storage buffer of `bytes` bytes; wgpu zero-fills it.
+    fn allocate(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
         // wgpu cannot bind an empty buffer, nor one smaller than one element
         // of the array the kernel declares; a stand-in as large as the largest
         // element type is never read because the matching count in
         // FrameParams is 0.
-        let size = (bytes.len() as u64).max(MIN_BUFFER_BYTES).next_multiple_of(4);
+        let size = bytes.max(MIN_BUFFER_BYTES).next_multiple_of(4);
         if size > self.max_binding_bytes {
             bail!(
                 "{label} needs {} MiB, more than this device binds in one buffer ({} MiB); lower the resolution",
@@ -119,14 +120,19 @@ impl GpuContext {
                 self.max_binding_bytes >> 20
             );
         }
-        let buffer = checked(&self.device, label, || {
+        checked(&self.device, label, || {
             self.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             })
-        })?;
+        })
+    }
+
+    /// A storage buffer holding `bytes`.
+    fn storage(&self, label: &str, bytes: &[u8]) -> Result<wgpu::Buffer> {
+        let buffer = self.allocate(label, bytes.len() as u64)?;
         if !bytes.is_empty() {
             self.queue.write_buffer(&buffer, 0, bytes);
         }
@@ -148,28 +154,24 @@ impl GpuContext {
 
     /// Uploads a scene's buffers. `shadow` gives the shadow maps' contents
     /// (from another backend, for equivalence tests); otherwise they are left
-    /// for `shadow_map_kernel` to fill.
+    /// for `shadow_map_kernel` to fill. The image kernels start on the first
+    /// band (see `set_band`).
     pub fn upload(&self, data: &SceneData, shadow: Option<&[f32]>) -> Result<GpuFrame<'_>> {
-        let shadow_len = data.params.shadow_texel_count as usize * 4;
-        let shadow_bytes = match shadow {
-            Some(s) => bytemuck::cast_slice(s).to_vec(),
-            None => vec![0u8; shadow_len],
-        };
-        let mut params = data.params;
-        params.band_start = 0;
-        params.band_pixels = self.band_pixels(data);
+        let shadow_bytes = data.params.shadow_texel_count as u64 * 4;
+        let band_bytes = self.band_pixels(data) as u64 * std::mem::size_of::<Vec4>() as u64;
         let buffers = vec![
-            self.storage("params", bytemuck::bytes_of(&params))?,
+            self.storage("params", bytemuck::bytes_of(&data.params))?,
             self.storage("lights", bytemuck::cast_slice(&data.lights))?,
             self.storage("spheres", bytemuck::cast_slice(&data.spheres))?,
             self.storage("triangles", bytemuck::cast_slice(&data.triangles))?,
             self.storage("light maps", bytemuck::cast_slice(&data.light_map))?,
-            self.storage("shadow maps", &shadow_bytes)?,
-            // Until the surface pass runs, no pixel sees a surface.
-            self.storage(
-                "image",
-                bytemuck::cast_slice(&vec![crate::render::no_surface(); self.band_pixels(data) as usize]),
-            )?,
+            // Filled by shadow_map_kernel unless given.
+            match shadow {
+                Some(s) => self.storage("shadow maps", bytemuck::cast_slice(s))?,
+                None => self.allocate("shadow maps", shadow_bytes)?,
+            },
+            // Band parameters and contents are set by `set_band` below.
+            self.allocate("image", band_bytes)?,
             self.storage("shaft tables", bytemuck::cast_slice(&data.tables))?,
             self.storage("triangle groups", bytemuck::cast_slice(&data.groups))?,
         ];
@@ -194,11 +196,13 @@ impl GpuContext {
                 })
                 .collect::<HashMap<_, _>>()
         })?;
-        Ok(GpuFrame {
+        let frame = GpuFrame {
             ctx: self,
             buffers,
             bind_groups,
-        })
+        };
+        frame.set_band(data, 0, self.band_pixels(data));
+        Ok(frame)
     }
 }
 

@@ -191,8 +191,11 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
             let mut start = 0;
             while start < data.pixel_count() {
                 let count = band.min(data.pixel_count() - start);
-                // Uploads and read-back count in the total time, not in a pass's.
-                frame.set_band(data, start, count);
+                // `upload` set up the first band. Uploads and read-back count
+                // in the total time, not in a pass's.
+                if start > 0 {
+                    frame.set_band(data, start, count);
+                }
                 for pass in passes.iter_mut().filter(|p| p.ran && p.name != "shadow_maps") {
                     pb.set_message(pass.name);
                     let t = Instant::now();

@@ -135,26 +135,35 @@ fn camera_ray(data: &SceneData, x: u32, y: u32) -> (DVec3, DVec3) {
     (o, d)
 }
 
-/// Attenuated surface radiance at one pixel centre, f64.
-pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
+/// A point in a light's frame, the unit direction from it toward the light,
+/// and the distance the light travels to it (from a spotlight, or from a
+/// directional light's entry plane), metres.
+fn toward_light(light: &GpuLight, point: DVec3) -> (DVec3, DVec3, f64) {
+    let rel = point - d3(light.position);
+    let local = DVec3::new(rel.dot(d3(light.axis_x)), rel.dot(d3(light.axis_y)), rel.dot(d3(light.axis_z)));
+    if light.kind == LIGHT_DIRECTIONAL {
+        (local, -d3(light.axis_z), local.z)
+    } else {
+        let s = rel.length();
+        (local, -rel / s.max(1e-300), s)
+    }
+}
+
+/// Attenuated surface radiance at one pixel centre, and the distance to the
+/// surface (infinite where the ray meets none), f64.
+fn surface_and_distance(data: &SceneData, x: u32, y: u32) -> (DVec3, f64) {
     let p = &data.params;
     let (o, d) = camera_ray(data, x, y);
     let Some(hit) = nearest(data, o, d, 0.0, f64::INFINITY) else {
-        return DVec3::ZERO;
+        return (DVec3::ZERO, f64::INFINITY);
     };
     let point = o + d * hit.t;
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
     let sigma_t = d3(p.sigma_t);
     let mut irradiance = DVec3::ZERO;
     for light in &data.lights {
-        let rel = point - d3(light.position);
-        let local = DVec3::new(rel.dot(d3(light.axis_x)), rel.dot(d3(light.axis_y)), rel.dot(d3(light.axis_z)));
-        let (to_light, distance, falloff) = if light.kind == LIGHT_DIRECTIONAL {
-            (-d3(light.axis_z), local.z, 1.0)
-        } else {
-            let s = rel.length();
-            (-rel / s, s, 1.0 / (s * s))
-        };
+        let (local, to_light, distance) = toward_light(light, point);
+        let falloff = if light.kind == LIGHT_DIRECTIONAL { 1.0 } else { 1.0 / (distance * distance) };
         let cos = normal.dot(to_light);
         if cos <= 0.0 {
             continue;
@@ -171,7 +180,12 @@ pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
         irradiance += e * attenuation * (cos * falloff);
     }
     let radiance = hit.albedo * irradiance / std::f64::consts::PI;
-    radiance * (-sigma_t * hit.t).exp()
+    (radiance * (-sigma_t * hit.t).exp(), hit.t)
+}
+
+/// Attenuated surface radiance at one pixel centre, f64.
+pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
+    surface_and_distance(data, x, y).0
 }
 
 /// Phase functions in f64, from their closed forms (normalised, 1/sr).
@@ -200,9 +214,9 @@ fn jitter(pixel: u32, sample: u32, round: u32) -> f64 {
 }
 
 /// In-scattered radiance at one pixel centre (eq. 2, summed over lights),
-/// with `samples` stratified samples over the ray, f64. Every sample casts
-/// a shadow ray to every light that lights it.
-pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, samples: u32) -> DVec3 {
+/// with `samples` stratified samples over the ray up to `t_surface`, f64.
+/// Every sample casts a shadow ray to every light that lights it.
+pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, t_surface: f64, samples: u32) -> DVec3 {
     let p = &data.params;
     let sigma_s = d3(p.sigma_s);
     if sigma_s == DVec3::ZERO {
@@ -211,7 +225,6 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, samples: u32) -> DVec3 
     let sigma_t = d3(p.sigma_t);
     let (o, d) = camera_ray(data, x, y);
     let cos_view = d.dot(d3(p.camera_forward));
-    let t_surface = nearest(data, o, d, 0.0, f64::INFINITY).map_or(f64::INFINITY, |h| h.t);
     let t0 = p.depth_near as f64 / cos_view;
     let t1 = (p.depth_far as f64 / cos_view).min(t_surface);
     if t1 <= t0 {
@@ -224,19 +237,17 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, samples: u32) -> DVec3 
         let t = t0 + (k as f64 + jitter(pixel, k, samples)) * dt;
         let point = o + d * t;
         for light in &data.lights {
-            let rel = point - d3(light.position);
-            let local = DVec3::new(rel.dot(d3(light.axis_x)), rel.dot(d3(light.axis_y)), rel.dot(d3(light.axis_z)));
+            let (local, to_light, distance) = toward_light(light, point);
             let e = emitted(data, light, local);
             if e == DVec3::ZERO {
                 continue;
             }
-            let (to_light, distance, falloff) = if light.kind == LIGHT_DIRECTIONAL {
-                (-d3(light.axis_z), local.z, 1.0)
+            let falloff = if light.kind == LIGHT_DIRECTIONAL {
+                1.0
             } else {
-                let s = rel.length();
                 // The kernels' point light has radius LIGHT_RADIUS in 1/s^2.
-                let r = s.max(slicelight_shaders::shafts::LIGHT_RADIUS as f64);
-                (-rel / s.max(1e-300), s, 1.0 / (r * r))
+                let r = distance.max(slicelight_shaders::shafts::LIGHT_RADIUS as f64);
+                1.0 / (r * r)
             };
             if !sees_light(data, point, to_light, distance) {
                 continue;
@@ -248,29 +259,29 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, samples: u32) -> DVec3 
     sum * dt
 }
 
-/// The reference (surface + in-scattering with `samples` samples per ray) at
-/// the given pixel indices (row-major), rgb in f64.
-pub fn render_at(data: &SceneData, pixels: &[u32], samples: u32) -> Vec<DVec3> {
-    let w = data.width();
-    pixels
-        .par_iter()
-        .map(|&i| surface_pixel(data, i % w, i / w) + inscatter_pixel(data, i % w, i / w, samples))
-        .collect()
-}
-
-/// The reference at convergence at the given pixels: the ray-march sample
-/// count starts at 64 and doubles until the values change by less than
-/// `tolerance` RMS, relative to their peak (or 65536 samples are reached).
-/// Returns the values and the final sample count.
+/// The reference at convergence at the given pixels (row-major indices),
+/// rgb in f64: the surface term once, plus the in-scattering, whose ray-march
+/// sample count starts at 64 and doubles until the values change by less
+/// than `tolerance` RMS, relative to their peak (or 65536 samples are
+/// reached). Returns the values and the final sample count.
 pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> (Vec<DVec3>, u32) {
-    let mut samples = 64;
-    let mut image = render_at(data, pixels, samples);
+    let w = data.width();
+    let surfaces: Vec<(DVec3, f64)> = pixels.par_iter().map(|&i| surface_and_distance(data, i % w, i / w)).collect();
+    let with_inscatter = |samples: u32| -> Vec<DVec3> {
+        pixels
+            .par_iter()
+            .zip(&surfaces)
+            .map(|(&i, &(surface, t))| surface + inscatter_pixel(data, i % w, i / w, t, samples))
+            .collect()
+    };
     if !data.scatters() {
-        return (image, 0);
+        return (surfaces.iter().map(|s| s.0).collect(), 0);
     }
+    let mut samples = 64;
+    let mut image = with_inscatter(samples);
     while samples < 65536 {
         samples *= 2;
-        let next = render_at(data, pixels, samples);
+        let next = with_inscatter(samples);
         let peak = next.iter().map(|p| p.max_element()).fold(1e-300, f64::max);
         let sum2: f64 = next.iter().zip(&image).map(|(a, b)| (*a - *b).length_squared()).sum();
         let change = (sum2 / (3 * next.len().max(1)) as f64).sqrt() / peak;

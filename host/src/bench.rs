@@ -298,6 +298,17 @@ const COLORS: [RGBColor; 6] = [
 
 type Series = (String, Vec<(f64, f64)>);
 
+/// The legend box, the same on every plot.
+fn draw_legend<'a, CT: plotters::coord::CoordTranslate>(chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .draw()?;
+    Ok(())
+}
+
 /// A log-x, linear-y line plot with one line per series.
 const PLOT_SIZE: (u32, u32) = (900, 600);
 
@@ -349,13 +360,7 @@ fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[S
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
             chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .draw()?;
-        Ok(())
+        draw_legend(&mut chart)
     })
 }
 
@@ -427,13 +432,7 @@ fn plot(dir: &Path, rows: &[Row]) -> Result<()> {
                 .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
             chart.draw_series(LineSeries::new(pareto(&pts), color.stroke_width(2)))?;
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .draw()?;
-        Ok(())
+        draw_legend(&mut chart)
     })
 }
 

@@ -349,6 +349,7 @@ fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[S
         chart
             .configure_mesh()
             .x_desc(x_label)
+            .x_label_formatter(&|x| format!("{x:.0}"))
             .y_desc(y_label)
             .label_style(("sans-serif", 15))
             .draw()?;
@@ -416,6 +417,8 @@ fn plot(dir: &Path, rows: &[Row]) -> Result<()> {
         chart
             .configure_mesh()
             .x_desc("median render time, s")
+            // Log-scale key points such as 0.1 * 3 print as 0.30000000000000004.
+            .x_label_formatter(&|x| format!("{}", (x * 1e4).round() / 1e4))
             .y_desc("RMS error, % of 8-bit range")
             .label_style(("sans-serif", 15))
             .draw()?;

@@ -12,6 +12,11 @@ if ! rustup toolchain list | grep -q "^$toolchain"; then
     echo "setup: installing Rust toolchain $toolchain" >&2
     rustup toolchain install  # installs what rust-toolchain.toml names, with its components
 fi
+# A toolchain installed before rustfmt and clippy joined rust-toolchain.toml lacks them.
+for component in rustfmt clippy; do
+    rustup component list --toolchain "$toolchain" --installed | grep -q "^$component" \
+        || rustup component add --toolchain "$toolchain" "$component"
+done
 
 have_vulkan() {
     ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1 && ldconfig -p | grep -q 'libvulkan\.so\.1'

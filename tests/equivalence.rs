@@ -1,16 +1,17 @@
-//! GPU-vs-CPU equivalence: every kernel, run as SPIR-V on a Vulkan device and
-//! as the same Rust function on the CPU, on identical inputs.
+//! GPU-vs-CPU equivalence: every registered pass's kernel, run as SPIR-V on a
+//! Vulkan device and as the same Rust function on the CPU, on identical
+//! inputs; then whole renders through the pass plan.
 //!
 //! These tests need a Vulkan device (lavapipe is enough: `scripts/setup.sh`
 //! installs it). Without one they fail; they never skip.
 
 mod common;
 
-use glam::Vec4;
 use indicatif::ProgressBar;
 use slicelight::gpu::GpuContext;
+use slicelight::passes::{Dispatch, Frame, PASSES};
+use slicelight::render;
 use slicelight::scene::SceneData;
-use slicelight::{cpu, render};
 
 fn device() -> GpuContext {
     let ctx = GpuContext::new().unwrap_or_else(|e| panic!("the equivalence tests need a Vulkan device: {e:#}"));
@@ -69,139 +70,94 @@ fn window_scene() -> SceneData {
     slicelight::scene::load(&path).unwrap()
 }
 
-/// Counts values whose difference exceeds `tol(cpu)`, and returns the largest
-/// difference among the rest.
-fn compare(gpu: &[f32], cpu: &[f32], tol: impl Fn(f32) -> f32) -> (usize, f32) {
-    assert_eq!(gpu.len(), cpu.len());
-    let mut outliers = 0;
-    let mut worst = 0.0f32;
-    for (&g, &c) in gpu.iter().zip(cpu) {
-        let d = (g - c).abs();
-        if d.is_nan() || d > tol(c) {
-            outliers += 1;
-        } else {
-            worst = worst.max(d);
-        }
-    }
-    (outliers, worst)
-}
-
-fn check_shadow_maps(ctx: &GpuContext, data: &SceneData) {
-    let cpu_maps = cpu::shadow_maps(data, &ProgressBar::hidden());
-    let frame = ctx.upload(data, None).unwrap();
-    frame.run("shadow_map_kernel", data.params.shadow_texel_count).unwrap();
-    let gpu_maps = frame.read_shadow(cpu_maps.len()).unwrap();
-    // A depth is one ray-surface intersection in f32. The GPU may fuse
-    // multiply-adds and round sqrt differently, so depths agree to a few ulps
-    // of the operands (1e-5 relative leaves a 10x margin over the worst seen).
-    // A texel whose ray grazes a silhouette can hit on one backend and miss on
-    // the other: such flips are allowed on at most 1e-4 of the texels.
-    let (outliers, worst) = compare(&gpu_maps, &cpu_maps, |c| 1e-5 * c.abs().max(1.0));
-    let allowed = cpu_maps.len() / 10_000 + 1;
-    println!("shadow maps: {} texels, {outliers} silhouette flips, worst other difference {worst:e} m", cpu_maps.len());
-    assert!(outliers <= allowed, "{outliers} of {} shadow texels differ (allowed {allowed})", cpu_maps.len());
-}
-
-fn check_surface(ctx: &GpuContext, data: &SceneData) {
-    // Both backends shade from the same (CPU-built) shadow maps, so this
-    // compares the surface kernel alone.
-    let shadow = cpu::shadow_maps(data, &ProgressBar::hidden());
-    let cpu_img = cpu::surface(data, &shadow, &ProgressBar::hidden());
-    let frame = ctx.upload(data, Some(&shadow)).unwrap();
-    frame.run("surface_kernel", data.pixel_count()).unwrap();
-    let gpu_img = frame.read_image(cpu_img.len()).unwrap();
-    let flat = |img: &[Vec4]| img.iter().flat_map(|p| p.to_array()).collect::<Vec<f32>>();
-    let peak = cpu_img.iter().map(|p| p.truncate().max_element()).fold(0.0, f32::max);
-    // Radiance is a product of about 20 f32 factors (exp, sqrt, dot products):
-    // 1e-5 of the image's peak is ~100 ulps of the largest value. Hit
-    // distances (w) agree like the shadow depths. A pixel can flip where its
-    // ray grazes a silhouette or its shadow test sits on the bias threshold:
-    // at most 1e-3 of the values may.
-    let (outliers, worst) = compare(&flat(&gpu_img), &flat(&cpu_img), |c| {
-        if c > 1e30 {
-            0.0
-        } else {
-            1e-5 * peak.max(c.abs())
-        }
-    });
-    let allowed = cpu_img.len() * 4 / 1000 + 1;
-    println!("surface: {} pixels, {outliers} flipped values, worst other difference {worst:e} (peak {peak:e})", cpu_img.len());
-    assert!(outliers <= allowed, "{outliers} of {} pixel values differ (allowed {allowed})", cpu_img.len() * 4);
-}
-
-fn check_shafts(ctx: &GpuContext, data: &SceneData) {
-    // Same shadow maps and same surface image (with its hit distances) on
-    // both backends: this compares the shafts kernel alone.
-    let pb = ProgressBar::hidden();
-    let shadow = cpu::shadow_maps(data, &pb);
-    let surface = cpu::surface(data, &shadow, &pb);
-    let mut cpu_img = surface.clone();
-    cpu::shafts(data, &shadow, &mut cpu_img, &pb);
-    let frame = ctx.upload(data, Some(&shadow)).unwrap();
-    frame.write_image(&surface);
-    frame.run("shafts_kernel", data.pixel_count()).unwrap();
-    let gpu_img = frame.read_image(cpu_img.len()).unwrap();
-    let rgb = |img: &[Vec4]| img.iter().flat_map(|p| p.truncate().to_array()).collect::<Vec<f32>>();
-    let peak = cpu_img.iter().map(|p| p.truncate().max_element()).fold(0.0, f32::max);
-    // In-scattered radiance is a sum over up to planes x sub-planes x lights
-    // terms, each a product like the surface's, plus (tables mode) an acos,
-    // which Vulkan lets a device compute to 4096 ulps, ahead of a table
-    // interpolation. Measured on lavapipe: worst 1.1e-5 of the peak in exact
-    // mode, 1.6e-5 with tables; the bound is 3e-5. A sub-plane sample can
-    // flip where its shadow test or cone test sits on a threshold (a plane
-    // boundary rounded differently moves it): at most 1e-3 of the values may.
-    let (outliers, worst) = compare(&rgb(&gpu_img), &rgb(&cpu_img), |c| 3e-5 * peak.max(c.abs()));
-    let allowed = cpu_img.len() * 3 / 1000 + 1;
-    println!(
-        "shafts ({:?}): {} pixels, {outliers} flipped values, worst other difference {worst:e} (peak {peak:e})",
-        data.shafts.mode,
-        cpu_img.len()
-    );
-    let worst_rel = rgb(&gpu_img).iter().zip(rgb(&cpu_img)).map(|(g, c)| (g - c).abs() / peak).fold(0.0, f32::max);
-    println!("worst difference / peak: {worst_rel:e}");
-    assert!(outliers <= allowed, "{outliers} of {} pixel values differ (allowed {allowed})", cpu_img.len() * 3);
-    // The sample counts (w) are integers; a flipped clip bound may move one
-    // interval's sub-planes in or out of a pixel's count.
-    let counts_differ = gpu_img.iter().zip(&cpu_img).filter(|(g, c)| g.w != c.w).count();
-    assert!(counts_differ <= allowed, "{counts_differ} sample counts differ");
-}
-
-#[test]
-fn shafts_kernel_matches_cpu() {
-    let ctx = device();
-    let mut data = fog_spot();
-    check_shafts(&ctx, &data);
-    let mut s = data.shafts;
+/// The scenes every pass is checked on: between them they reach every
+/// kernel path (spot and directional lights, light maps, a mesh, exact and
+/// table shafts, the self-check).
+fn scenes() -> Vec<(&'static str, SceneData)> {
+    let mut tables = fog_spot();
+    let mut s = tables.shafts.settings;
     s.mode = slicelight::scene::ShaftMode::Tables;
     s.jitter = false;
-    data.configure_shafts(s).unwrap();
-    check_shafts(&ctx, &data);
-    check_shafts(&ctx, &window_scene());
+    tables.configure_shafts(s).unwrap();
+    let mut aa = window_scene();
+    aa.set_samples_per_pixel(4).unwrap();
+    aa.common.sample_index = 3;
+    let mut fog = fog_spot();
+    fog.requested_passes.push("scatter_check".into());
+    vec![
+        ("fog_spot", fog),
+        ("fog_spot, tables", tables),
+        ("window", window_scene()),
+        ("window, sample 3 of 4", aa),
+    ]
 }
 
+/// Every registered pass, on every scene that runs it: the CPU runs all
+/// passes up to and including it; the GPU runs it alone on the CPU's
+/// inputs (so this compares the one kernel), and the pass compares the two
+/// with the tolerances it states. Every pass must be checked at least once.
 #[test]
-fn shadow_map_kernel_matches_cpu() {
+fn every_pass_matches_cpu() {
     let ctx = device();
-    check_shadow_maps(&ctx, &fog_spot());
-    check_shadow_maps(&ctx, &window_scene());
-}
-
-#[test]
-fn surface_kernel_matches_cpu() {
-    let ctx = device();
-    check_surface(&ctx, &fog_spot());
-    check_surface(&ctx, &window_scene());
+    let pb = ProgressBar::hidden();
+    let mut checked = std::collections::HashSet::new();
+    for (name, data) in scenes() {
+        let mut cpu_frame = Frame::default();
+        for r in PASSES.iter().flat_map(|p| p.reads().iter().chain(p.writes())) {
+            if let Some(blank) = r.blank(data.pixel_count() as usize) {
+                cpu_frame.insert(r, blank);
+            }
+        }
+        for &pass in PASSES {
+            if !pass.plan(&data).runs {
+                continue;
+            }
+            let inputs = cpu_frame.clone();
+            pass.run_cpu(&data, &data.common, &mut cpu_frame, &pb);
+            let invocations = match pass.dispatch() {
+                Dispatch::Whole => pass.plan(&data).invocations as u32,
+                Dispatch::PerPixel => data.pixel_count(),
+            };
+            let frame = ctx.frame(&data, &[pass], Some(&inputs)).unwrap();
+            frame.set_band(0, data.pixel_count(), data.common.sample_index);
+            frame.run(&[(pass, invocations)]).unwrap();
+            let mut gpu_frame = Frame::default();
+            for w in pass.writes() {
+                let bytes = cpu_frame.bytes(w).expect("the CPU wrote it").len() as u64;
+                gpu_frame.insert(w, frame.read(w, bytes).unwrap());
+            }
+            match pass.compare(&data, &gpu_frame, &cpu_frame) {
+                Ok(line) => println!("{name}: {}: {line}", pass.name()),
+                Err(e) => panic!("{name}: {}: GPU and CPU differ: {e:#}", pass.name()),
+            }
+            checked.insert(pass.name());
+        }
+    }
+    for p in PASSES {
+        assert!(
+            checked.contains(p.name()),
+            "pass {} was not checked on any scene",
+            p.name()
+        );
+    }
 }
 
 #[test]
 fn whole_render_matches_cpu() {
-    // End to end through the pass plan on both backends, as the CLI runs it.
+    // End to end through the pass plan on both backends, as the CLI runs it,
+    // with 4 sub-pixel samples (the sample loop and the box filter).
     let ctx = device();
-    let data = fog_spot();
+    let mut data = fog_spot();
+    data.set_samples_per_pixel(4).unwrap();
     let (cpu_img, _) = render::render(&data, &render::Backend::Cpu, false).unwrap();
     let gpu = render::Backend::Gpu(Box::new(ctx));
     let (gpu_img, stats) = render::render(&data, &gpu, false).unwrap();
     assert_eq!(stats.backend, "gpu");
+    println!(
+        "pass timing: {}; {:?}",
+        stats.pass_timing,
+        stats.passes.iter().map(|p| (p.name, p.seconds)).collect::<Vec<_>>()
+    );
     let d = slicelight::metrics::difference(
         &slicelight::metrics::to_f64(&gpu_img),
         &slicelight::metrics::to_f64(&cpu_img),
@@ -221,7 +177,7 @@ fn banded_render_matches_cpu() {
     // the CPU, which renders the image whole.
     let mut ctx = device();
     let data = fog_spot();
-    ctx.limit_band_bytes(37 * data.width() as u64 * 16);
+    ctx.limit_band_bytes(37 * data.width() as u64 * 32);
     assert_eq!(ctx.band_pixels(&data), 37 * data.width());
     let (cpu_img, _) = render::render(&data, &render::Backend::Cpu, false).unwrap();
     let (gpu_img, _) = render::render(&data, &render::Backend::Gpu(Box::new(ctx)), false).unwrap();
@@ -234,4 +190,21 @@ fn banded_render_matches_cpu() {
     // As for the whole render: a band in the wrong place would be off by
     // whole rows of radiance, orders of magnitude above this.
     assert!(d.rms_relative < 1e-4, "{d:?}");
+}
+
+#[test]
+fn scatter_self_check_passes_on_the_device() {
+    // Through the renderer, as `render --pass scatter_check` runs it.
+    let ctx = device();
+    let mut data = fog_spot();
+    data.requested_passes.push("scatter_check".into());
+    let (_, stats) = render::render(&data, &render::Backend::Gpu(Box::new(ctx)), false).unwrap();
+    let check = stats.passes.iter().find(|p| p.name == "scatter_check").unwrap();
+    println!("{:?}", check.report);
+    assert!(check.ran);
+    assert!(
+        !check.report.as_deref().unwrap().starts_with("FAILED"),
+        "{:?}",
+        check.report
+    );
 }

@@ -65,7 +65,11 @@ pub fn sweep(quick: bool) -> Vec<Config> {
         jitter: true,
         quantize_8bit: false,
     };
-    let planes: &[u32] = if quick { &[5, 30, 120] } else { &[5, 10, 20, 30, 60, 120, 240] };
+    let planes: &[u32] = if quick {
+        &[5, 30, 120]
+    } else {
+        &[5, 10, 20, 30, 60, 120, 240]
+    };
     let subs: &[u32] = if quick { &[1, 6, 24] } else { &[1, 2, 4, 6, 12, 24] };
     let tables: &[u32] = if quick { &[16, 256] } else { &[16, 64, 256] };
     let mut v = Vec::new();
@@ -197,8 +201,8 @@ pub fn run(opts: &Options) -> Result<Vec<Row>> {
                     max_8bit_percent: e.max_8bit_percent,
                     rms_relative: e.rms_relative,
                     max_relative: e.max_relative,
-                    shaft_samples: st.shaft_samples,
-                    shaft_samples_naive: st.shaft_samples_naive,
+                    shaft_samples: st.counter("shaft_samples"),
+                    shaft_samples_naive: st.counter("shaft_samples_naive"),
                 };
                 eprintln!(
                     "{name:>14} {:>4} {:<12} n={:<4} m={:<3} {:?}{} {:>8.4} s  rms {:.3}%  max {:.2}%",
@@ -278,12 +282,12 @@ fn register_font() -> Result<()> {
         "/usr/share/fonts/TTF/DejaVuSans.ttf",
         "/usr/share/fonts/dejavu/DejaVuSans.ttf",
     ];
-    let path = CANDIDATES
-        .iter()
-        .find(|p| Path::new(p).exists())
-        .ok_or_else(|| anyhow!("no DejaVuSans.ttf for the plots' labels; install fonts-dejavu-core (scripts/setup.sh does)"))?;
+    let path = CANDIDATES.iter().find(|p| Path::new(p).exists()).ok_or_else(|| {
+        anyhow!("no DejaVuSans.ttf for the plots' labels; install fonts-dejavu-core (scripts/setup.sh does)")
+    })?;
     let bytes: &'static [u8] = Box::leak(std::fs::read(path)?.into_boxed_slice());
-    plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).map_err(|_| anyhow!("{path}: not a usable font"))?;
+    plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+        .map_err(|_| anyhow!("{path}: not a usable font"))?;
     Ok(())
 }
 
@@ -299,7 +303,9 @@ const COLORS: [RGBColor; 6] = [
 type Series = (String, Vec<(f64, f64)>);
 
 /// The legend box, the same on every plot.
-fn draw_legend<'a, CT: plotters::coord::CoordTranslate>(chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>) -> Result<()> {
+fn draw_legend<'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>,
+) -> Result<()> {
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
@@ -313,7 +319,10 @@ fn draw_legend<'a, CT: plotters::coord::CoordTranslate>(chart: &mut ChartContext
 const PLOT_SIZE: (u32, u32) = (900, 600);
 
 /// Draws into an RGB buffer with `draw` and writes it as a PNG, whole or not at all.
-fn save_plot(path: &Path, draw: impl FnOnce(DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>) -> Result<()> {
+fn save_plot(
+    path: &Path,
+    draw: impl FnOnce(DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>,
+) -> Result<()> {
     let (w, h) = PLOT_SIZE;
     let mut buf = vec![0u8; (w * h * 3) as usize];
     {

@@ -1,28 +1,22 @@
-//! The GPU backend: the SPIR-V kernels run through wgpu (Vulkan).
+//! The GPU backend: the SPIR-V kernels of every registered pass, run through
+//! wgpu (Vulkan). Buffers are created per resource (by binding), bind groups
+//! per pass from the pass's own resource lists; nothing here names a pass.
 
 use anyhow::{anyhow, bail, Context, Result};
-use glam::Vec4;
 use slicelight_shaders::WORKGROUP_SIZE;
 use std::collections::HashMap;
+use std::time::Instant;
 
+use crate::passes::{Buffer, Frame, Pass, Resource, ResourceKind, COMMON, PASSES};
 use crate::scene::SceneData;
 
 /// The kernels compiled by `build.rs` from `shader-crate`.
-const SPIRV: &[u8] = include_bytes!(env!("SLICELIGHT_SPV"));
+pub const SPIRV: &[u8] = include_bytes!(env!("SLICELIGHT_SPV"));
 
-/// Entry points of the shader module (`shader-crate/src/lib.rs`) and the
-/// bindings each declares. Pipelines take their layouts from the SPIR-V, so a
-/// binding listed here that a kernel does not declare (or the reverse) fails
-/// at pipeline creation, in the equivalence tests.
-pub const KERNELS: &[(&str, &[u32])] = &[
-    ("shadow_map_kernel", &[0, 1, 2, 3, 5, 8]),
-    ("surface_kernel", &[0, 1, 2, 3, 4, 5, 6, 8]),
-    ("shafts_kernel", &[0, 1, 4, 5, 6, 7]),
-];
-
-const BINDING_SHADOW: usize = 5;
+/// wgpu cannot bind an empty buffer, nor one smaller than one element of the
+/// array the kernel declares; a stand-in as large as the largest element type
+/// (`GpuLight`) is never read because the matching count is 0.
 const MIN_BUFFER_BYTES: u64 = std::mem::size_of::<slicelight_shaders::types::GpuLight>() as u64;
-const BINDING_OUTPUT: usize = 6;
 
 /// Runs `f` inside validation and out-of-memory error scopes, so that what
 /// wgpu reports becomes an error naming `what` instead of a panic in wgpu's
@@ -44,15 +38,18 @@ pub struct GpuContext {
     device: wgpu::Device,
     queue: wgpu::Queue,
     pub adapter: wgpu::AdapterInfo,
+    /// One pipeline per registered pass, by pass name.
     pipelines: HashMap<&'static str, wgpu::ComputePipeline>,
     max_binding_bytes: u64,
     /// Largest image band, bytes: `max_binding_bytes` unless lowered.
     band_limit_bytes: u64,
+    /// Whether per-pass times come from timestamp queries.
+    timestamps: bool,
 }
 
 impl GpuContext {
     /// Opens the first Vulkan device wgpu finds (a discrete GPU if there is
-    /// one, else lavapipe) and builds every kernel's pipeline.
+    /// one, else lavapipe) and builds every registered pass's pipeline.
     pub fn new() -> Result<Self> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
@@ -66,9 +63,16 @@ impl GpuContext {
         })?;
         let info = adapter.get_info();
         let limits = adapter.limits();
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let required_features = if timestamps {
+            wgpu::Features::TIMESTAMP_QUERY
+        } else {
+            wgpu::Features::empty()
+        };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("slicelight"),
             required_limits: limits.clone(),
+            required_features,
             ..Default::default()
         }))
         .with_context(|| format!("cannot open device {}", info.name))?;
@@ -77,18 +81,18 @@ impl GpuContext {
                 label: Some("slicelight kernels"),
                 source: wgpu::util::make_spirv(SPIRV),
             });
-            KERNELS
+            PASSES
                 .iter()
-                .map(|&(name, _)| {
+                .map(|pass| {
                     let p = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(name),
+                        label: Some(pass.name()),
                         layout: None,
                         module: &module,
-                        entry_point: Some(name),
+                        entry_point: Some(pass.kernel()),
                         compilation_options: Default::default(),
                         cache: None,
                     });
-                    (name, p)
+                    (pass.name(), p)
                 })
                 .collect::<HashMap<_, _>>()
         })?;
@@ -99,19 +103,24 @@ impl GpuContext {
             pipelines,
             max_binding_bytes: limits.max_storage_buffer_binding_size as u64,
             band_limit_bytes: limits.max_storage_buffer_binding_size as u64,
+            timestamps,
         })
     }
 
     pub fn device_name(&self) -> String {
-        format!("{} ({:?}, {:?})", self.adapter.name, self.adapter.device_type, self.adapter.backend)
+        format!(
+            "{} ({:?}, {:?})",
+            self.adapter.name, self.adapter.device_type, self.adapter.backend
+        )
+    }
+
+    /// Whether per-pass times are the device's own (timestamp queries).
+    pub fn has_timestamps(&self) -> bool {
+        self.timestamps
     }
 
     /// A storage buffer of `bytes` bytes; wgpu zero-fills it.
     fn allocate(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
-        // wgpu cannot bind an empty buffer, nor one smaller than one element
-        // of the array the kernel declares; a stand-in as large as the largest
-        // element type is never read because the matching count in
-        // FrameParams is 0.
         let size = bytes.max(MIN_BUFFER_BYTES).next_multiple_of(4);
         if size > self.max_binding_bytes {
             bail!(
@@ -130,6 +139,102 @@ impl GpuContext {
         })
     }
 
+    /// Lowers the image band size (to test the banding on small images).
+    pub fn limit_band_bytes(&mut self, bytes: u64) {
+        self.band_limit_bytes = bytes.min(self.max_binding_bytes);
+    }
+
+    /// Pixels per band: the whole image if every per-pixel buffer fits in
+    /// one binding, else as many whole rows as fit.
+    pub fn band_pixels(&self, data: &SceneData) -> u32 {
+        let widest = PASSES
+            .iter()
+            .flat_map(|p| p.reads().iter().chain(p.writes()))
+            .filter_map(|r| r.bytes_per_pixel())
+            .max()
+            .unwrap_or(16);
+        let fit = (self.band_limit_bytes / widest).min(u32::MAX as u64) as u32;
+        let rows = (fit / data.width()).max(1);
+        data.pixel_count().min(rows * data.width())
+    }
+
+    /// Creates the buffers and bind groups of `passes` for a scene. Frame
+    /// and per-pixel resources found in `inputs` (another backend's results,
+    /// for equivalence tests) are uploaded; per-pixel resources none of the
+    /// passes writes are filled with their blank. The per-pixel passes start
+    /// on the first band, sample 0 (see `set_band`).
+    pub fn frame<'a>(
+        &'a self,
+        scene: &SceneData,
+        passes: &[&'static dyn Pass],
+        inputs: Option<&Frame>,
+    ) -> Result<GpuFrame<'a>> {
+        let band = self.band_pixels(scene);
+        let written: Vec<u32> = passes.iter().flat_map(|p| p.writes()).map(|r| r.binding).collect();
+        let mut buffers: HashMap<u32, wgpu::Buffer> = HashMap::new();
+        for r in passes.iter().flat_map(|p| p.reads().iter().chain(p.writes())) {
+            if buffers.contains_key(&r.binding) {
+                continue;
+            }
+            let given = inputs.and_then(|f| f.bytes(r));
+            let buffer = match r.kind {
+                ResourceKind::Scene(bytes) => self.storage(r.name, bytes(scene))?,
+                ResourceKind::Frame(len) => match given {
+                    Some(bytes) => self.storage(r.name, bytes)?,
+                    None => self.allocate(r.name, len(scene))?,
+                },
+                ResourceKind::PerPixel { .. } => {
+                    let bpp = r.bytes_per_pixel().unwrap_or(16);
+                    let buffer = self.allocate(r.name, band as u64 * bpp)?;
+                    match given {
+                        Some(bytes) => {
+                            ensure_one_band(scene, band, r)?;
+                            self.queue.write_buffer(&buffer, 0, bytes);
+                        }
+                        None if !written.contains(&r.binding) => {
+                            let blank = r.blank(band as usize).expect("per-pixel");
+                            self.queue.write_buffer(&buffer, 0, blank.as_bytes());
+                        }
+                        None => {}
+                    }
+                    buffer
+                }
+            };
+            buffers.insert(r.binding, buffer);
+        }
+        let bind_groups = checked(&self.device, "binding the scene's buffers", || {
+            passes
+                .iter()
+                .map(|pass| {
+                    let entries: Vec<_> = pass
+                        .reads()
+                        .iter()
+                        .chain(pass.writes())
+                        .map(|r| wgpu::BindGroupEntry {
+                            binding: r.binding,
+                            resource: buffers[&r.binding].as_entire_binding(),
+                        })
+                        .collect();
+                    let layout = self.pipelines[pass.name()].get_bind_group_layout(0);
+                    let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some(pass.name()),
+                        layout: &layout,
+                        entries: &entries,
+                    });
+                    (pass.name(), group)
+                })
+                .collect::<HashMap<_, _>>()
+        })?;
+        let frame = GpuFrame {
+            ctx: self,
+            common: scene.common,
+            buffers,
+            bind_groups,
+        };
+        frame.set_band(0, band, 0);
+        Ok(frame)
+    }
+
     /// A storage buffer holding `bytes`.
     fn storage(&self, label: &str, bytes: &[u8]) -> Result<wgpu::Buffer> {
         let buffer = self.allocate(label, bytes.len() as u64)?;
@@ -139,162 +244,154 @@ impl GpuContext {
         Ok(buffer)
     }
 
-    /// Lowers the image band size (to test the banding on small images).
-    pub fn limit_band_bytes(&mut self, bytes: u64) {
-        self.band_limit_bytes = bytes.min(self.max_binding_bytes);
-    }
-
-    /// Pixels per band: the whole image if one buffer can hold it, else as
-    /// many whole rows as fit.
-    pub fn band_pixels(&self, data: &SceneData) -> u32 {
-        let fit = (self.band_limit_bytes / std::mem::size_of::<Vec4>() as u64).min(u32::MAX as u64) as u32;
-        let rows = (fit / data.width()).max(1);
-        data.pixel_count().min(rows * data.width())
-    }
-
-    /// Uploads a scene's buffers. `shadow` gives the shadow maps' contents
-    /// (from another backend, for equivalence tests); otherwise they are left
-    /// for `shadow_map_kernel` to fill. The image kernels start on the first
-    /// band (see `set_band`).
-    pub fn upload(&self, data: &SceneData, shadow: Option<&[f32]>) -> Result<GpuFrame<'_>> {
-        let shadow_bytes = data.params.shadow_texel_count as u64 * 4;
-        let band_bytes = self.band_pixels(data) as u64 * std::mem::size_of::<Vec4>() as u64;
-        let buffers = vec![
-            self.storage("params", bytemuck::bytes_of(&data.params))?,
-            self.storage("lights", bytemuck::cast_slice(&data.lights))?,
-            self.storage("spheres", bytemuck::cast_slice(&data.spheres))?,
-            self.storage("triangles", bytemuck::cast_slice(&data.triangles))?,
-            self.storage("light maps", bytemuck::cast_slice(&data.light_map))?,
-            // Filled by shadow_map_kernel unless given.
-            match shadow {
-                Some(s) => self.storage("shadow maps", bytemuck::cast_slice(s))?,
-                None => self.allocate("shadow maps", shadow_bytes)?,
-            },
-            // Band parameters and contents are set by `set_band` below.
-            self.allocate("image", band_bytes)?,
-            self.storage("shaft tables", bytemuck::cast_slice(&data.tables))?,
-            self.storage("triangle groups", bytemuck::cast_slice(&data.groups))?,
-        ];
-        let bind_groups = checked(&self.device, "binding the scene's buffers", || {
-            KERNELS
-                .iter()
-                .map(|&(name, bindings)| {
-                    let entries: Vec<_> = bindings
-                        .iter()
-                        .map(|&i| wgpu::BindGroupEntry {
-                            binding: i,
-                            resource: buffers[i as usize].as_entire_binding(),
-                        })
-                        .collect();
-                    let layout = self.pipelines[name].get_bind_group_layout(0);
-                    let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: Some(name),
-                        layout: &layout,
-                        entries: &entries,
-                    });
-                    (name, group)
-                })
-                .collect::<HashMap<_, _>>()
-        })?;
-        let frame = GpuFrame {
-            ctx: self,
-            buffers,
-            bind_groups,
-        };
-        frame.set_band(data, 0, self.band_pixels(data));
-        Ok(frame)
-    }
-}
-
-/// A scene's buffers on the device.
-pub struct GpuFrame<'a> {
-    ctx: &'a GpuContext,
-    buffers: Vec<wgpu::Buffer>,
-    bind_groups: HashMap<&'static str, wgpu::BindGroup>,
-}
-
-impl GpuFrame<'_> {
-    /// Runs `entry` for `invocations` invocations and waits for it to finish.
-    /// Workgroups beyond the per-dimension limit wrap into rows (see
-    /// `flat_index` in the shader crate).
-    pub fn run(&self, entry: &str, invocations: u32) -> Result<()> {
-        if invocations == 0 {
-            return Ok(());
-        }
-        let pipeline = self.ctx.pipelines.get(entry).ok_or_else(|| anyhow!("no kernel named {entry}"))?;
-        let groups = invocations.div_ceil(WORKGROUP_SIZE);
-        let max = self.ctx.device.limits().max_compute_workgroups_per_dimension;
-        let gx = groups.min(max);
-        let gy = groups.div_ceil(gx);
-        checked(&self.ctx.device, entry, || {
-            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = encoder.begin_compute_pass(&Default::default());
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &self.bind_groups[entry], &[]);
-                pass.dispatch_workgroups(gx, gy, 1);
-            }
-            self.ctx.queue.submit([encoder.finish()]);
-        })?;
-        self.ctx
-            .device
+    fn wait(&self, what: &str) -> Result<()> {
+        self.device
             .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| anyhow!("device lost while running {entry}: {e}"))?;
+            .map_err(|e| anyhow!("device lost while {what}: {e}"))?;
         Ok(())
     }
 
-    fn read(&self, index: usize) -> Result<Vec<u8>> {
-        let src = &self.buffers[index];
-        let staging = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+    /// Copies `src` to a mappable buffer and returns its bytes.
+    fn read_buffer(&self, src: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size: src.size(),
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(src, 0, &staging, 0, src.size());
-        self.ctx.queue.submit([encoder.finish()]);
+        self.queue.submit([encoder.finish()]);
         let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        self.ctx
-            .device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| anyhow!("device lost: {e}"))?;
+        self.wait("reading a result")?;
         rx.recv()?.map_err(|e| anyhow!("cannot map the result buffer: {e}"))?;
-        let bytes = slice
+        let view = slice
             .get_mapped_range()
-            .map_err(|e| anyhow!("cannot read the result buffer: {e}"))?
-            .to_vec();
-        Ok(bytes)
+            .map_err(|e| anyhow!("cannot read the result buffer: {e}"))?;
+        Ok(view[..bytes as usize].to_vec())
+    }
+}
+
+fn ensure_one_band(scene: &SceneData, band: u32, r: &Resource) -> Result<()> {
+    if band < scene.pixel_count() {
+        bail!(
+            "{}: a given per-pixel input must fit in one band ({} of {} pixels)",
+            r.name,
+            band,
+            scene.pixel_count()
+        );
+    }
+    Ok(())
+}
+
+/// A scene's buffers on the device, for a set of passes.
+pub struct GpuFrame<'a> {
+    ctx: &'a GpuContext,
+    common: slicelight_shaders::types::CommonParams,
+    buffers: HashMap<u32, wgpu::Buffer>,
+    bind_groups: HashMap<&'static str, wgpu::BindGroup>,
+}
+
+impl GpuFrame<'_> {
+    /// Points the per-pixel passes at pixels `start .. start + count` (a
+    /// band of whole rows) and sub-pixel sample `sample`.
+    pub fn set_band(&self, start: u32, count: u32, sample: u32) {
+        // A frame of passes that do not read the common block has none.
+        let Some(buffer) = self.buffers.get(&COMMON.binding) else {
+            return;
+        };
+        let mut common = self.common;
+        common.band_start = start;
+        common.band_pixels = count;
+        common.sample_index = sample;
+        self.ctx.queue.write_buffer(buffer, 0, bytemuck::bytes_of(&common));
     }
 
-    pub fn read_shadow(&self, texels: usize) -> Result<Vec<f32>> {
-        let bytes = self.read(BINDING_SHADOW)?;
-        Ok(bytemuck::cast_slice(&bytes[..texels * 4]).to_vec())
+    /// Runs `passes` (each with its invocation count) in order, in one
+    /// submission, and waits. Returns each pass's seconds: the device's own
+    /// timestamps where it has them, else the wall time of a submission per
+    /// pass.
+    pub fn run(&self, passes: &[(&'static dyn Pass, u32)]) -> Result<Vec<f64>> {
+        let passes: Vec<_> = passes.iter().filter(|(_, n)| *n > 0).collect();
+        if passes.is_empty() {
+            return Ok(Vec::new());
+        }
+        if !self.ctx.timestamps {
+            return passes
+                .iter()
+                .map(|&&(pass, n)| {
+                    let t = Instant::now();
+                    self.submit(&[(pass, n)], None)?;
+                    Ok(t.elapsed().as_secs_f64())
+                })
+                .collect();
+        }
+        let count = 2 * passes.len() as u32;
+        let query_set = self.ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("pass times"),
+            ty: wgpu::QueryType::Timestamp,
+            count,
+        });
+        let resolve = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pass times"),
+            size: count as u64 * 8,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let list: Vec<_> = passes.iter().map(|&&p| p).collect();
+        self.submit(&list, Some((&query_set, &resolve)))?;
+        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&self.ctx.read_buffer(&resolve, count as u64 * 8)?);
+        let period = self.ctx.queue.get_timestamp_period() as f64 * 1e-9;
+        Ok(ticks
+            .chunks(2)
+            .map(|t| t[1].saturating_sub(t[0]) as f64 * period)
+            .collect())
     }
 
-    /// Points the image kernels at pixels `start .. start + count` (a band of
-    /// whole rows) and clears the image buffer to "no surface".
-    pub fn set_band(&self, data: &SceneData, start: u32, count: u32) {
-        let mut params = data.params;
-        params.band_start = start;
-        params.band_pixels = count;
-        self.ctx.queue.write_buffer(&self.buffers[0], 0, bytemuck::bytes_of(&params));
-        self.write_image(&vec![crate::render::no_surface(); count as usize]);
+    fn submit(
+        &self,
+        passes: &[(&'static dyn Pass, u32)],
+        timing: Option<(&wgpu::QuerySet, &wgpu::Buffer)>,
+    ) -> Result<()> {
+        let max = self.ctx.device.limits().max_compute_workgroups_per_dimension;
+        let names: Vec<_> = passes.iter().map(|(p, _)| p.name()).collect();
+        checked(&self.ctx.device, &format!("running {}", names.join(", ")), || {
+            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            for (k, &(pass, invocations)) in passes.iter().enumerate() {
+                let groups = invocations.div_ceil(WORKGROUP_SIZE);
+                let gx = groups.min(max);
+                let gy = groups.div_ceil(gx);
+                let timestamp_writes = timing.map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(2 * k as u32),
+                    end_of_pass_write_index: Some(2 * k as u32 + 1),
+                });
+                let mut cpass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some(pass.name()),
+                    timestamp_writes,
+                });
+                cpass.set_pipeline(&self.ctx.pipelines[pass.name()]);
+                cpass.set_bind_group(0, &self.bind_groups[pass.name()], &[]);
+                cpass.dispatch_workgroups(gx, gy, 1);
+            }
+            if let Some((set, resolve)) = timing {
+                encoder.resolve_query_set(set, 0..2 * passes.len() as u32, resolve, 0);
+            }
+            self.ctx.queue.submit([encoder.finish()]);
+        })?;
+        self.ctx.wait(&format!("running {}", names.join(", ")))
     }
 
-    /// Replaces the image buffer's contents (for testing a kernel that reads it).
-    pub fn write_image(&self, pixels: &[Vec4]) {
-        self.ctx
-            .queue
-            .write_buffer(&self.buffers[BINDING_OUTPUT], 0, bytemuck::cast_slice(pixels));
-    }
-
-    pub fn read_image(&self, pixels: usize) -> Result<Vec<Vec4>> {
-        let bytes = self.read(BINDING_OUTPUT)?;
-        Ok(bytemuck::pod_collect_to_vec(&bytes[..pixels * 16]))
+    /// Reads `r` back: `bytes` long (a per-pixel resource: the band's pixels).
+    pub fn read(&self, r: &Resource, bytes: u64) -> Result<Buffer> {
+        let buffer = self
+            .buffers
+            .get(&r.binding)
+            .ok_or_else(|| anyhow!("{} is not bound in this frame", r.name))?;
+        Ok(Buffer::from_bytes(&self.ctx.read_buffer(buffer, bytes)?))
     }
 }

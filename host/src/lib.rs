@@ -3,10 +3,12 @@
 //! top-level `tests/` folder use it.
 
 pub mod bench;
+pub mod bvh;
 pub mod cpu;
 pub mod gpu;
 pub mod metrics;
 pub mod output;
+pub mod passes;
 pub mod reference;
 pub mod render;
 pub mod scene;

@@ -10,7 +10,11 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(Parser)]
-#[command(name = "slicelight", version, about = "Light in participating media, as Rust-GPU compute kernels")]
+#[command(
+    name = "slicelight",
+    version,
+    about = "Light in participating media, as Rust-GPU compute kernels"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -34,6 +38,14 @@ enum Command {
         quiet: bool,
         #[command(flatten)]
         shafts: ShaftOverrides,
+        /// Sub-pixel samples per pixel, stratified and box-filtered
+        /// (overrides `[camera] samples_per_pixel`; 1 is the pixel centre).
+        #[arg(long)]
+        spp: Option<u32>,
+        /// Also run a pass no scene needs, by name (`scatter_check`: the
+        /// scatter accumulation's self-check). Give it more than once for several.
+        #[arg(long = "pass")]
+        passes: Vec<String>,
     },
     /// Render the f64 reference (shadow rays against the real geometry, no maps or tables).
     Reference {
@@ -44,6 +56,9 @@ enum Command {
         /// than this RMS, relative to its peak.
         #[arg(long, default_value_t = 2e-4)]
         tolerance: f64,
+        /// Sub-pixel samples per pixel, at the same positions as `render --spp`.
+        #[arg(long)]
+        spp: Option<u32>,
     },
     /// Time against error of the shafts pass over its settings: CSV and PNG plots.
     Bench {
@@ -96,12 +111,13 @@ struct ShaftOverrides {
 
 impl ShaftOverrides {
     fn apply(&self, data: &mut scene::SceneData) -> Result<()> {
-        let mut s = data.shafts;
+        let mut s = data.shafts.settings;
         s.planes = self.planes.unwrap_or(s.planes);
         s.subplanes = self.subplanes.unwrap_or(s.subplanes);
         s.mode = self.mode.unwrap_or(s.mode);
         s.jitter &= !self.no_jitter;
-        data.configure_shafts(s).map_err(|e| anyhow!("command line: --{}", e.to_string().replace('_', "-")))
+        data.configure_shafts(s)
+            .map_err(|e| anyhow!("command line: --{}", e.to_string().replace('_', "-")))
     }
 }
 
@@ -112,79 +128,175 @@ fn main() {
     }
 }
 
+/// Checks every output path before any work: a known format, and a folder
+/// that exists.
 fn check_outputs(outputs: &[PathBuf]) -> Result<()> {
     for o in outputs {
         output::format_of(o)?;
+        check_outputs_dir(o)?;
     }
     Ok(())
 }
 
-fn write_outputs(outputs: &[PathBuf], pixels: &[Vec4], data: &scene::SceneData) -> Result<()> {
+fn write_outputs(
+    outputs: &[PathBuf],
+    pixels: &[Vec4],
+    layers: &[(&str, Vec<Vec4>)],
+    data: &scene::SceneData,
+) -> Result<()> {
     for o in outputs {
-        output::write_image(o, pixels, data.width(), data.height(), data.exposure)?;
+        output::write_layered(o, pixels, layers, data.width(), data.height(), data.exposure)?;
         eprintln!("wrote {}", o.display());
     }
     Ok(())
 }
 
+fn set_spp(data: &mut scene::SceneData, spp: Option<u32>) -> Result<()> {
+    match spp {
+        Some(n) => data
+            .set_samples_per_pixel(n)
+            .map_err(|e| anyhow!("command line: --spp: {e}")),
+        None => Ok(()),
+    }
+}
+
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Render { scene, output, backend, stats, quiet, shafts } => {
+        Command::Render {
+            scene,
+            output,
+            backend,
+            stats,
+            quiet,
+            shafts,
+            spp,
+            passes,
+        } => {
             check_outputs(&output)?;
+            if let Some(path) = &stats {
+                check_outputs_dir(path)?;
+            }
             let mut data = scene::load(&scene)?;
             shafts.apply(&mut data)?;
+            set_spp(&mut data, spp)?;
+            for name in &passes {
+                if slicelight::passes::by_name(name).is_none() {
+                    let known: Vec<_> = slicelight::passes::PASSES.iter().map(|p| p.name()).collect();
+                    return Err(anyhow!(
+                        "command line: --pass: expected one of {}, got {name:?}",
+                        known.join(", ")
+                    ));
+                }
+            }
+            data.requested_passes = passes;
             let backend = Backend::open(backend)?;
             eprintln!("backend: {} on {}", backend.name(), backend.device());
             let show = !quiet && std::io::stderr().is_terminal();
-            let (pixels, st) = render::render(&data, &backend, show)?;
+            let rendered = render::render_layers(&data, &backend, show)?;
+            let st = &rendered.stats;
             for p in &st.passes {
                 if p.ran {
-                    eprintln!("  {:<12} {:>9.3} s  {}", p.name, p.seconds, p.reason);
+                    eprintln!("  {:<13} {:>9.3} s  {}", p.name, p.seconds, p.reason);
                 } else {
-                    eprintln!("  {:<12}   skipped  {}", p.name, p.reason);
+                    eprintln!("  {:<13}   skipped  {}", p.name, p.reason);
+                }
+                if let Some(report) = &p.report {
+                    eprintln!("  {:<13}            {report}", "");
                 }
             }
-            eprintln!("  total        {:>9.3} s", st.total_seconds);
-            if st.shaft_samples_naive > 0 {
+            eprintln!(
+                "  total         {:>9.3} s  ({} sample(s) per pixel; pass times: {})",
+                st.total_seconds, st.samples_per_pixel, st.pass_timing
+            );
+            if st.counter("shaft_samples_naive") > 0 {
                 eprintln!(
                     "  shaft samples {} of a naive {} ({:.1}%)",
-                    st.shaft_samples,
-                    st.shaft_samples_naive,
-                    100.0 * st.shaft_samples as f64 / st.shaft_samples_naive as f64
+                    st.counter("shaft_samples"),
+                    st.counter("shaft_samples_naive"),
+                    100.0 * st.counter("shaft_samples") as f64 / st.counter("shaft_samples_naive") as f64
                 );
             }
-            write_outputs(&output, &pixels, &data)?;
+            if let Some(failed) = st
+                .passes
+                .iter()
+                .find(|p| p.report.as_deref().is_some_and(|r| r.starts_with("FAILED")))
+            {
+                return Err(anyhow!(
+                    "pass {}: {}",
+                    failed.name,
+                    failed.report.as_deref().unwrap_or_default()
+                ));
+            }
+            write_outputs(&output, &rendered.image, &rendered.layers, &data)?;
             if let Some(path) = stats {
-                let json = serde_json::to_vec_pretty(&st)?;
+                let json = serde_json::to_vec_pretty(st)?;
                 output::write_atomically(&path, &json)?;
             }
             Ok(())
         }
-        Command::Reference { scene, output, tolerance } => {
+        Command::Reference {
+            scene,
+            output,
+            tolerance,
+            spp,
+        } => {
             check_outputs(&output)?;
-            let data = scene::load(&scene)?;
+            let mut data = scene::load(&scene)?;
+            set_spp(&mut data, spp)?;
             let t = Instant::now();
             let (image, samples) = reference::render_converged(&data, tolerance);
-            eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
+            eprintln!(
+                "reference: {samples} samples per ray, {:.3} s",
+                t.elapsed().as_secs_f64()
+            );
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
-            write_outputs(&output, &pixels, &data)
+            write_outputs(&output, &pixels, &[], &data)
         }
-        Command::Bench { scenes, backend, repeats, stride, quick, out_dir } => {
+        Command::Bench {
+            scenes,
+            backend,
+            repeats,
+            stride,
+            quick,
+            out_dir,
+        } => {
             let scenes = if scenes.is_empty() {
-                ["fig6_sphere", "fig7_stage", "stained_glass"].iter().map(|s| PathBuf::from(format!("scenes/{s}.toml"))).collect()
+                ["fig6_sphere", "fig7_stage", "stained_glass"]
+                    .iter()
+                    .map(|s| PathBuf::from(format!("scenes/{s}.toml")))
+                    .collect()
             } else {
                 scenes
             };
-            let opts = bench::Options { scenes, backends: backend, repeats, stride, quick, out_dir: out_dir.clone() };
+            let opts = bench::Options {
+                scenes,
+                backends: backend,
+                repeats,
+                stride,
+                quick,
+                out_dir: out_dir.clone(),
+            };
             bench::run(&opts)?;
-            eprintln!("wrote {0}/bench.csv, {0}/error_vs_planes.png, {0}/error_vs_subplanes.png, {0}/time_vs_error.png", out_dir.display());
+            eprintln!(
+                "wrote {0}/bench.csv, {0}/error_vs_planes.png, {0}/error_vs_subplanes.png, {0}/time_vs_error.png",
+                out_dir.display()
+            );
             Ok(())
         }
-        Command::Compare { image, reference, exposure, diff } => {
+        Command::Compare {
+            image,
+            reference,
+            exposure,
+            diff,
+        } => {
             let (w, h, a) = read_linear(&image)?;
             let (rw, rh, b) = read_linear(&reference)?;
             if (w, h) != (rw, rh) {
-                return Err(anyhow!("{} is {w}x{h} but {} is {rw}x{rh}", image.display(), reference.display()));
+                return Err(anyhow!(
+                    "{} is {w}x{h} but {} is {rw}x{rh}",
+                    image.display(),
+                    reference.display()
+                ));
             }
             let d = metrics::difference(&a, &b, exposure);
             println!("rms_relative     {:.4e}", d.rms_relative);
@@ -192,8 +304,17 @@ fn run(cli: Cli) -> Result<()> {
             println!("rms_8bit_percent {:.4}", d.rms_8bit_percent);
             println!("max_8bit_percent {:.4}", d.max_8bit_percent);
             if let Some(path) = diff {
-                let largest = a.iter().zip(&b).map(|(x, y)| (*x - *y).abs().max_element()).fold(0.0, f64::max).max(1e-300);
-                let pixels: Vec<Vec4> = a.iter().zip(&b).map(|(x, y)| ((*x - *y).abs() / largest).as_vec3().extend(0.0)).collect();
+                let largest = a
+                    .iter()
+                    .zip(&b)
+                    .map(|(x, y)| (*x - *y).abs().max_element())
+                    .fold(0.0, f64::max)
+                    .max(1e-300);
+                let pixels: Vec<Vec4> = a
+                    .iter()
+                    .zip(&b)
+                    .map(|(x, y)| ((*x - *y).abs() / largest).as_vec3().extend(0.0))
+                    .collect();
                 output::write_image(&path, &pixels, w, h, 1.0)?;
                 eprintln!("wrote {} (white = {largest:.4e})", path.display());
             }
@@ -202,11 +323,37 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+fn check_outputs_dir(path: &Path) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if !dir.is_dir() {
+        return Err(anyhow!(
+            "{}: the folder {} does not exist",
+            path.display(),
+            dir.display()
+        ));
+    }
+    Ok(())
+}
+
 /// Reads an image as linear rgb: EXR as stored, PNG with its sRGB transfer undone.
 fn read_linear(path: &Path) -> Result<(u32, u32, Vec<DVec3>)> {
     let format = output::format_of(path)?;
-    let img = image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?.to_rgb32f();
-    let decode = |v: f32| if format == output::Format::Png { scene::srgb_to_linear(v) } else { v };
-    let pixels = img.pixels().map(|p| DVec3::new(decode(p[0]) as f64, decode(p[1]) as f64, decode(p[2]) as f64)).collect();
+    let img = image::open(path)
+        .with_context(|| format!("{}: cannot read the image", path.display()))?
+        .to_rgb32f();
+    let decode = |v: f32| {
+        if format == output::Format::Png {
+            scene::srgb_to_linear(v)
+        } else {
+            v
+        }
+    };
+    let pixels = img
+        .pixels()
+        .map(|p| DVec3::new(decode(p[0]) as f64, decode(p[1]) as f64, decode(p[2]) as f64))
+        .collect();
     Ok((img.width(), img.height(), pixels))
 }

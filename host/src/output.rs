@@ -16,10 +16,18 @@ pub enum Format {
 
 /// The format named by the extension of `path`, or an error saying which are known.
 pub fn format_of(path: &Path) -> Result<Format> {
-    match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .as_deref()
+    {
         Some("png") => Ok(Format::Png),
         Some("exr") => Ok(Format::Exr),
-        _ => bail!("{}: expected an output file ending in .png (tone-mapped sRGB) or .exr (linear radiance)", path.display()),
+        _ => bail!(
+            "{}: expected an output file ending in .png (tone-mapped sRGB) or .exr (linear radiance)",
+            path.display()
+        ),
     }
 }
 
@@ -48,6 +56,27 @@ pub fn tone_map(pixels: &[Vec4], width: u32, height: u32, exposure: f32) -> RgbI
 
 /// Writes `pixels` (rgb radiance, row-major, row 0 at the top) to `path`.
 pub fn write_image(path: &Path, pixels: &[Vec4], width: u32, height: u32, exposure: f32) -> Result<()> {
+    write_layered(path, pixels, &[], width, height, exposure)
+}
+
+/// Writes an image and, to an EXR, its named layers: the beauty image as the
+/// channels `R`, `G`, `B`, and each layer as `<name>.R`, `<name>.G`,
+/// `<name>.B` in the same part (the channel-group convention that Nuke,
+/// Blender and OpenImageIO read as layers; readers that know only RGB see
+/// the beauty image). A PNG gets the tone-mapped beauty image only.
+pub fn write_layered(
+    path: &Path,
+    pixels: &[Vec4],
+    layers: &[(&str, Vec<Vec4>)],
+    width: u32,
+    height: u32,
+    exposure: f32,
+) -> Result<()> {
+    if format_of(path)? == Format::Exr && !layers.is_empty() {
+        let bytes =
+            layered_exr(pixels, layers, width, height).with_context(|| format!("{}: cannot encode", path.display()))?;
+        return write_atomically(path, &bytes);
+    }
     let format = format_of(path)?;
     let mut bytes = std::io::Cursor::new(Vec::new());
     match format {
@@ -63,6 +92,32 @@ pub fn write_image(path: &Path, pixels: &[Vec4], width: u32, height: u32, exposu
     write_atomically(path, bytes.get_ref())
 }
 
+fn layered_exr(pixels: &[Vec4], layers: &[(&str, Vec<Vec4>)], width: u32, height: u32) -> Result<Vec<u8>> {
+    use exr::prelude::*;
+    let channel = |name: String, img: &[Vec4], c: usize| {
+        AnyChannel::new(name.as_str(), FlatSamples::F32(img.iter().map(|p| p[c]).collect()))
+    };
+    let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    for (c, name) in ["R", "G", "B"].iter().enumerate() {
+        channels.push(channel(name.to_string(), pixels, c));
+        for (layer, img) in layers {
+            channels.push(channel(format!("{layer}.{name}"), img, c));
+        }
+    }
+    let layer = Layer::new(
+        (width as usize, height as usize),
+        LayerAttributes::named("slicelight"),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(channels),
+    );
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok(bytes.into_inner())
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same folder, so
 /// that `path` either keeps its old contents or gets all of the new ones.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
@@ -70,14 +125,17 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).with_context(|| format!("{}: cannot create a file in {}", path.display(), dir.display()))?;
-    tmp.write_all(bytes).with_context(|| format!("{}: write failed", path.display()))?;
+    let mut tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("{}: cannot create a file in {}", path.display(), dir.display()))?;
+    tmp.write_all(bytes)
+        .with_context(|| format!("{}: write failed", path.display()))?;
     // The temporary file is private (0600); the result is an ordinary file.
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
     }
-    tmp.persist(path).map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
+    tmp.persist(path)
+        .map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
     Ok(())
 }

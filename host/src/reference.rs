@@ -3,7 +3,9 @@
 //! pixel positions with the kernels and nothing of their method, so the
 //! difference between the two is the method's error.
 //!
-//! It renders eq. 1 of the 2002 shafts-of-light paper at pixel centres: the
+//! It renders eq. 1 of the 2002 shafts-of-light paper at the same sub-pixel
+//! positions as the kernels (`camera::sample_offset`; the pixel centre at one
+//! sample per pixel), averaged with the same box filter: the
 //! attenuated surface radiance `I_o exp(-sigma_t T)` plus the in-scattered
 //! light of eq. 2, integrated by a stratified ray march (jittered samples, f64
 //! sums, a shadow ray per sample and light) over the same range as the
@@ -13,6 +15,7 @@
 
 use glam::{DVec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
+use slicelight_shaders::camera::sample_offset;
 use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL};
 
 use crate::scene::SceneData;
@@ -27,10 +30,24 @@ struct Surface {
     albedo: DVec3,
 }
 
-/// Nearest intersection beyond `t_min`, in f64.
+/// Whether the ray meets the box `[lo, hi]` within `[t_min, t_max]`, f64 slab test.
+fn hits_box(o: DVec3, inv: DVec3, lo: DVec3, hi: DVec3, t_min: f64, t_max: f64) -> bool {
+    let a = (lo - o) * inv;
+    let b = (hi - o) * inv;
+    let near = a.min(b).max_element().max(t_min);
+    let far = a.max(b).min_element().min(t_max);
+    // A NaN (origin on a face, ray parallel to it) fails the test; the boxes
+    // are padded beyond their triangles, so no hit is lost.
+    near <= far
+}
+
+/// Nearest intersection beyond `t_min`, in f64. Triangles are found through
+/// the scene's BVH (its boxes padded beyond the triangles, so the walk
+/// skips only what cannot be hit), each tested exactly in f64.
 fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<Surface> {
     let mut best: Option<Surface> = None;
     let mut limit = t_max;
+    let albedo = |material: u32| d3(data.materials[material as usize].albedo);
     for s in &data.spheres {
         let c = d3(s.center_radius);
         let r = s.center_radius.w as f64;
@@ -44,29 +61,53 @@ fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Opti
         for t in [tc - half, tc + half] {
             if t > t_min && t < limit {
                 limit = t;
-                best = Some(Surface { t, normal: (o + d * t - c).normalize(), albedo: d3(s.albedo) });
+                best = Some(Surface {
+                    t,
+                    normal: (o + d * t - c).normalize(),
+                    albedo: albedo(s.material),
+                });
                 break;
             }
         }
     }
-    for tri in &data.triangles {
-        let (a, b, c) = (d3(tri.v0), d3(tri.v1), d3(tri.v2));
-        let n = (b - a).cross(c - a);
-        let denom = n.dot(d);
-        if denom.abs() < 1e-300 {
+    let inv = DVec3::ONE / d;
+    let mut n = 0;
+    while n < data.bvh_nodes.len() {
+        let node = &data.bvh_nodes[n];
+        if !hits_box(o, inv, d3(node.bounds_min), d3(node.bounds_max), t_min, limit) {
+            n = node.skip as usize;
             continue;
         }
-        let t = n.dot(a - o) / denom;
-        if !(t > t_min && t < limit) {
+        if node.count == 0 {
+            n += 1;
             continue;
         }
-        let p = o + d * t;
-        // Inside test by the signs of the sub-triangle areas.
-        let inside = n.dot((b - a).cross(p - a)) >= 0.0 && n.dot((c - b).cross(p - b)) >= 0.0 && n.dot((a - c).cross(p - c)) >= 0.0;
-        if inside {
-            limit = t;
-            best = Some(Surface { t, normal: n.normalize(), albedo: d3(tri.albedo) });
+        for tri in &data.triangles[node.first as usize..(node.first + node.count) as usize] {
+            let (a, b, c) = (d3(tri.v0), d3(tri.v1), d3(tri.v2));
+            let nrm = (b - a).cross(c - a);
+            let denom = nrm.dot(d);
+            if denom.abs() < 1e-300 {
+                continue;
+            }
+            let t = nrm.dot(a - o) / denom;
+            if !(t > t_min && t < limit) {
+                continue;
+            }
+            let p = o + d * t;
+            // Inside test by the signs of the sub-triangle areas.
+            let inside = nrm.dot((b - a).cross(p - a)) >= 0.0
+                && nrm.dot((c - b).cross(p - b)) >= 0.0
+                && nrm.dot((a - c).cross(p - c)) >= 0.0;
+            if inside {
+                limit = t;
+                best = Some(Surface {
+                    t,
+                    normal: nrm.normalize(),
+                    albedo: albedo(tri.material),
+                });
+            }
         }
+        n = node.skip as usize;
     }
     best
 }
@@ -101,7 +142,11 @@ fn emitted(data: &SceneData, light: &GpuLight, local: DVec3) -> DVec3 {
         if angle > cut {
             return DVec3::ZERO;
         }
-        let profile = if beam >= cut { 1.0 } else { ((cut - angle) / (cut - beam)).clamp(0.0, 1.0) };
+        let profile = if beam >= cut {
+            1.0
+        } else {
+            ((cut - angle) / (cut - beam)).clamp(0.0, 1.0)
+        };
         let s = 0.5 / (local.z * cut.tan());
         return power * profile * light_map(data, light, 0.5 + local.x * s, 0.5 + local.y * s);
     };
@@ -126,10 +171,13 @@ fn light_map(data: &SceneData, light: &GpuLight, u: f64, v: f64) -> DVec3 {
     top * (1.0 - ty) + bottom * ty
 }
 
-fn camera_ray(data: &SceneData, x: u32, y: u32) -> (DVec3, DVec3) {
-    let p = &data.params;
-    let ndc_x = 2.0 * (x as f64 + 0.5) / p.width as f64 - 1.0;
-    let ndc_y = 1.0 - 2.0 * (y as f64 + 0.5) / p.height as f64;
+/// The view ray through sub-pixel sample `sample` of pixel `(x, y)`, in
+/// f64, at the kernels' sample position (`camera::sample_offset`).
+fn camera_ray(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3, DVec3) {
+    let p = &data.common;
+    let offset = sample_offset(sample, p.samples_per_pixel).as_dvec2();
+    let ndc_x = 2.0 * (x as f64 + offset.x) / p.width as f64 - 1.0;
+    let ndc_y = 1.0 - 2.0 * (y as f64 + offset.y) / p.height as f64;
     let o = d3(p.camera_position);
     let d = (d3(p.camera_forward) + d3(p.camera_right) * ndc_x + d3(p.camera_up) * ndc_y).normalize();
     (o, d)
@@ -140,7 +188,11 @@ fn camera_ray(data: &SceneData, x: u32, y: u32) -> (DVec3, DVec3) {
 /// directional light's entry plane), metres.
 fn toward_light(light: &GpuLight, point: DVec3) -> (DVec3, DVec3, f64) {
     let rel = point - d3(light.position);
-    let local = DVec3::new(rel.dot(d3(light.axis_x)), rel.dot(d3(light.axis_y)), rel.dot(d3(light.axis_z)));
+    let local = DVec3::new(
+        rel.dot(d3(light.axis_x)),
+        rel.dot(d3(light.axis_y)),
+        rel.dot(d3(light.axis_z)),
+    );
     if light.kind == LIGHT_DIRECTIONAL {
         (local, -d3(light.axis_z), local.z)
     } else {
@@ -149,21 +201,29 @@ fn toward_light(light: &GpuLight, point: DVec3) -> (DVec3, DVec3, f64) {
     }
 }
 
-/// Attenuated surface radiance at one pixel centre, and the distance to the
-/// surface (infinite where the ray meets none), f64.
-fn surface_and_distance(data: &SceneData, x: u32, y: u32) -> (DVec3, f64) {
-    let p = &data.params;
-    let (o, d) = camera_ray(data, x, y);
+/// Attenuated surface radiance at one sub-pixel sample, and the distance to
+/// the surface (infinite where the ray meets none), f64.
+fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3, f64) {
+    let p = &data.common;
+    let (o, d) = camera_ray(data, x, y, sample);
     let Some(hit) = nearest(data, o, d, 0.0, f64::INFINITY) else {
         return (DVec3::ZERO, f64::INFINITY);
     };
     let point = o + d * hit.t;
-    let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
+    let normal = if hit.normal.dot(d) > 0.0 {
+        -hit.normal
+    } else {
+        hit.normal
+    };
     let sigma_t = d3(p.sigma_t);
     let mut irradiance = DVec3::ZERO;
     for light in &data.lights {
         let (local, to_light, distance) = toward_light(light, point);
-        let falloff = if light.kind == LIGHT_DIRECTIONAL { 1.0 } else { 1.0 / (distance * distance) };
+        let falloff = if light.kind == LIGHT_DIRECTIONAL {
+            1.0
+        } else {
+            1.0 / (distance * distance)
+        };
         let cos = normal.dot(to_light);
         if cos <= 0.0 {
             continue;
@@ -183,18 +243,19 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32) -> (DVec3, f64) {
     (radiance * (-sigma_t * hit.t).exp(), hit.t)
 }
 
-/// Attenuated surface radiance at one pixel centre, f64.
+/// Attenuated surface radiance of one pixel (the mean over its sub-pixel samples), f64.
 pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
-    surface_and_distance(data, x, y).0
+    let spp = data.samples_per_pixel();
+    (0..spp).map(|s| surface_and_distance(data, x, y, s).0).sum::<DVec3>() / spp as f64
 }
 
 /// Phase functions in f64, from their closed forms (normalised, 1/sr).
 fn phase(data: &SceneData, cos: f64) -> f64 {
     use slicelight_shaders::types::{PHASE_DOBASHI, PHASE_HENYEY_GREENSTEIN, PHASE_RAYLEIGH};
     let pi = std::f64::consts::PI;
-    match data.params.phase_kind {
+    match data.common.phase_kind {
         PHASE_HENYEY_GREENSTEIN => {
-            let g = data.params.phase_g as f64;
+            let g = data.common.phase_g as f64;
             (1.0 - g * g) / (4.0 * pi * (1.0 + g * g - 2.0 * g * cos).powf(1.5))
         }
         PHASE_RAYLEIGH => 3.0 * (1.0 + cos * cos) / (16.0 * pi),
@@ -213,25 +274,27 @@ fn jitter(pixel: u32, sample: u32, round: u32) -> f64 {
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
-/// In-scattered radiance at one pixel centre (eq. 2, summed over lights),
-/// with `samples` stratified samples over the ray up to `t_surface`, f64.
-/// Every sample casts a shadow ray to every light that lights it.
-pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, t_surface: f64, samples: u32) -> DVec3 {
-    let p = &data.params;
+/// In-scattered radiance along the ray of one sub-pixel sample (eq. 2,
+/// summed over lights), with `samples` stratified samples over the ray up to
+/// `t_surface`, f64. Every sample casts a shadow ray to every light that
+/// lights it.
+pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f64, samples: u32) -> DVec3 {
+    let p = &data.common;
     let sigma_s = d3(p.sigma_s);
     if sigma_s == DVec3::ZERO {
         return DVec3::ZERO;
     }
     let sigma_t = d3(p.sigma_t);
-    let (o, d) = camera_ray(data, x, y);
+    let (o, d) = camera_ray(data, x, y, sub);
     let cos_view = d.dot(d3(p.camera_forward));
-    let t0 = p.depth_near as f64 / cos_view;
-    let t1 = (p.depth_far as f64 / cos_view).min(t_surface);
+    let range = &data.shafts.params;
+    let t0 = range.depth_near as f64 / cos_view;
+    let t1 = (range.depth_far as f64 / cos_view).min(t_surface);
     if t1 <= t0 {
         return DVec3::ZERO;
     }
     let dt = (t1 - t0) / samples as f64;
-    let pixel = y * p.width + x;
+    let pixel = (y * p.width + x).wrapping_mul(p.samples_per_pixel).wrapping_add(sub);
     let mut sum = DVec3::ZERO;
     for k in 0..samples {
         let t = t0 + (k as f64 + jitter(pixel, k, samples)) * dt;
@@ -266,16 +329,30 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, t_surface: f64, samples
 /// reached). Returns the values and the final sample count.
 pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> (Vec<DVec3>, u32) {
     let w = data.width();
-    let surfaces: Vec<(DVec3, f64)> = pixels.par_iter().map(|&i| surface_and_distance(data, i % w, i / w)).collect();
-    let with_inscatter = |samples: u32| -> Vec<DVec3> {
-        pixels
-            .par_iter()
-            .zip(&surfaces)
-            .map(|(&i, &(surface, t))| surface + inscatter_pixel(data, i % w, i / w, t, samples))
+    let spp = data.samples_per_pixel();
+    // Every (pixel, sub-pixel sample), each traced and shaded once.
+    let rays: Vec<(u32, u32)> = pixels.iter().flat_map(|&i| (0..spp).map(move |s| (i, s))).collect();
+    let surfaces: Vec<(DVec3, f64)> = rays
+        .par_iter()
+        .map(|&(i, s)| surface_and_distance(data, i % w, i / w, s))
+        .collect();
+    // The box filter: the mean of each pixel's `spp` consecutive values.
+    let filter = |values: Vec<DVec3>| -> Vec<DVec3> {
+        values
+            .chunks(spp as usize)
+            .map(|c| c.iter().sum::<DVec3>() / spp as f64)
             .collect()
     };
+    let with_inscatter = |samples: u32| -> Vec<DVec3> {
+        filter(
+            rays.par_iter()
+                .zip(&surfaces)
+                .map(|(&(i, s), &(surface, t))| surface + inscatter_pixel(data, i % w, i / w, s, t, samples))
+                .collect(),
+        )
+    };
     if !data.scatters() {
-        return (surfaces.iter().map(|s| s.0).collect(), 0);
+        return (filter(surfaces.iter().map(|s| s.0).collect()), 0);
     }
     let mut samples = 64;
     let mut image = with_inscatter(samples);
@@ -302,5 +379,8 @@ pub fn render_converged(data: &SceneData, tolerance: f64) -> (Vec<DVec3>, u32) {
 /// The reference image's surface term alone (no in-scattering), rgb in f64.
 pub fn render_surfaces(data: &SceneData) -> Vec<DVec3> {
     let w = data.width();
-    (0..data.pixel_count()).into_par_iter().map(|i| surface_pixel(data, i % w, i / w)).collect()
+    (0..data.pixel_count())
+        .into_par_iter()
+        .map(|i| surface_pixel(data, i % w, i / w))
+        .collect()
 }

@@ -1,14 +1,21 @@
-//! The pass plan and the renderer: which passes a scene needs, run on the
-//! chosen backend, with each pass's time.
+//! The renderer: walks the registered passes (`passes::PASSES`), runs those
+//! the scene needs on the chosen backend, and sums their radiance layers
+//! into the image, over the sub-pixel samples.
+//!
+//! Order: every `Whole` pass runs once, first (shadow maps, and later maps
+//! and tables that do not depend on the pixel); then, for each band of rows
+//! and each sub-pixel sample, the `PerPixel` passes in registration order.
+//! A `Whole` pass therefore never reads a per-pixel resource.
 
 use anyhow::Result;
 use glam::Vec4;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::time::Instant;
 
-use crate::cpu;
 use crate::gpu::GpuContext;
+use crate::passes::{Buffer, Dispatch, Frame, Pass, Plan, ResourceKind, PASSES};
 use crate::scene::SceneData;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -67,7 +74,12 @@ pub struct PassStats {
     pub reason: String,
     /// Kernel invocations (0 when skipped).
     pub invocations: u64,
+    /// Time in the pass's kernels (GPU: device timestamps where the device
+    /// has them, see `RenderStats::pass_timing`).
     pub seconds: f64,
+    /// What the pass reported (a self-check's verdict).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub report: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -76,63 +88,62 @@ pub struct RenderStats {
     pub device: String,
     pub width: u32,
     pub height: u32,
+    pub samples_per_pixel: u32,
     pub passes: Vec<PassStats>,
-    /// Wall time of all passes, including uploads and read-back on the GPU.
+    /// How pass times were taken: `device timestamps`, `wall clock per
+    /// submission` or `wall clock` (CPU).
+    pub pass_timing: &'static str,
+    /// Wall time of the whole render, including uploads and read-back on the GPU.
     pub total_seconds: f64,
-    /// `H I_l` samples the shafts pass evaluated, and the naive count
-    /// `pixels x planes x sub-planes x lights` without clipping or culling.
-    pub shaft_samples: u64,
-    pub shaft_samples_naive: u64,
+    /// The passes' named work counts (`shaft_samples`, ...).
+    pub counters: BTreeMap<&'static str, u64>,
 }
 
-/// What the scene needs, decided before anything runs.
+impl RenderStats {
+    /// A named counter, 0 if no pass reported it.
+    pub fn counter(&self, name: &str) -> u64 {
+        self.counters.get(name).copied().unwrap_or(0)
+    }
+}
+
+/// A rendered frame: the image (rgb radiance, W/(m^2 sr); w unused), and
+/// each radiance layer that summed into it, by pass name.
+pub struct Rendered {
+    pub image: Vec<Vec4>,
+    pub layers: Vec<(&'static str, Vec<Vec4>)>,
+    pub stats: RenderStats,
+}
+
+/// What every registered pass would do for the scene, decided before
+/// anything runs.
 pub fn plan(data: &SceneData) -> Vec<PassStats> {
-    let pass = |name, ran: bool, reason: String, invocations: u32| PassStats {
-        name,
-        ran,
-        reason,
-        invocations: if ran { invocations as u64 } else { 0 },
-        seconds: 0.0,
-    };
-    let shadow_texels = data.params.shadow_texel_count;
-    let lights = data.lights.len();
-    let shadow_reason = if lights == 0 {
-        "no lights".to_string()
-    } else if !data.has_geometry() {
-        "no geometry to cast shadows".to_string()
-    } else {
-        format!("{lights} light(s), {} shadow-map texels", shadow_texels)
-    };
-    let visible = data.lights.iter().filter(|l| l.in_view != 0).count();
-    let (shafts_run, shafts_reason) = if !data.scatters() {
-        (false, "the medium does not scatter (sigma_s = 0)".to_string())
-    } else if visible == 0 {
-        (false, format!("no light's volume is in view ({lights} light(s))"))
-    } else {
-        let s = &data.shafts;
-        (
-            true,
-            format!(
-                "{visible} of {lights} light(s) in view, {} planes x {} sub-planes, {:?} mode",
-                s.planes, s.subplanes, s.mode
-            ),
-        )
-    };
-    vec![
-        pass("shadow_maps", shadow_texels > 0, shadow_reason, shadow_texels),
-        pass(
-            "surface",
-            data.has_geometry(),
-            if data.has_geometry() { "surfaces seen through the medium (eq. 1, first term)".into() } else { "no geometry".into() },
-            data.pixel_count(),
-        ),
-        pass("shafts", shafts_run, shafts_reason, data.pixel_count()),
-    ]
+    plans(data)
+        .into_iter()
+        .map(|(pass, plan)| stats_of(pass, &plan, data))
+        .collect()
 }
 
-/// A pixel whose view ray meets no surface.
-pub fn no_surface() -> Vec4 {
-    Vec4::new(0.0, 0.0, 0.0, slicelight_shaders::surface::MISS_DISTANCE)
+fn plans(data: &SceneData) -> Vec<(&'static dyn Pass, Plan)> {
+    PASSES.iter().map(|&p| (p, p.plan(data))).collect()
+}
+
+fn invocations(pass: &dyn Pass, plan: &Plan, data: &SceneData) -> u64 {
+    match (plan.runs, pass.dispatch()) {
+        (false, _) => 0,
+        (true, Dispatch::Whole) => plan.invocations,
+        (true, Dispatch::PerPixel) => data.pixel_count() as u64 * data.samples_per_pixel() as u64,
+    }
+}
+
+fn stats_of(pass: &'static dyn Pass, plan: &Plan, data: &SceneData) -> PassStats {
+    PassStats {
+        name: pass.name(),
+        ran: plan.runs,
+        reason: plan.reason.clone(),
+        invocations: invocations(pass, plan, data),
+        seconds: 0.0,
+        report: None,
+    }
 }
 
 fn progress_bar(total: u64) -> ProgressBar {
@@ -145,88 +156,173 @@ fn progress_bar(total: u64) -> ProgressBar {
     pb
 }
 
-/// Renders a scene: rgb radiance per pixel (W/(m^2 sr)), w = hit distance.
+/// Renders a scene: rgb radiance per pixel (W/(m^2 sr)).
 pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<(Vec<Vec4>, RenderStats)> {
-    let mut passes = plan(data);
-    let total: u64 = passes.iter().map(|p| p.invocations).sum();
-    let pb = if show_progress { progress_bar(total) } else { ProgressBar::hidden() };
+    let r = render_layers(data, backend, show_progress)?;
+    Ok((r.image, r.stats))
+}
+
+/// Renders a scene, keeping each pass's radiance layer.
+pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<Rendered> {
+    let plans = plans(data);
+    let mut stats: Vec<PassStats> = plans.iter().map(|(p, plan)| stats_of(*p, plan, data)).collect();
+    let running: Vec<(usize, &'static dyn Pass, u64)> = plans
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, plan))| plan.runs)
+        .map(|(k, (p, plan))| (k, *p, plan.invocations))
+        .collect();
+    let total: u64 = stats.iter().map(|p| p.invocations).sum();
+    let pb = if show_progress {
+        progress_bar(total)
+    } else {
+        ProgressBar::hidden()
+    };
     let start = Instant::now();
+    let layers: Vec<&'static dyn Pass> = running
+        .iter()
+        .map(|r| r.1)
+        .filter(|p| p.radiance_layer().is_some())
+        .collect();
     let pixels = data.pixel_count() as usize;
-    let image = match backend {
+    // The results: `Whole` outputs and the layers summed over samples.
+    let mut result = Frame::default();
+    let mut sums: Vec<Vec<Vec4>> = vec![vec![Vec4::ZERO; pixels]; layers.len()];
+    let spp = data.samples_per_pixel();
+    let pass_timing = match backend {
         Backend::Cpu => {
-            let mut shadow = Vec::new();
-            let mut image = vec![no_surface(); pixels];
-            for pass in passes.iter_mut().filter(|p| p.ran) {
-                pb.set_message(pass.name);
-                let t = Instant::now();
-                match pass.name {
-                    "shadow_maps" => shadow = cpu::shadow_maps(data, &pb),
-                    "surface" => image = cpu::surface(data, &shadow, &pb),
-                    "shafts" => cpu::shafts(data, &shadow, &mut image, &pb),
-                    other => unreachable!("pass {other} has no CPU path"),
+            let mut frame = Frame::default();
+            // Per-pixel resources no running pass writes hold their blank.
+            for r in PASSES.iter().flat_map(|p| p.reads().iter().chain(p.writes())) {
+                let written = running
+                    .iter()
+                    .any(|(_, p, _)| p.writes().iter().any(|w| w.binding == r.binding));
+                if let (false, Some(blank)) = (written, r.blank(pixels)) {
+                    frame.insert(r, blank);
                 }
-                pass.seconds = t.elapsed().as_secs_f64();
             }
-            image
+            for &(k, pass, _) in running.iter().filter(|r| r.1.dispatch() == Dispatch::Whole) {
+                pb.set_message(pass.name());
+                let t = Instant::now();
+                pass.run_cpu(data, &data.common, &mut frame, &pb);
+                stats[k].seconds += t.elapsed().as_secs_f64();
+            }
+            for sample in 0..spp {
+                let mut common = data.common;
+                common.sample_index = sample;
+                for &(k, pass, _) in running.iter().filter(|r| r.1.dispatch() == Dispatch::PerPixel) {
+                    pb.set_message(pass.name());
+                    let t = Instant::now();
+                    pass.run_cpu(data, &common, &mut frame, &pb);
+                    stats[k].seconds += t.elapsed().as_secs_f64();
+                }
+                for (sum, pass) in sums.iter_mut().zip(&layers) {
+                    let layer = frame.get::<Vec4>(pass.radiance_layer().expect("a layer"));
+                    sum.iter_mut().zip(layer).for_each(|(s, v)| *s += *v);
+                }
+            }
+            for (_, pass, _) in running.iter().filter(|r| r.1.dispatch() == Dispatch::Whole) {
+                for w in pass.writes() {
+                    if let Some(b) = frame.remove(w) {
+                        result.insert(w, b);
+                    }
+                }
+            }
+            "wall clock"
         }
         Backend::Gpu(ctx) => {
-            let frame = ctx.upload(data, None)?;
-            let entry = |name: &str| match name {
-                "shadow_maps" => "shadow_map_kernel",
-                "surface" => "surface_kernel",
-                "shafts" => "shafts_kernel",
-                other => unreachable!("pass {other} has no GPU kernel"),
-            };
-            // Shadow maps once; the image passes band by band when the image
-            // is larger than one device buffer.
-            for pass in passes.iter_mut().filter(|p| p.ran && p.name == "shadow_maps") {
-                pb.set_message(pass.name);
-                let t = Instant::now();
-                frame.run(entry(pass.name), pass.invocations as u32)?;
-                pass.seconds = t.elapsed().as_secs_f64();
-                pb.inc(pass.invocations);
+            let passes: Vec<&'static dyn Pass> = running.iter().map(|r| r.1).collect();
+            let frame = ctx.frame(data, &passes, None)?;
+            let whole: Vec<(usize, &'static dyn Pass, u32)> = running
+                .iter()
+                .filter(|r| r.1.dispatch() == Dispatch::Whole)
+                .map(|&(k, p, n)| (k, p, n as u32))
+                .collect();
+            pb.set_message("maps");
+            let times = frame.run(&whole.iter().map(|&(_, p, n)| (p, n)).collect::<Vec<_>>())?;
+            for ((k, _, n), t) in whole.iter().zip(times) {
+                stats[*k].seconds += t;
+                pb.inc(*n as u64);
             }
+            for (_, pass, _) in &whole {
+                for w in pass.writes() {
+                    if let ResourceKind::Frame(len) = w.kind {
+                        result.insert(w, frame.read(w, len(data))?);
+                    }
+                }
+            }
+            let per_pixel: Vec<(usize, &'static dyn Pass)> = running
+                .iter()
+                .filter(|r| r.1.dispatch() == Dispatch::PerPixel)
+                .map(|&(k, p, _)| (k, p))
+                .collect();
             let band = ctx.band_pixels(data);
-            let mut image = Vec::with_capacity(pixels);
-            let mut start = 0;
-            while start < data.pixel_count() {
-                let count = band.min(data.pixel_count() - start);
-                // `upload` set up the first band. Uploads and read-back count
-                // in the total time, not in a pass's.
-                if start > 0 {
-                    frame.set_band(data, start, count);
+            let mut first = 0;
+            while first < data.pixel_count() {
+                let count = band.min(data.pixel_count() - first);
+                for sample in 0..spp {
+                    frame.set_band(first, count, sample);
+                    pb.set_message("image");
+                    let times = frame.run(&per_pixel.iter().map(|&(_, p)| (p, count)).collect::<Vec<_>>())?;
+                    for ((k, _), t) in per_pixel.iter().zip(times) {
+                        stats[*k].seconds += t;
+                        pb.inc(count as u64);
+                    }
+                    for (sum, pass) in sums.iter_mut().zip(&layers) {
+                        let layer = frame.read(pass.radiance_layer().expect("a layer"), count as u64 * 16)?;
+                        let range = &mut sum[first as usize..(first + count) as usize];
+                        range
+                            .iter_mut()
+                            .zip(layer.as_slice::<Vec4>())
+                            .for_each(|(s, v)| *s += *v);
+                    }
                 }
-                for pass in passes.iter_mut().filter(|p| p.ran && p.name != "shadow_maps") {
-                    pb.set_message(pass.name);
-                    let t = Instant::now();
-                    frame.run(entry(pass.name), count)?;
-                    pass.seconds += t.elapsed().as_secs_f64();
-                    pb.inc(count as u64);
-                }
-                image.extend(frame.read_image(count as usize)?);
-                start += count;
+                first += count;
             }
-            image
+            if ctx.has_timestamps() {
+                "device timestamps"
+            } else {
+                "wall clock per submission"
+            }
         }
     };
     pb.finish_and_clear();
-    let shafts_ran = passes.iter().any(|p| p.name == "shafts" && p.ran);
-    let shaft_samples = if shafts_ran { image.iter().map(|p| p.w as u64).sum() } else { 0 };
-    let s = &data.shafts;
-    let shaft_samples_naive = if shafts_ran {
-        data.pixel_count() as u64 * s.planes as u64 * s.subplanes as u64 * data.lights.len() as u64
-    } else {
-        0
-    };
+    for (sum, pass) in sums.iter().zip(&layers) {
+        result.insert(
+            pass.radiance_layer().expect("a layer"),
+            Buffer::from_bytes(bytemuck::cast_slice(sum)),
+        );
+    }
+    let mut counters = BTreeMap::new();
+    for &(k, pass, _) in &running {
+        stats[k].report = pass.report(data, &result);
+        counters.extend(pass.counters(data, &result));
+    }
+    // The image: the mean over samples of the sum of the layers (box filter).
+    let inv = 1.0 / spp as f32;
+    let mut image = vec![Vec4::ZERO; pixels];
+    let mut named = Vec::new();
+    for (mut sum, pass) in sums.into_iter().zip(&layers) {
+        for (px, s) in image.iter_mut().zip(sum.iter_mut()) {
+            *s = (*s * inv).truncate().extend(0.0);
+            *px += *s;
+        }
+        named.push((pass.name(), sum));
+    }
     let stats = RenderStats {
-        shaft_samples,
-        shaft_samples_naive,
         backend: backend.name(),
         device: backend.device(),
         width: data.width(),
         height: data.height(),
-        passes,
+        samples_per_pixel: spp,
+        passes: stats,
+        pass_timing,
         total_seconds: start.elapsed().as_secs_f64(),
+        counters,
     };
-    Ok((image, stats))
+    Ok(Rendered {
+        image,
+        layers: named,
+        stats,
+    })
 }

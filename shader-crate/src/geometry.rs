@@ -3,8 +3,8 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use crate::types::{GpuSphere, GpuTriangle, GpuTriangleGroup};
-use crate::glam::{Vec3, Vec4, Vec4Swizzles};
+use crate::glam::{Vec3, Vec4Swizzles};
+use crate::types::{GpuBvhNode, GpuSphere, GpuTriangle, NO_OBJECT};
 
 /// Returned by the intersection functions when nothing is hit (the largest
 /// finite f32: naga rejects infinite constants in shaders).
@@ -17,8 +17,23 @@ pub struct Hit {
     pub distance: f32,
     /// Unit geometric normal, not yet turned to face the ray.
     pub normal: Vec3,
-    /// Diffuse albedo per channel.
-    pub albedo: Vec4,
+    /// The scene object and the material hit (`NO_OBJECT` if nothing).
+    pub object: u32,
+    pub material: u32,
+    /// BVH nodes whose boxes the walk tested: the cost of the trace (tests
+    /// check that it grows about logarithmically with the triangle count).
+    pub visits: u32,
+}
+
+/// The scene's geometry as the kernels see it: spheres (tested one by one,
+/// scenes hold few) and triangles under a BVH.
+#[derive(Copy, Clone)]
+pub struct Geometry<'a> {
+    pub spheres: &'a [GpuSphere],
+    pub sphere_count: u32,
+    pub triangles: &'a [GpuTriangle],
+    pub nodes: &'a [GpuBvhNode],
+    pub node_count: u32,
 }
 
 /// Distance to the first intersection of the ray `origin + t dir` (`dir` unit,
@@ -91,61 +106,72 @@ pub fn ray_hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_min: f32,
     near <= far
 }
 
-/// The nearest hit of a ray with all spheres and triangles, closer than
-/// `t_max`. Triangles are visited group by group (one group per scene
-/// object); a group whose bounding box the ray misses, or meets only beyond
-/// the nearest hit so far, is skipped whole.
-pub fn trace_nearest(
-    origin: Vec3,
-    dir: Vec3,
-    t_min: f32,
-    t_max: f32,
-    spheres: &[GpuSphere],
-    sphere_count: u32,
-    triangles: &[GpuTriangle],
-    groups: &[GpuTriangleGroup],
-    group_count: u32,
-) -> Hit {
+/// The nearest hit of a ray with the scene, closer than `t_max`.
+///
+/// Triangles are found through the BVH, walked in depth-first order without
+/// a stack: a node whose box the ray misses, or meets only beyond the
+/// nearest hit so far, is skipped with its whole subtree (`skip`). Without
+/// a stack the children are not visited nearest-first; the pruning by the
+/// nearest hit still keeps the cost about logarithmic in the triangle count.
+pub fn trace_nearest(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry) -> Hit {
     let mut hit = Hit {
         distance: NO_HIT,
         normal: Vec3::ZERO,
-        albedo: Vec4::ZERO,
+        object: NO_OBJECT,
+        material: NO_OBJECT,
+        visits: 0,
     };
     let mut best = t_max;
     let mut i = 0;
-    while i < sphere_count as usize {
-        let s = spheres[i];
+    while i < geometry.sphere_count as usize {
+        let s = geometry.spheres[i];
         let center = s.center_radius.xyz();
         let t = ray_sphere(origin, dir, center, s.center_radius.w, t_min);
         if t < best {
             best = t;
             hit.distance = t;
             hit.normal = (origin + dir * t - center).normalize();
-            hit.albedo = s.albedo;
+            hit.object = s.object;
+            hit.material = s.material;
         }
         i += 1;
     }
     let inv_dir = Vec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
-    let mut g = 0;
-    while g < group_count as usize {
-        let group = groups[g];
-        if ray_hits_box(origin, inv_dir, group.bounds_min.xyz(), group.bounds_max.xyz(), t_min, best) {
-            let mut j = group.first_triangle as usize;
-            let end = j + group.triangle_count as usize;
-            while j < end {
-                let tri = triangles[j];
-                let (v0, v1, v2) = (tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz());
-                let t = ray_triangle(origin, dir, v0, v1, v2, t_min);
-                if t < best {
-                    best = t;
-                    hit.distance = t;
-                    hit.normal = (v1 - v0).cross(v2 - v0).normalize();
-                    hit.albedo = tri.albedo;
-                }
-                j += 1;
-            }
+    let mut n = 0;
+    while n < geometry.node_count {
+        let node = geometry.nodes[n as usize];
+        hit.visits += 1;
+        if !ray_hits_box(
+            origin,
+            inv_dir,
+            node.bounds_min.xyz(),
+            node.bounds_max.xyz(),
+            t_min,
+            best,
+        ) {
+            n = node.skip;
+            continue;
         }
-        g += 1;
+        if node.count == 0 {
+            n += 1;
+            continue;
+        }
+        let mut j = node.first as usize;
+        let end = j + node.count as usize;
+        while j < end {
+            let tri = geometry.triangles[j];
+            let (v0, v1, v2) = (tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz());
+            let t = ray_triangle(origin, dir, v0, v1, v2, t_min);
+            if t < best {
+                best = t;
+                hit.distance = t;
+                hit.normal = (v1 - v0).cross(v2 - v0).normalize();
+                hit.object = tri.object;
+                hit.material = tri.material;
+            }
+            j += 1;
+        }
+        n = node.skip;
     }
     hit
 }
@@ -181,18 +207,43 @@ mod tests {
         let (lo, hi) = (Vec3::new(-1.0, -1.0, 2.99999), Vec3::new(1.0, 1.0, 3.00001));
         let inv = |d: Vec3| Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
         assert!(ray_hits_box(Vec3::ZERO, inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
-        assert!(!ray_hits_box(Vec3::new(2.0, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
+        assert!(!ray_hits_box(
+            Vec3::new(2.0, 0.0, 0.0),
+            inv(Vec3::Z),
+            lo,
+            hi,
+            0.0,
+            NO_HIT
+        ));
         // Hit only beyond t_max: skipped.
         assert!(!ray_hits_box(Vec3::ZERO, inv(Vec3::Z), lo, hi, 0.0, 2.0));
         // A zero direction component (inverse infinite) with the origin
         // inside that slab, and outside it.
-        assert!(ray_hits_box(Vec3::new(0.5, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
-        assert!(!ray_hits_box(Vec3::new(1.5, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
+        assert!(ray_hits_box(
+            Vec3::new(0.5, 0.0, 0.0),
+            inv(Vec3::Z),
+            lo,
+            hi,
+            0.0,
+            NO_HIT
+        ));
+        assert!(!ray_hits_box(
+            Vec3::new(1.5, 0.0, 0.0),
+            inv(Vec3::Z),
+            lo,
+            hi,
+            0.0,
+            NO_HIT
+        ));
     }
 
     #[test]
     fn triangle_hit_edges_and_miss() {
-        let (a, b, c) = (Vec3::new(-1.0, -1.0, 3.0), Vec3::new(1.0, -1.0, 3.0), Vec3::new(0.0, 1.0, 3.0));
+        let (a, b, c) = (
+            Vec3::new(-1.0, -1.0, 3.0),
+            Vec3::new(1.0, -1.0, 3.0),
+            Vec3::new(0.0, 1.0, 3.0),
+        );
         assert!((ray_triangle(Vec3::ZERO, Vec3::Z, a, b, c, 0.0) - 3.0).abs() < 1e-6);
         assert_eq!(ray_triangle(Vec3::new(5.0, 0.0, 0.0), Vec3::Z, a, b, c, 0.0), NO_HIT);
         // Behind the origin: not hit.

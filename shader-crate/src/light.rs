@@ -4,9 +4,8 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use crate::geometry::trace_nearest;
-use crate::types::{FrameParams, GpuLight, GpuSphere, GpuTriangle, GpuTriangleGroup, LIGHT_DIRECTIONAL};
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
+use crate::types::{GpuLight, LIGHT_DIRECTIONAL};
 
 /// Stored in a shadow-map texel whose ray hits nothing.
 pub const SHADOW_FAR: f32 = f32::MAX;
@@ -27,7 +26,11 @@ pub fn transmittance(sigma_t: Vec4, distance: f32) -> Vec4 {
 /// (directional).
 pub fn light_local(light: &GpuLight, p: Vec3) -> Vec3 {
     let d = p - light.position.xyz();
-    Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()))
+    Vec3::new(
+        d.dot(light.axis_x.xyz()),
+        d.dot(light.axis_y.xyz()),
+        d.dot(light.axis_z.xyz()),
+    )
 }
 
 /// The spotlight cone's angular profile at `local` (a point in the light's
@@ -74,7 +77,10 @@ pub fn sample_light_map(texels: &[Vec4], offset: u32, width: u32, height: u32, u
 /// directional: `uv = 0.5 + 0.5 (x / half_extent_x, y / half_extent_y)`.
 pub fn light_uv(light: &GpuLight, local: Vec3) -> (f32, f32) {
     if light.kind == LIGHT_DIRECTIONAL {
-        (0.5 + 0.5 * local.x / light.half_extent_x, 0.5 + 0.5 * local.y / light.half_extent_y)
+        (
+            0.5 + 0.5 * local.x / light.half_extent_x,
+            0.5 + 0.5 * local.y / light.half_extent_y,
+        )
     } else {
         let s = 0.5 / (local.z * light.tan_cutoff);
         (0.5 + local.x * s, 0.5 + local.y * s)
@@ -104,7 +110,14 @@ pub fn emitted(light: &GpuLight, light_map: &[Vec4], local: Vec3) -> Vec4 {
             return Vec4::ZERO;
         }
         if light.light_map_width > 0 {
-            color *= sample_light_map(light_map, light.light_map_offset, light.light_map_width, light.light_map_height, u, v);
+            color *= sample_light_map(
+                light_map,
+                light.light_map_offset,
+                light.light_map_width,
+                light.light_map_height,
+                u,
+                v,
+            );
         }
     }
     color
@@ -128,41 +141,6 @@ pub fn shadow_texel_ray(light: &GpuLight, texel: u32) -> (Vec3, Vec3) {
         let dir = (z + x * (a * light.tan_cutoff) + y * (b * light.tan_cutoff)).normalize();
         (light.position.xyz(), dir)
     }
-}
-
-/// Shadow-map texel kernel: the distance from the light (spot, metres along the
-/// texel's ray) or from its entry plane (directional) to the nearest surface,
-/// or `SHADOW_FAR`. `index` runs over the texels of all lights in order.
-pub fn shadow_map_texel(
-    index: u32,
-    params: &FrameParams,
-    lights: &[GpuLight],
-    spheres: &[GpuSphere],
-    triangles: &[GpuTriangle],
-    groups: &[GpuTriangleGroup],
-) -> f32 {
-    let mut l = 0;
-    while l < params.light_count as usize {
-        let light = lights[l];
-        let count = light.shadow_resolution * light.shadow_resolution;
-        if index >= light.shadow_offset && index < light.shadow_offset + count {
-            let (origin, dir) = shadow_texel_ray(&light, index - light.shadow_offset);
-            let hit = trace_nearest(
-                origin,
-                dir,
-                0.0,
-                SHADOW_FAR,
-                spheres,
-                params.sphere_count,
-                triangles,
-                groups,
-                params.group_count,
-            );
-            return hit.distance.min(SHADOW_FAR);
-        }
-        l += 1;
-    }
-    SHADOW_FAR
 }
 
 /// Depth tolerance of the shadow test, metres. A shadow-map texel stores the

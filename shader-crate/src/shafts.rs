@@ -16,19 +16,60 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use crate::glam::{Vec3, Vec4, Vec4Swizzles};
+use crate::camera::camera_ray;
+use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::light::{emitted, light_local, shadow_visibility, transmittance};
 use crate::phase;
-use crate::surface::camera_ray;
-use crate::types::{FrameParams, GpuLight, LIGHT_DIRECTIONAL};
+use crate::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL};
 use core::f32::consts::PI;
+use spirv_std::spirv;
+
+/// The shafts pass's parameter block.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct ShaftsParams {
+    /// Number of sample planes `n` (eq. 5).
+    pub plane_count: u32,
+    /// Sub-sample planes per plane interval `m` (eq. 9).
+    pub subplane_count: u32,
+    /// `MODE_EXACT` or `MODE_TABLES`.
+    pub mode: u32,
+    /// 1 to offset the plane lattice per pixel by an ordered dither.
+    pub jitter: u32,
+    /// Depth range (along the view direction, metres) the planes span.
+    pub depth_near: f32,
+    pub depth_far: f32,
+    /// Nodes of the phase table `F(alpha)` over [0, pi].
+    pub phase_table_size: u32,
+    /// Nodes of the attenuation table `h(s, t)` along `s` and `t`.
+    pub h_table_s: u32,
+    pub h_table_t: u32,
+    /// The `h` table covers `[0, h_s_max] x [0, h_t_max]` metres.
+    pub h_s_max: f32,
+    pub h_t_max: f32,
+    /// 1 to integrate the `1/s^2` of eq. 3 exactly over each interval.
+    pub analytic_inverse_square: u32,
+    /// 1 to round each interval's contribution to 8 bits of the frame
+    /// buffer, as the 2002 paper's blending hardware did.
+    pub quantize_8bit: u32,
+    /// Radiance that maps to 1.0 in the frame buffer is `1 / quantize_scale`
+    /// (the PNG exposure).
+    pub quantize_scale: f32,
+    pub _pad: [u32; 2],
+}
+
+#[cfg(not(target_arch = "spirv"))]
+// SAFETY: `repr(C)`, sixteen 4-byte scalars, no padding; any bits are valid.
+unsafe impl bytemuck::Zeroable for ShaftsParams {}
+#[cfg(not(target_arch = "spirv"))]
+unsafe impl bytemuck::Pod for ShaftsParams {}
 
 /// A point light is treated as a ball of this radius (metres) in the `1/s^2`
 /// factor, so that a view ray through the light gives a large but finite
 /// radiance instead of an infinite one. The reference uses the same bound.
 pub const LIGHT_RADIUS: f32 = 1e-3;
 
-/// Shaft rendering settings, read from `FrameParams`.
+/// `ShaftsParams::mode`: evaluate the phase and attenuation functions.
 pub const MODE_EXACT: u32 = 0;
 /// The paper's tables: `F(alpha)` (1D) and `h(s, t)` (2D).
 pub const MODE_TABLES: u32 = 1;
@@ -43,9 +84,16 @@ pub const MODE_TABLES: u32 = 1;
 /// convex, so the set is one interval: the quadratic's roots and the `z = 0`
 /// crossing split the ray into at most four pieces, and each piece is tested
 /// at its midpoint.
+// Manual swaps: plain loads and stores, where `slice::swap` would go
+// through raw pointers, which rust-gpu handles less well.
+#[allow(clippy::manual_swap)]
 pub fn clip_to_cone(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
     let q = light_local(light, o);
-    let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
+    let v = Vec3::new(
+        d.dot(light.axis_x.xyz()),
+        d.dot(light.axis_y.xyz()),
+        d.dot(light.axis_z.xyz()),
+    );
     let (sin, cos) = light.cutoff.sin_cos();
     let (c2, s2) = (cos * cos, sin * sin);
     let a = c2 * (v.x * v.x + v.y * v.y) - s2 * v.z * v.z;
@@ -125,7 +173,11 @@ pub fn clip_to_cone(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) 
 /// `[t_min, t_max]`.
 pub fn clip_to_beam(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
     let q = light_local(light, o);
-    let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
+    let v = Vec3::new(
+        d.dot(light.axis_x.xyz()),
+        d.dot(light.axis_y.xyz()),
+        d.dot(light.axis_z.xyz()),
+    );
     let (mut lo, mut hi) = slab(q.z, v.z, 0.0, f32::MAX, t_min, t_max);
     if light.bounded != 0 {
         let (lx, hx) = slab(q.x, v.x, -light.half_extent_x, light.half_extent_x, lo, hi);
@@ -137,6 +189,7 @@ pub fn clip_to_beam(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) 
 }
 
 /// `[t_min, t_max]` intersected with `{t : lo <= q + t v <= hi}`.
+#[allow(clippy::manual_swap)]
 fn slab(q: f32, v: f32, lo: f32, hi: f32, t_min: f32, t_max: f32) -> (f32, f32) {
     if v.abs() < 1e-30 {
         if q >= lo && q <= hi {
@@ -200,7 +253,17 @@ pub fn phase_from_table(tables: &[Vec4], size: u32, cos_alpha: f32) -> f32 {
 /// `[0, s_max] x [0, t_max]` (nodes at the cell ends), bilinear, clamped to the
 /// table's edge outside it (eq. 6 of the 2002 paper). `offset` is where the
 /// table starts in `tables`.
-pub fn attenuation_from_table(tables: &[Vec4], offset: u32, ns: u32, nt: u32, s_max: f32, t_max: f32, s: f32, t: f32) -> Vec4 {
+#[allow(clippy::too_many_arguments)]
+pub fn attenuation_from_table(
+    tables: &[Vec4],
+    offset: u32,
+    ns: u32,
+    nt: u32,
+    s_max: f32,
+    t_max: f32,
+    s: f32,
+    t: f32,
+) -> Vec4 {
     let fs = (s / s_max * (ns - 1) as f32).clamp(0.0, (ns - 1) as f32);
     let ft = (t / t_max * (nt - 1) as f32).clamp(0.0, (nt - 1) as f32);
     let i = (fs.floor() as u32).min(ns - 2);
@@ -215,7 +278,7 @@ pub fn attenuation_from_table(tables: &[Vec4], offset: u32, ns: u32, nt: u32, s_
 /// The smooth part of the attenuation that the `h` table holds, per channel:
 /// `sigma_s exp(-sigma_t (s + t))`, times `1/max(s, LIGHT_RADIUS)^2` unless
 /// the `1/s^2` is integrated analytically. Unit 1/m (or 1/m^3 with `1/s^2`).
-pub fn attenuation(params: &FrameParams, s: f32, t: f32, with_inverse_square: bool) -> Vec4 {
+pub fn attenuation(params: &CommonParams, s: f32, t: f32, with_inverse_square: bool) -> Vec4 {
     let mut h = params.sigma_s * transmittance(params.sigma_t, s + t);
     if with_inverse_square {
         let r = s.max(LIGHT_RADIUS);
@@ -228,24 +291,24 @@ pub fn attenuation(params: &FrameParams, s: f32, t: f32, with_inverse_square: bo
 /// nodes first (`F` in `x`), then the `h` table row by row. The host fills the
 /// tables with this function on the CPU, so the values are the very ones the
 /// exact mode computes at the nodes.
-pub fn table_entry(params: &FrameParams, k: u32) -> Vec4 {
+pub fn table_entry(common: &CommonParams, params: &ShaftsParams, k: u32) -> Vec4 {
     let nf = params.phase_table_size;
     if k < nf {
         let alpha = PI * k as f32 / (nf - 1) as f32;
-        let f = phase::evaluate(params.phase_kind, alpha.cos(), params.phase_g);
+        let f = phase::evaluate(common.phase_kind, alpha.cos(), common.phase_g);
         return Vec4::new(f, f, f, 0.0);
     }
     let k = k - nf;
     let (i, j) = (k % params.h_table_s, k / params.h_table_s);
     let s = params.h_s_max * i as f32 / (params.h_table_s - 1) as f32;
     let t = params.h_t_max * j as f32 / (params.h_table_t - 1) as f32;
-    attenuation(params, s, t, params.analytic_inverse_square == 0)
+    attenuation(common, s, t, params.analytic_inverse_square == 0)
 }
 
 /// In-scattered radiance along the view ray of one pixel, W/(m^2 sr) per
 /// channel, in `xyz`; `w` holds the number of `H I_l` samples evaluated.
-/// `surface_distance` is the distance to the visible surface (the surface
-/// pass's `w`), where the integral ends.
+/// `surface_distance` is the distance to the visible surface (from the
+/// G-buffer), where the integral ends.
 ///
 /// For each light and each plane interval `[a, b]` (clipped as described in
 /// the module docs), eq. 7: `I_s += J_i g_i`, with `J_i` the mean of `H I_l`
@@ -254,19 +317,21 @@ pub fn table_entry(params: &FrameParams, k: u32) -> Vec4 {
 /// `sigma_s p(alpha) exp(-sigma_t (s + t)) * integral_a^b dt / s^2` at the
 /// interval's middle (spotlights), `sigma_s p(alpha) exp(-sigma_t (z + t)) (b - a)`
 /// (directional lights, `z` the distance travelled from the entry plane).
+#[allow(clippy::too_many_arguments)]
 pub fn shafts_pixel(
     index: u32,
-    params: &FrameParams,
+    common: &CommonParams,
+    params: &ShaftsParams,
     lights: &[GpuLight],
     light_map: &[Vec4],
     shadow: &[f32],
     tables: &[Vec4],
     surface_distance: f32,
 ) -> Vec4 {
-    let x = index % params.width;
-    let y = index / params.width;
-    let (o, d) = camera_ray(params, x, y);
-    let cos_view = d.dot(params.camera_forward.xyz());
+    let x = index % common.width;
+    let y = index / common.width;
+    let (o, d) = camera_ray(common, x, y);
+    let cos_view = d.dot(common.camera_forward.xyz());
     let planes = params.plane_count;
     let sub = params.subplane_count;
     let dz = (params.depth_far - params.depth_near) / planes as f32;
@@ -276,7 +341,7 @@ pub fn shafts_pixel(
     let mut radiance = Vec4::ZERO;
     let mut samples = 0u32;
     let mut l = 0;
-    while l < params.light_count as usize {
+    while l < common.light_count as usize {
         let light = lights[l];
         let directional = light.kind == LIGHT_DIRECTIONAL;
         let (lo, hi) = if light.in_view == 0 {
@@ -289,14 +354,20 @@ pub fn shafts_pixel(
         if lo < hi {
             // The ray in the light's frame: local(t) = q + v t.
             let q = light_local(&light, o);
-            let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
+            let v = Vec3::new(
+                d.dot(light.axis_x.xyz()),
+                d.dot(light.axis_y.xyz()),
+                d.dot(light.axis_z.xyz()),
+            );
             // Closest approach of the ray to a spotlight, for the exact 1/s^2.
             let to_light = light.position.xyz() - o;
             let t_c = to_light.dot(d);
             let h = (to_light - d * t_c).length();
             // Plane intervals [z_k, z_k + dz] in depth, shifted by the dither.
             let k0 = ((lo * cos_view - params.depth_near) / dz - offset).floor().max(-1.0) as i32;
-            let k1 = ((hi * cos_view - params.depth_near) / dz - offset).ceil().min(planes as f32 + 1.0) as i32;
+            let k1 = ((hi * cos_view - params.depth_near) / dz - offset)
+                .ceil()
+                .min(planes as f32 + 1.0) as i32;
             let mut k = k0;
             while k < k1 {
                 let z0 = params.depth_near + (k as f32 + offset) * dz;
@@ -330,16 +401,16 @@ pub fn shafts_pixel(
                     // the direction toward the eye.
                     let cos_alpha = to_l.dot(d);
                     let g = if directional {
-                        let f = phase::evaluate(params.phase_kind, cos_alpha, params.phase_g);
-                        attenuation(params, s, t_mid, false) * (f * (b - a))
+                        let f = phase::evaluate(common.phase_kind, cos_alpha, common.phase_g);
+                        attenuation(common, s, t_mid, false) * (f * (b - a))
                     } else {
-                        let f = if params.shaft_mode == MODE_TABLES {
+                        let f = if params.mode == MODE_TABLES {
                             phase_from_table(tables, params.phase_table_size, cos_alpha)
                         } else {
-                            phase::evaluate(params.phase_kind, cos_alpha, params.phase_g)
+                            phase::evaluate(common.phase_kind, cos_alpha, common.phase_g)
                         };
                         let analytic = params.analytic_inverse_square != 0;
-                        let h_st = if params.shaft_mode == MODE_TABLES {
+                        let h_st = if params.mode == MODE_TABLES {
                             attenuation_from_table(
                                 tables,
                                 params.phase_table_size,
@@ -351,9 +422,13 @@ pub fn shafts_pixel(
                                 t_mid,
                             )
                         } else {
-                            attenuation(params, s, t_mid, !analytic)
+                            attenuation(common, s, t_mid, !analytic)
                         };
-                        let length = if analytic { inverse_square_integral(a, b, t_c, h) } else { b - a };
+                        let length = if analytic {
+                            inverse_square_integral(a, b, t_c, h)
+                        } else {
+                            b - a
+                        };
                         h_st * (f * length)
                     };
                     let contribution = j_mean * g;
@@ -378,11 +453,35 @@ pub fn quantize_8bit(v: Vec4, scale: f32) -> Vec4 {
     Vec4::new(q(v.x), q(v.y), q(v.z), v.w)
 }
 
-/// The full image of eq. 1: the attenuated surface radiance (the surface
-/// pass's rgb) plus the in-scattered radiance; `w` becomes the shafts pass's
-/// sample count.
-pub fn add_to_surface(surface: Vec4, shafts: Vec4) -> Vec4 {
-    Vec4::new(surface.x + shafts.x, surface.y + shafts.y, surface.z + shafts.z, shafts.w)
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn shafts_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] shadow: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 10)] params: &[ShaftsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 11)] tables: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 12)] radiance: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let common = &common[0];
+    if index < common.band_pixels {
+        let distance = gbuffer[index as usize].normal_distance.w;
+        radiance[index as usize] = shafts_pixel(
+            common.band_start + index,
+            common,
+            &params[0],
+            lights,
+            light_map,
+            shadow,
+            tables,
+            distance,
+        );
+    }
 }
 
 #[cfg(test)]
@@ -393,7 +492,10 @@ mod tests {
     struct Lcg(u64);
     impl Lcg {
         fn next(&mut self) -> f32 {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((self.0 >> 40) as f32) / (1u64 << 24) as f32
         }
         fn signed(&mut self) -> f32 {
@@ -444,8 +546,11 @@ mod tests {
                     if lo < hi && t > lo + eps && t < hi - eps {
                         assert!(inside(&light, p), "cutoff {cutoff}: t={t} in [{lo},{hi}] but outside");
                     }
-                    if !(lo < hi) || t < lo - eps || t > hi + eps {
-                        assert!(!inside(&light, p), "cutoff {cutoff}: t={t} outside [{lo},{hi}] but inside");
+                    if lo >= hi || t < lo - eps || t > hi + eps {
+                        assert!(
+                            !inside(&light, p),
+                            "cutoff {cutoff}: t={t} outside [{lo},{hi}] but inside"
+                        );
                     }
                 }
             }
@@ -465,13 +570,22 @@ mod tests {
 
     #[test]
     fn inverse_square_integral_matches_quadrature() {
-        let cases = [(0.0f32, 1.0f32, 0.5f32, 0.2f32), (0.0, 10.0, 3.0, 1e-3), (5.0, 5.01, 0.0, 2.0), (100.0, 101.0, 0.0, 0.1), (0.0, 2.0, 1.0, 1e-6)];
+        let cases = [
+            (0.0f32, 1.0f32, 0.5f32, 0.2f32),
+            (0.0, 10.0, 3.0, 1e-3),
+            (5.0, 5.01, 0.0, 2.0),
+            (100.0, 101.0, 0.0, 0.1),
+            (0.0, 2.0, 1.0, 1e-6),
+        ];
         for (a, b, tc, h) in cases {
             let hh = (h as f64).max(LIGHT_RADIUS as f64);
             // The antiderivative in f64 is exact; compare f32 to it.
             let exact = (((b - tc) as f64 / hh).atan() - ((a - tc) as f64 / hh).atan()) / hh;
             let got = inverse_square_integral(a, b, tc, h) as f64;
-            assert!((got - exact).abs() <= 1e-5 * exact.abs() + 1e-12, "{a} {b} {tc} {h}: {got} vs {exact}");
+            assert!(
+                (got - exact).abs() <= 1e-5 * exact.abs() + 1e-12,
+                "{a} {b} {tc} {h}: {got} vs {exact}"
+            );
         }
     }
 
@@ -488,11 +602,14 @@ mod tests {
 
     #[test]
     fn tables_are_exact_at_nodes_and_clamped_outside() {
-        let params = FrameParams {
+        let common = CommonParams {
             sigma_s: Vec4::new(0.1, 0.2, 0.3, 0.0),
             sigma_t: Vec4::new(0.2, 0.3, 0.4, 0.0),
             phase_kind: crate::types::PHASE_HENYEY_GREENSTEIN,
             phase_g: 0.7,
+            ..Default::default()
+        };
+        let params = ShaftsParams {
             phase_table_size: 64,
             h_table_s: 16,
             h_table_t: 8,
@@ -502,13 +619,13 @@ mod tests {
             ..Default::default()
         };
         let n = params.phase_table_size + params.h_table_s * params.h_table_t;
-        let tables: Vec<Vec4> = (0..n).map(|k| table_entry(&params, k)).collect();
+        let tables: Vec<Vec4> = (0..n).map(|k| table_entry(&common, &params, k)).collect();
         let alpha = PI * 5.0 / 63.0;
         let f = phase_from_table(&tables, 64, alpha.cos());
         let exact = phase::henyey_greenstein(alpha.cos(), 0.7);
         assert!((f - exact).abs() < 1e-4 * exact);
         let h = attenuation_from_table(&tables, 64, 16, 8, 15.0, 7.0, 3.0, 2.0);
-        let e = attenuation(&params, 3.0, 2.0, false);
+        let e = attenuation(&common, 3.0, 2.0, false);
         assert!((h - e).abs().max_element() < 1e-6);
         // Outside the table: the edge value, finite.
         let far = attenuation_from_table(&tables, 64, 16, 8, 15.0, 7.0, 1e5, -3.0);

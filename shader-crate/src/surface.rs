@@ -1,23 +1,29 @@
 //! The lit-surface pass: surfaces lit directly by every light (cone, light map,
 //! shadow map), seen through the medium. This is the first term of eq. 1 of the
 //! 2002 shafts-of-light paper, `I_o exp(-rho kappa T)`, with `rho kappa = sigma_t`.
+//! It also writes the G-buffer that later passes read.
 
-use crate::geometry::{trace_nearest, NO_HIT};
+use crate::camera::camera_ray;
+use crate::geometry::{trace_nearest, Geometry, NO_HIT};
+use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::light::{emitted, light_local, shadow_visibility, transmittance};
-use crate::types::{FrameParams, GpuLight, GpuSphere, GpuTriangle, GpuTriangleGroup, LIGHT_DIRECTIONAL};
+use crate::types::{
+    CommonParams, GBufferTexel, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL, NO_OBJECT,
+};
 use core::f32::consts::FRAC_1_PI;
-use crate::glam::{Vec3, Vec4, Vec4Swizzles};
+use spirv_std::spirv;
 
-/// Stored in the `w` channel of a pixel whose view ray hits nothing.
+/// The G-buffer's distance at a pixel whose view ray hits nothing.
 pub const MISS_DISTANCE: f32 = f32::MAX;
 
-/// Unit view ray through the centre of pixel `(x, y)` (row 0 at the top):
-/// origin and direction.
-pub fn camera_ray(params: &FrameParams, x: u32, y: u32) -> (Vec3, Vec3) {
-    let ndc_x = 2.0 * (x as f32 + 0.5) / params.width as f32 - 1.0;
-    let ndc_y = 1.0 - 2.0 * (y as f32 + 0.5) / params.height as f32;
-    let dir = params.camera_forward.xyz() + params.camera_right.xyz() * ndc_x + params.camera_up.xyz() * ndc_y;
-    (params.camera_position.xyz(), dir.normalize())
+/// The G-buffer texel of a pixel that sees no surface.
+pub fn no_surface() -> GBufferTexel {
+    GBufferTexel {
+        normal_distance: Vec4::new(0.0, 0.0, 0.0, MISS_DISTANCE),
+        object: NO_OBJECT,
+        material: NO_OBJECT,
+        _pad: [0; 2],
+    }
 }
 
 /// Radiance leaving a diffuse surface point `p` with unit normal `normal`
@@ -27,7 +33,7 @@ pub fn camera_ray(params: &FrameParams, x: u32, y: u32) -> (Vec3, Vec3) {
 /// directional light `E = E_l H cos(theta) exp(-sigma_t z)`, `z` the distance
 /// travelled from its entry plane.
 pub fn direct_radiance(
-    params: &FrameParams,
+    params: &CommonParams,
     lights: &[GpuLight],
     light_map: &[Vec4],
     shadow: &[f32],
@@ -61,40 +67,74 @@ pub fn direct_radiance(
     Vec4::new(radiance.x, radiance.y, radiance.z, 0.0)
 }
 
-/// Per-pixel kernel of the lit-surface pass. Returns the attenuated surface
-/// radiance `I_o exp(-sigma_t T)` (eq. 1, first term) in rgb, W/(m^2 sr), and
-/// the distance `T` to the surface in `w` (metres; `MISS_DISTANCE` if none),
-/// which later passes use to end their integrals.
+/// Per-pixel kernel of the lit-surface pass, at the current sub-pixel
+/// sample. Returns the attenuated surface radiance `I_o exp(-sigma_t T)`
+/// (eq. 1, first term) in rgb, W/(m^2 sr) (w = 0), and the pixel's G-buffer
+/// texel: normal toward the viewer, distance `T` (metres), object, material.
 pub fn surface_pixel(
     index: u32,
-    params: &FrameParams,
+    params: &CommonParams,
     lights: &[GpuLight],
-    spheres: &[GpuSphere],
-    triangles: &[GpuTriangle],
-    groups: &[GpuTriangleGroup],
+    geometry: &Geometry,
+    materials: &[GpuMaterial],
     light_map: &[Vec4],
     shadow: &[f32],
-) -> Vec4 {
+) -> (Vec4, GBufferTexel) {
     let x = index % params.width;
     let y = index / params.width;
     let (origin, dir) = camera_ray(params, x, y);
-    let hit = trace_nearest(
-        origin,
-        dir,
-        0.0,
-        NO_HIT,
-        spheres,
-        params.sphere_count,
-        triangles,
-        groups,
-        params.group_count,
-    );
+    let hit = trace_nearest(origin, dir, 0.0, NO_HIT, geometry);
     if hit.distance == NO_HIT {
-        return Vec4::new(0.0, 0.0, 0.0, MISS_DISTANCE);
+        return (Vec4::ZERO, no_surface());
     }
     let p = origin + dir * hit.distance;
-    let normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
-    let radiance = direct_radiance(params, lights, light_map, shadow, p, normal, hit.albedo)
+    let normal = if hit.normal.dot(dir) > 0.0 {
+        -hit.normal
+    } else {
+        hit.normal
+    };
+    let albedo = materials[hit.material as usize].albedo;
+    let radiance = direct_radiance(params, lights, light_map, shadow, p, normal, albedo)
         * transmittance(params.sigma_t, hit.distance);
-    Vec4::new(radiance.x, radiance.y, radiance.z, hit.distance)
+    let texel = GBufferTexel {
+        normal_distance: normal.extend(hit.distance),
+        object: hit.object,
+        material: hit.material,
+        _pad: [0; 2],
+    };
+    (Vec4::new(radiance.x, radiance.y, radiance.z, 0.0), texel)
+}
+
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn surface_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] shadow: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &mut [GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] radiance: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let params = &common[0];
+    if index < params.band_pixels {
+        let geometry = crate::scene_geometry(params, spheres, triangles, nodes);
+        let (color, texel) = surface_pixel(
+            params.band_start + index,
+            params,
+            lights,
+            &geometry,
+            materials,
+            light_map,
+            shadow,
+        );
+        radiance[index as usize] = color;
+        gbuffer[index as usize] = texel;
+    }
 }

@@ -1,4 +1,6 @@
-//! Buffer layouts shared by the host and the kernels. They are written once, here.
+//! Buffer layouts shared by the host and the kernels of more than one pass.
+//! They are written once, here; a pass's own parameter block lives in the
+//! pass's module (`shafts::ShaftsParams`, ...).
 //!
 //! Every struct is built from `Vec4`s and groups of four 32-bit scalars, so that its
 //! layout is the same on the host (Rust `repr(C)`) and in SPIR-V (rust-gpu emits the
@@ -6,10 +8,11 @@
 
 use crate::glam::Vec4;
 
-/// What the kernels know about one frame: camera, medium and object counts.
+/// The block every kernel may read: camera, medium, image, band and sample,
+/// and the scene's counts.
 #[repr(C)]
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
-pub struct FrameParams {
+pub struct CommonParams {
     /// Camera position, metres (w unused).
     pub camera_position: Vec4,
     /// Unit view direction (w unused).
@@ -24,49 +27,26 @@ pub struct FrameParams {
     pub sigma_s: Vec4,
     pub width: u32,
     pub height: u32,
+    /// The per-pixel kernels write pixels `band_start .. band_start + band_pixels`
+    /// (row-major) into buffers of `band_pixels` elements; the host splits
+    /// images larger than one device buffer into such bands of whole rows.
+    pub band_start: u32,
+    pub band_pixels: u32,
     pub light_count: u32,
     pub sphere_count: u32,
     pub triangle_count: u32,
+    /// Nodes of the triangle BVH (0 without triangles).
+    pub bvh_node_count: u32,
     /// Total number of shadow-map texels over all lights.
     pub shadow_texel_count: u32,
     /// One of the `PHASE_*` constants.
     pub phase_kind: u32,
     /// Henyey-Greenstein asymmetry `g` (only for `PHASE_HENYEY_GREENSTEIN`).
     pub phase_g: f32,
-    /// Shafts: number of sample planes `n` (eq. 5).
-    pub plane_count: u32,
-    /// Shafts: sub-sample planes per plane interval `m` (eq. 9).
-    pub subplane_count: u32,
-    /// Shafts: `shafts::MODE_EXACT` or `shafts::MODE_TABLES`.
-    pub shaft_mode: u32,
-    /// Shafts: 1 to offset the plane lattice per pixel by an ordered dither.
-    pub jitter: u32,
-    /// Shafts: depth range (along the view direction, metres) the planes span.
-    pub depth_near: f32,
-    pub depth_far: f32,
-    /// Shafts: nodes of the phase table `F(alpha)` over [0, pi].
-    pub phase_table_size: u32,
-    /// Shafts: nodes of the attenuation table `h(s, t)` along `s` and `t`.
-    pub h_table_s: u32,
-    pub h_table_t: u32,
-    /// Shafts: the `h` table covers `[0, h_s_max] x [0, h_t_max]` metres.
-    pub h_s_max: f32,
-    pub h_t_max: f32,
-    /// Shafts: 1 to integrate the `1/s^2` of eq. 3 exactly over each interval.
-    pub analytic_inverse_square: u32,
-    /// Shafts: 1 to round each interval's contribution to 8 bits of the
-    /// frame buffer, as the 2002 paper's blending hardware did.
-    pub quantize_8bit: u32,
-    /// Radiance that maps to 1.0 in the frame buffer is `1 / quantize_scale`
-    /// (the PNG exposure).
-    pub quantize_scale: f32,
-    /// The image kernels write pixels `band_start .. band_start + band_pixels`
-    /// (row-major) into an output buffer of `band_pixels` elements; the host
-    /// splits images larger than one device buffer into such bands.
-    pub band_start: u32,
-    pub band_pixels: u32,
-    /// Number of triangle groups (one per scene object made of triangles).
-    pub group_count: u32,
+    /// Sub-pixel samples per pixel (1: the pixel centre); see `camera::sample_offset`.
+    pub samples_per_pixel: u32,
+    /// Which of the `samples_per_pixel` positions this dispatch renders.
+    pub sample_index: u32,
     pub _pad: [u32; 3],
 }
 
@@ -126,38 +106,78 @@ pub struct GpuLight {
     pub _pad: [u32; 3],
 }
 
-/// A sphere with a diffuse albedo.
+/// A sphere. `object` is the index of the scene's `[[object]]` it came
+/// from; `material` indexes the material buffer.
 #[repr(C)]
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct GpuSphere {
     /// Centre xyz in metres, radius in w.
     pub center_radius: Vec4,
-    /// Diffuse albedo per channel in [0, 1].
-    pub albedo: Vec4,
+    pub object: u32,
+    pub material: u32,
+    pub _pad: [u32; 2],
 }
 
-/// A triangle with a diffuse albedo. Surfaces are two-sided.
+/// A triangle (vertices in metres, w unused). Surfaces are two-sided.
 #[repr(C)]
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct GpuTriangle {
     pub v0: Vec4,
     pub v1: Vec4,
     pub v2: Vec4,
-    pub albedo: Vec4,
-}
-
-/// A run of consecutive triangles (one scene object) and its bounding box:
-/// a ray that misses the box skips all of them.
-#[repr(C)]
-#[derive(Copy, Clone, Debug, Default, PartialEq)]
-pub struct GpuTriangleGroup {
-    /// Box corners, metres (w unused).
-    pub bounds_min: Vec4,
-    pub bounds_max: Vec4,
-    pub first_triangle: u32,
-    pub triangle_count: u32,
+    pub object: u32,
+    pub material: u32,
     pub _pad: [u32; 2],
 }
+
+pub const MATERIAL_DIFFUSE: u32 = 0;
+
+/// How a surface reflects light.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct GpuMaterial {
+    /// Diffuse albedo per channel in [0, 1] (w unused).
+    pub albedo: Vec4,
+    /// One of the `MATERIAL_*` constants.
+    pub kind: u32,
+    pub _pad: [u32; 3],
+}
+
+/// A node of the triangle BVH, flattened in depth-first order so that it
+/// can be walked without a stack (see `geometry::trace_nearest`): the first
+/// child of an inner node is the next node, and `skip` is where the walk goes
+/// when the ray misses this node's box (or after a leaf's triangles).
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct GpuBvhNode {
+    /// Box corners, metres (w unused), padded so that f32 rounding of the
+    /// slab test cannot let a ray slip past a triangle inside.
+    pub bounds_min: Vec4,
+    pub bounds_max: Vec4,
+    /// Leaf: its triangles are `first .. first + count`; inner: `count` = 0.
+    pub first: u32,
+    pub count: u32,
+    /// Index of the node after this node's subtree (`bvh_node_count` at the end).
+    pub skip: u32,
+    pub _pad: u32,
+}
+
+/// What the surface pass leaves for later passes at every pixel (G-buffer).
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct GBufferTexel {
+    /// Unit normal turned toward the viewer (xyz) and distance along the
+    /// view ray to the surface, metres (w; `surface::MISS_DISTANCE` if none).
+    pub normal_distance: Vec4,
+    /// Index of the scene object seen (`NO_OBJECT` if none).
+    pub object: u32,
+    /// Its material (`NO_OBJECT` if none).
+    pub material: u32,
+    pub _pad: [u32; 2],
+}
+
+/// `GBufferTexel::object` and `material` of a pixel that sees no surface.
+pub const NO_OBJECT: u32 = u32::MAX;
 
 #[cfg(not(target_arch = "spirv"))]
 mod pod {
@@ -170,13 +190,23 @@ mod pod {
             unsafe impl bytemuck::Pod for $t {}
         )*};
     }
-    pod!(super::FrameParams, super::GpuLight, super::GpuSphere, super::GpuTriangle, super::GpuTriangleGroup);
+    pod!(
+        super::CommonParams,
+        super::GpuLight,
+        super::GpuSphere,
+        super::GpuTriangle,
+        super::GpuMaterial,
+        super::GpuBvhNode,
+        super::GBufferTexel
+    );
 
     const _: () = {
-        assert!(core::mem::size_of::<super::FrameParams>() == 6 * 16 + 112);
-        assert!(core::mem::size_of::<super::GpuTriangleGroup>() == 48);
+        assert!(core::mem::size_of::<super::CommonParams>() == 6 * 16 + 64);
         assert!(core::mem::size_of::<super::GpuLight>() == 5 * 16 + 64);
         assert!(core::mem::size_of::<super::GpuSphere>() == 32);
         assert!(core::mem::size_of::<super::GpuTriangle>() == 64);
+        assert!(core::mem::size_of::<super::GpuMaterial>() == 32);
+        assert!(core::mem::size_of::<super::GpuBvhNode>() == 48);
+        assert!(core::mem::size_of::<super::GBufferTexel>() == 32);
     };
 }

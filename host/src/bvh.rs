@@ -1,0 +1,293 @@
+//! The triangle BVH: built on the host with the surface area heuristic over
+//! binned centroids, flattened in depth-first order with skip links so the
+//! kernels walk it without a stack (`geometry::trace_nearest`), and walked
+//! the same way by the f64 reference.
+
+use glam::{Vec3, Vec4};
+use slicelight_shaders::types::{GpuBvhNode, GpuTriangle};
+
+/// Triangles a leaf may hold before a split is tried.
+const MAX_LEAF: usize = 4;
+/// Centroid bins per axis of the SAH sweep.
+const BINS: usize = 16;
+/// Cost of visiting a node, in triangle tests (the SAH's traversal cost).
+const TRAVERSAL_COST: f32 = 1.0;
+/// Below this depth the SAH chooses splits; past it (a degenerate mesh)
+/// splits are median splits, which bound the depth by log2 of the count.
+const SAH_DEPTH: u32 = 40;
+
+/// The flattened tree and the triangles reordered so each leaf's are contiguous.
+pub struct Bvh {
+    pub nodes: Vec<GpuBvhNode>,
+    pub triangles: Vec<GpuTriangle>,
+}
+
+#[derive(Clone, Copy)]
+struct Aabb {
+    lo: Vec3,
+    hi: Vec3,
+}
+
+impl Aabb {
+    const EMPTY: Aabb = Aabb {
+        lo: Vec3::splat(f32::INFINITY),
+        hi: Vec3::splat(f32::NEG_INFINITY),
+    };
+    fn grow(self, p: Vec3) -> Aabb {
+        Aabb {
+            lo: self.lo.min(p),
+            hi: self.hi.max(p),
+        }
+    }
+    fn union(self, o: Aabb) -> Aabb {
+        Aabb {
+            lo: self.lo.min(o.lo),
+            hi: self.hi.max(o.hi),
+        }
+    }
+    fn half_area(self) -> f32 {
+        let e = (self.hi - self.lo).max(Vec3::ZERO);
+        e.x * e.y + e.y * e.z + e.z * e.x
+    }
+}
+
+struct Item {
+    bounds: Aabb,
+    centroid: Vec3,
+    triangle: GpuTriangle,
+}
+
+impl Bvh {
+    pub fn build(triangles: Vec<GpuTriangle>) -> Bvh {
+        let mut items: Vec<Item> = triangles
+            .into_iter()
+            .map(|t| {
+                let bounds = [t.v0, t.v1, t.v2].iter().fold(Aabb::EMPTY, |b, v| b.grow(v.truncate()));
+                Item {
+                    bounds,
+                    centroid: (bounds.lo + bounds.hi) * 0.5,
+                    triangle: t,
+                }
+            })
+            .collect();
+        let mut nodes = Vec::with_capacity(2 * items.len().div_ceil(MAX_LEAF));
+        if !items.is_empty() {
+            let n = items.len();
+            build_node(&mut items, 0, n, 0, &mut nodes);
+        }
+        Bvh {
+            nodes,
+            triangles: items.into_iter().map(|i| i.triangle).collect(),
+        }
+    }
+}
+
+/// Appends the subtree over `items[first..end]` to `nodes` in depth-first
+/// order and sets its skip link.
+fn build_node(items: &mut [Item], first: usize, end: usize, depth: u32, nodes: &mut Vec<GpuBvhNode>) {
+    let slice = &mut items[first..end];
+    let bounds = slice.iter().fold(Aabb::EMPTY, |b, i| b.union(i.bounds));
+    let index = nodes.len();
+    nodes.push(padded_node(bounds));
+    let split = if slice.len() <= MAX_LEAF {
+        None
+    } else {
+        choose_split(slice, bounds, depth)
+    };
+    match split {
+        None => {
+            nodes[index].first = first as u32;
+            nodes[index].count = slice.len() as u32;
+        }
+        Some(mid) => {
+            build_node(items, first, first + mid, depth + 1, nodes);
+            build_node(items, first + mid, end, depth + 1, nodes);
+        }
+    }
+    nodes[index].skip = nodes.len() as u32;
+}
+
+/// Partitions `items` and returns the size of the first part, or `None` if
+/// a leaf is cheaper (SAH) or the items cannot be told apart.
+fn choose_split(items: &mut [Item], bounds: Aabb, depth: u32) -> Option<usize> {
+    let cb = items.iter().fold(Aabb::EMPTY, |b, i| b.grow(i.centroid));
+    let extent = cb.hi - cb.lo;
+    if extent.max_element() <= 0.0 {
+        // Every centroid in one point: split by index so leaves stay small.
+        return Some(items.len() / 2);
+    }
+    if depth >= SAH_DEPTH {
+        let axis = extent.max_position();
+        let mid = items.len() / 2;
+        items.select_nth_unstable_by(mid, |a, b| a.centroid[axis].total_cmp(&b.centroid[axis]));
+        return Some(mid);
+    }
+    let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, last bin of the left part)
+    for axis in 0..3 {
+        if extent[axis] <= 0.0 {
+            continue;
+        }
+        let bin_of = |c: Vec3| (((c[axis] - cb.lo[axis]) / extent[axis] * BINS as f32) as usize).min(BINS - 1);
+        let mut counts = [0usize; BINS];
+        let mut boxes = [Aabb::EMPTY; BINS];
+        for it in items.iter() {
+            let b = bin_of(it.centroid);
+            counts[b] += 1;
+            boxes[b] = boxes[b].union(it.bounds);
+        }
+        // Sweep: right-side areas and counts from the top, then the left.
+        let mut right_area = [0.0f32; BINS];
+        let mut right_count = [0usize; BINS];
+        let (mut acc, mut n) = (Aabb::EMPTY, 0);
+        for b in (1..BINS).rev() {
+            acc = acc.union(boxes[b]);
+            n += counts[b];
+            right_area[b] = acc.half_area();
+            right_count[b] = n;
+        }
+        let (mut acc, mut n) = (Aabb::EMPTY, 0);
+        for b in 0..BINS - 1 {
+            acc = acc.union(boxes[b]);
+            n += counts[b];
+            if n == 0 || right_count[b + 1] == 0 {
+                continue;
+            }
+            let cost = acc.half_area() * n as f32 + right_area[b + 1] * right_count[b + 1] as f32;
+            if best.is_none_or(|(c, _, _)| cost < c) {
+                best = Some((cost, axis, b));
+            }
+        }
+    }
+    let (cost, axis, last) = best?;
+    let leaf_cost = items.len() as f32;
+    let split_cost = TRAVERSAL_COST + cost / bounds.half_area().max(1e-30);
+    if split_cost >= leaf_cost && items.len() <= 4 * MAX_LEAF {
+        return None;
+    }
+    let threshold = |c: Vec3| (((c[axis] - cb.lo[axis]) / extent[axis] * BINS as f32) as usize).min(BINS - 1) <= last;
+    let mut mid = 0;
+    for i in 0..items.len() {
+        if threshold(items[i].centroid) {
+            items.swap(i, mid);
+            mid += 1;
+        }
+    }
+    Some(mid)
+}
+
+/// A node over `b`, its box padded by 1e-4 of its extent plus 1e-6 of its
+/// distance from the origin so that a flat box (a quad's) has a thickness
+/// f32 rounding of the slab test cannot slip through.
+fn padded_node(b: Aabb) -> GpuBvhNode {
+    let pad = (b.hi - b.lo).max_element() * 1e-4 + 1e-6 * (1.0 + b.lo.abs().max(b.hi.abs()).max_element());
+    GpuBvhNode {
+        bounds_min: (b.lo - Vec3::splat(pad)).extend(0.0),
+        bounds_max: (b.hi + Vec3::splat(pad)).extend(0.0),
+        first: 0,
+        count: 0,
+        skip: 0,
+        _pad: 0,
+    }
+}
+
+/// Depth of the deepest leaf (1 for a single leaf), from the skip links.
+pub fn depth(nodes: &[GpuBvhNode]) -> usize {
+    fn walk(nodes: &[GpuBvhNode], i: usize) -> (usize, usize) {
+        // Returns (depth of the subtree at i, index after it).
+        if nodes[i].count > 0 {
+            return (1, nodes[i].skip as usize);
+        }
+        let (dl, next) = walk(nodes, i + 1);
+        let (dr, after) = walk(nodes, next);
+        debug_assert_eq!(after, nodes[i].skip as usize);
+        (1 + dl.max(dr), after)
+    }
+    if nodes.is_empty() {
+        0
+    } else {
+        walk(nodes, 0).0
+    }
+}
+
+/// Whether `p` lies in a node's (padded) box.
+pub fn node_contains(node: &GpuBvhNode, p: Vec4) -> bool {
+    p.truncate().cmpge(node.bounds_min.truncate()).all() && p.truncate().cmple(node.bounds_max.truncate()).all()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn random_triangles(n: usize) -> Vec<GpuTriangle> {
+        let mut state = 12345u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 40) as f32) / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|i| {
+                let c = Vec3::new(next(), next(), next()) * 10.0;
+                GpuTriangle {
+                    v0: c.extend(1.0),
+                    v1: (c + Vec3::new(0.1, 0.0, 0.0)).extend(1.0),
+                    v2: (c + Vec3::new(0.0, 0.1, 0.05)).extend(1.0),
+                    object: i as u32,
+                    ..Default::default()
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_triangle_is_in_exactly_one_leaf_inside_every_box_above_it() {
+        let bvh = Bvh::build(random_triangles(5000));
+        let mut seen = vec![0; bvh.triangles.len()];
+        // Walk with an explicit stack of ancestors to check containment.
+        fn visit(bvh: &Bvh, i: usize, ancestors: &mut Vec<usize>, seen: &mut [u32]) -> usize {
+            let node = bvh.nodes[i];
+            if node.count > 0 {
+                for t in node.first..node.first + node.count {
+                    seen[t as usize] += 1;
+                    let tri = bvh.triangles[t as usize];
+                    for a in ancestors.iter().chain([&i]) {
+                        for v in [tri.v0, tri.v1, tri.v2] {
+                            assert!(node_contains(&bvh.nodes[*a], v), "triangle {t} outside node {a}");
+                        }
+                    }
+                }
+                return node.skip as usize;
+            }
+            ancestors.push(i);
+            let next = visit(bvh, i + 1, ancestors, seen);
+            let after = visit(bvh, next, ancestors, seen);
+            ancestors.pop();
+            assert_eq!(after, node.skip as usize, "skip link of node {i}");
+            after
+        }
+        let end = visit(&bvh, 0, &mut Vec::new(), &mut seen);
+        assert_eq!(end, bvh.nodes.len());
+        assert!(seen.iter().all(|&s| s == 1));
+        // The SAH keeps a random soup shallow: about log2(5000 / 4) = 10.
+        let d = depth(&bvh.nodes);
+        assert!(d <= 25, "depth {d}");
+    }
+
+    #[test]
+    fn degenerate_inputs_build() {
+        // All triangles at one point, and one triangle.
+        let same: Vec<GpuTriangle> = (0..1000)
+            .map(|_| GpuTriangle {
+                v1: Vec4::X,
+                v2: Vec4::Y,
+                ..Default::default()
+            })
+            .collect();
+        let bvh = Bvh::build(same);
+        assert!(depth(&bvh.nodes) <= 12, "depth {}", depth(&bvh.nodes));
+        let one = Bvh::build(random_triangles(1));
+        assert_eq!(one.nodes.len(), 1);
+        assert!(Bvh::build(Vec::new()).nodes.is_empty());
+    }
+}

@@ -1,0 +1,327 @@
+//! The passes, registered once in `PASSES`, and the resources they share.
+//!
+//! A pass is one unit: its kernel module in `shader-crate/src/<pass>.rs` (the
+//! pure per-invocation function and its thin entry point) and its host
+//! module here, which says whether a scene needs it and why not, which
+//! resources it reads and writes, how it is dispatched, how it runs the same
+//! function on the CPU, and how its GPU and CPU results are compared. The
+//! renderer, the pass plan, `--stats`, the progress bar, the GPU backend's
+//! pipelines and bind groups, and the equivalence tests all walk `PASSES`.
+//!
+//! Resources are named by their binding number, which is written once, in
+//! the `Resource` that declares it (shared ones below, a pass's own in its
+//! module); the `bindings` test checks them against the compiled SPIR-V.
+
+use bytemuck::Pod;
+use indicatif::ProgressBar;
+use slicelight_shaders::types::CommonParams;
+use std::collections::HashMap;
+
+use crate::scene::SceneData;
+
+/// A `&'static [&'static Resource]` of the given resources (a pass's reads
+/// or writes; a static, since a constant may not point at statics).
+macro_rules! resources {
+    ($($r:expr),* $(,)?) => {{
+        static LIST: &[&Resource] = &[$(&$r),*];
+        LIST
+    }};
+}
+
+pub mod scatter_check;
+pub mod shadow_maps;
+pub mod shafts;
+pub mod surface;
+
+/// Every pass, in the order the renderer runs them.
+pub static PASSES: &[&dyn Pass] = &[
+    &shadow_maps::ShadowMaps,
+    &surface::Surface,
+    &shafts::Shafts,
+    &scatter_check::ScatterCheck,
+];
+
+/// The registered pass named `name`.
+pub fn by_name(name: &str) -> Option<&'static dyn Pass> {
+    PASSES.iter().copied().find(|p| p.name() == name)
+}
+
+/// A buffer the kernels bind, at `binding` of descriptor set 0.
+pub struct Resource {
+    pub binding: u32,
+    pub name: &'static str,
+    pub kind: ResourceKind,
+}
+
+pub enum ResourceKind {
+    /// Read-only data taken from the scene (geometry, lights, a pass's
+    /// parameter block), uploaded once per frame.
+    Scene(for<'a> fn(&'a SceneData) -> &'a [u8]),
+    /// Written once per frame by a pass; `bytes(scene)` long. The GPU
+    /// backend zero-fills it before the pass runs.
+    Frame(fn(&SceneData) -> u64),
+    /// Written for every pixel of a band by a per-pixel pass. `blank` is
+    /// one pixel's value where no pass writes it (a G-buffer that sees no
+    /// surface); its length is the bytes per pixel.
+    PerPixel { blank: fn() -> Vec<u8> },
+}
+
+impl Resource {
+    /// Bytes per pixel of a `PerPixel` resource.
+    pub fn bytes_per_pixel(&self) -> Option<u64> {
+        match self.kind {
+            ResourceKind::PerPixel { blank } => Some(blank().len() as u64),
+            _ => None,
+        }
+    }
+
+    /// A `PerPixel` resource's contents for `pixels` pixels where no pass writes it.
+    pub fn blank(&self, pixels: usize) -> Option<Buffer> {
+        match self.kind {
+            ResourceKind::PerPixel { blank } => Some(Buffer::from_bytes(&blank().repeat(pixels))),
+            _ => None,
+        }
+    }
+}
+
+/// The blank of a per-pixel radiance layer: no light.
+pub fn no_radiance() -> Vec<u8> {
+    vec![0; 16]
+}
+
+// The resources several passes share. A pass's own live in its module.
+
+pub static COMMON: Resource = Resource {
+    binding: 0,
+    name: "common parameters",
+    kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.common)),
+};
+pub static LIGHTS: Resource = Resource {
+    binding: 1,
+    name: "lights",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.lights)),
+};
+pub static SPHERES: Resource = Resource {
+    binding: 2,
+    name: "spheres",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.spheres)),
+};
+pub static TRIANGLES: Resource = Resource {
+    binding: 3,
+    name: "triangles",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.triangles)),
+};
+pub static BVH_NODES: Resource = Resource {
+    binding: 4,
+    name: "BVH nodes",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.bvh_nodes)),
+};
+pub static MATERIALS: Resource = Resource {
+    binding: 5,
+    name: "materials",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.materials)),
+};
+pub static LIGHT_MAPS: Resource = Resource {
+    binding: 6,
+    name: "light maps",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.light_map)),
+};
+pub static SHADOW_MAPS: Resource = Resource {
+    binding: 7,
+    name: "shadow maps",
+    kind: ResourceKind::Frame(|s| s.common.shadow_texel_count as u64 * 4),
+};
+pub static GBUFFER: Resource = Resource {
+    binding: 8,
+    name: "G-buffer",
+    kind: ResourceKind::PerPixel {
+        blank: || bytemuck::bytes_of(&slicelight_shaders::surface::no_surface()).to_vec(),
+    },
+};
+
+/// How a pass's kernel is dispatched.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dispatch {
+    /// Once per frame, over `Plan::invocations` invocations.
+    Whole,
+    /// Once per band of pixels and per sub-pixel sample, one invocation per pixel.
+    PerPixel,
+}
+
+/// Whether a pass runs for a scene, and why (or why not).
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub runs: bool,
+    pub reason: String,
+    /// Invocations of a `Whole` pass (per-pixel passes: one per pixel).
+    pub invocations: u64,
+}
+
+impl Plan {
+    pub fn skip(reason: impl Into<String>) -> Plan {
+        Plan {
+            runs: false,
+            reason: reason.into(),
+            invocations: 0,
+        }
+    }
+    pub fn run(reason: impl Into<String>, invocations: u64) -> Plan {
+        Plan {
+            runs: true,
+            reason: reason.into(),
+            invocations,
+        }
+    }
+}
+
+/// One pass: see the module docs.
+pub trait Pass: Sync {
+    /// Its name in the plan, `--stats` and the EXR's layers.
+    fn name(&self) -> &'static str;
+    /// Its SPIR-V entry point (rust-gpu names it by its module path:
+    /// `surface::surface_kernel`).
+    fn kernel(&self) -> &'static str;
+    /// Resources its kernel only reads.
+    fn reads(&self) -> &'static [&'static Resource];
+    /// Resources its kernel writes.
+    fn writes(&self) -> &'static [&'static Resource];
+    fn dispatch(&self) -> Dispatch;
+    /// Whether the scene needs it, and why (or why not).
+    fn plan(&self, scene: &SceneData) -> Plan;
+    /// Runs its kernel function on the CPU for every invocation, reading
+    /// and writing `frame`. `common` is the scene's common block with the
+    /// band (the whole image on the CPU) and sub-pixel sample set.
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar);
+    /// The per-pixel radiance (rgb, W/(m^2 sr)) it adds to the image, if
+    /// any: a layer of the EXR, summed into the beauty image.
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        None
+    }
+    /// What the pass found, for the stats (a self-check's verdict). `frame`
+    /// holds the frame's results: what `Whole` passes wrote, and each
+    /// radiance layer summed over the sub-pixel samples.
+    fn report(&self, _scene: &SceneData, _frame: &Frame) -> Option<String> {
+        None
+    }
+    /// Named counts of the work it did, for the stats (from the same frame).
+    fn counters(&self, _scene: &SceneData, _frame: &Frame) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
+    /// Compares what the GPU wrote with what the CPU wrote, from the same
+    /// inputs, within tolerances the pass states and justifies; returns a
+    /// line describing the agreement, or an error.
+    fn compare(&self, scene: &SceneData, gpu: &Frame, cpu: &Frame) -> anyhow::Result<String>;
+}
+
+/// A 16-byte, 16-aligned block: the storage of `Frame`, so that any buffer
+/// can be viewed as a slice of `Vec4` or of the kernels' structs.
+#[repr(C, align(16))]
+#[derive(Copy, Clone, Default)]
+struct Block([u32; 4]);
+// SAFETY: 16 bytes of u32s, align 16, no padding; any bits are valid.
+unsafe impl bytemuck::Zeroable for Block {}
+unsafe impl bytemuck::Pod for Block {}
+
+/// A buffer's contents on the CPU, 16-aligned so that it can be viewed as
+/// a slice of `Vec4` or of the kernels' structs.
+#[derive(Clone, Default)]
+pub struct Buffer {
+    blocks: Vec<Block>,
+    bytes: usize,
+}
+
+impl Buffer {
+    /// `len` zeroed `T`s.
+    pub fn zeroed<T: Pod>(len: usize) -> Buffer {
+        let bytes = len * std::mem::size_of::<T>();
+        Buffer {
+            blocks: vec![Block::default(); bytes.div_ceil(16)],
+            bytes,
+        }
+    }
+
+    pub fn from_bytes(bytes: &[u8]) -> Buffer {
+        let mut b = Buffer {
+            blocks: vec![Block::default(); bytes.len().div_ceil(16)],
+            bytes: bytes.len(),
+        };
+        bytemuck::cast_slice_mut::<Block, u8>(&mut b.blocks)[..bytes.len()].copy_from_slice(bytes);
+        b
+    }
+
+    pub fn as_slice<T: Pod>(&self) -> &[T] {
+        &bytemuck::cast_slice(&self.blocks)[..self.bytes / std::mem::size_of::<T>()]
+    }
+
+    pub fn as_mut_slice<T: Pod>(&mut self) -> &mut [T] {
+        let len = self.bytes / std::mem::size_of::<T>();
+        &mut bytemuck::cast_slice_mut(&mut self.blocks)[..len]
+    }
+
+    pub fn as_bytes(&self) -> &[u8] {
+        &bytemuck::cast_slice(&self.blocks)[..self.bytes]
+    }
+}
+
+/// The buffers passes write (shadow maps, G-buffer, radiance layers,
+/// accumulators), by binding, on the CPU: what the CPU backend computes, and
+/// what the GPU backend reads back.
+#[derive(Default, Clone)]
+pub struct Frame {
+    buffers: HashMap<u32, Buffer>,
+}
+
+impl Frame {
+    /// The contents of `r` as `T`s (empty if nothing wrote it).
+    pub fn get<T: Pod>(&self, r: &Resource) -> &[T] {
+        self.buffers.get(&r.binding).map_or(&[], |b| b.as_slice())
+    }
+
+    pub fn bytes(&self, r: &Resource) -> Option<&[u8]> {
+        self.buffers.get(&r.binding).map(|b| b.as_bytes())
+    }
+
+    pub fn contains(&self, r: &Resource) -> bool {
+        self.buffers.contains_key(&r.binding)
+    }
+
+    /// Stores a copy of `values` as the contents of `r`.
+    pub fn put<T: Pod>(&mut self, r: &Resource, values: &[T]) {
+        self.insert(r, Buffer::from_bytes(bytemuck::cast_slice(values)));
+    }
+
+    pub fn insert(&mut self, r: &Resource, buffer: Buffer) {
+        self.buffers.insert(r.binding, buffer);
+    }
+
+    pub fn remove(&mut self, r: &Resource) -> Option<Buffer> {
+        self.buffers.remove(&r.binding)
+    }
+
+    /// Runs `fill` on a zeroed buffer of `len` `T`s that becomes the
+    /// contents of `r`, while the rest of the frame stays readable.
+    pub fn write<T: Pod>(&mut self, r: &Resource, len: usize, fill: impl FnOnce(&Frame, &mut [T])) {
+        let mut buffer = Buffer::zeroed::<T>(len);
+        self.buffers.remove(&r.binding);
+        fill(self, buffer.as_mut_slice());
+        self.buffers.insert(r.binding, buffer);
+    }
+}
+
+/// Counts values whose difference exceeds `tol(cpu)` (or is NaN), and
+/// returns the largest difference among the rest: the equivalence tests'
+/// measure.
+pub fn count_differences(gpu: &[f32], cpu: &[f32], tol: impl Fn(f32) -> f32) -> (usize, f32) {
+    assert_eq!(gpu.len(), cpu.len(), "buffers of different lengths");
+    let mut outliers = 0;
+    let mut worst = 0.0f32;
+    for (&g, &c) in gpu.iter().zip(cpu) {
+        let d = (g - c).abs();
+        if d.is_nan() || d > tol(c) {
+            outliers += 1;
+        } else {
+            worst = worst.max(d);
+        }
+    }
+    (outliers, worst)
+}

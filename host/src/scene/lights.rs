@@ -1,0 +1,199 @@
+//! Scene lights to kernel lights: frames, light maps, shadow-map layout.
+
+use anyhow::{anyhow, bail, Result};
+use glam::{Vec3, Vec4};
+use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_SPOT};
+use std::path::Path;
+
+use super::schema::{DirectionalLight, Spotlight};
+use super::validate::{finite3, invalid, non_negative3, shadow_resolution, unit3};
+
+/// Every light of a scene, their light maps' texels, and the total number
+/// of shadow-map texels.
+#[derive(Default)]
+pub struct Lights {
+    pub lights: Vec<GpuLight>,
+    pub light_map: Vec<Vec4>,
+    pub shadow_texels: u32,
+}
+
+impl Lights {
+    /// Appends a light, laying out its shadow map after the others' and its
+    /// light map's texels after theirs.
+    fn push(&mut self, field: &str, mut light: GpuLight, map: Option<(u32, u32, Vec<Vec4>)>) -> Result<()> {
+        let res = light.shadow_resolution;
+        light.shadow_offset = self.shadow_texels;
+        self.shadow_texels = self.shadow_texels.checked_add(res * res).ok_or_else(|| {
+            invalid(
+                &format!("{field}.shadow_map_resolution"),
+                "fewer shadow-map texels in all",
+                res,
+            )
+        })?;
+        if let Some((w, h, texels)) = map {
+            light.light_map_offset = self.light_map.len() as u32;
+            light.light_map_width = w;
+            light.light_map_height = h;
+            self.light_map.extend(texels);
+        }
+        self.lights.push(light);
+        Ok(())
+    }
+}
+
+/// Validates and converts the lights. `bounds` (of the geometry) places a
+/// directional light's entry plane when the file gives none.
+pub fn build(
+    spots: &[Spotlight],
+    directionals: &[DirectionalLight],
+    base: &Path,
+    bounds: Option<(Vec3, Vec3)>,
+) -> Result<Lights> {
+    let mut out = Lights::default();
+    for (i, s) in spots.iter().enumerate() {
+        let field = format!("spotlight[{i}]");
+        let (light, map) = spotlight(&field, s, base)?;
+        out.push(&field, light, map)?;
+    }
+    for (i, d) in directionals.iter().enumerate() {
+        let field = format!("directional_light[{i}]");
+        let (light, map) = directional(&field, d, base, bounds)?;
+        out.push(&field, light, map)?;
+    }
+    Ok(out)
+}
+
+type LightMap = Option<(u32, u32, Vec<Vec4>)>;
+
+fn spotlight(field: &str, s: &Spotlight, base: &Path) -> Result<(GpuLight, LightMap)> {
+    let pos = finite3(&format!("{field}.position"), s.position)?;
+    let z = unit3(&format!("{field}.direction"), s.direction)?;
+    let (x, y) = light_frame(field, z, s.up)?;
+    if !(s.cutoff_deg > 0.0 && s.cutoff_deg < 90.0) {
+        bail!(invalid(
+            &format!("{field}.cutoff_deg"),
+            "an angle in (0, 90) degrees",
+            s.cutoff_deg
+        ));
+    }
+    let beam = s.beam_deg.unwrap_or(s.cutoff_deg);
+    if !(beam > 0.0 && beam <= s.cutoff_deg) {
+        bail!(invalid(
+            &format!("{field}.beam_deg"),
+            "an angle in (0, cutoff_deg] degrees",
+            beam
+        ));
+    }
+    let light = GpuLight {
+        position: pos.extend(1.0),
+        axis_x: x.extend(0.0),
+        axis_y: y.extend(0.0),
+        axis_z: z.extend(0.0),
+        power: non_negative3(&format!("{field}.intensity"), s.intensity)?.extend(0.0),
+        kind: LIGHT_SPOT,
+        cutoff: s.cutoff_deg.to_radians(),
+        beam: beam.to_radians(),
+        tan_cutoff: s.cutoff_deg.to_radians().tan(),
+        shadow_resolution: shadow_resolution(&format!("{field}.shadow_map_resolution"), s.shadow_map_resolution)?,
+        ..Default::default()
+    };
+    let map = match &s.light_map {
+        Some(file) => Some(load_light_map(&format!("{field}.light_map"), base, file)?),
+        None => None,
+    };
+    Ok((light, map))
+}
+
+fn directional(
+    field: &str,
+    d: &DirectionalLight,
+    base: &Path,
+    bounds: Option<(Vec3, Vec3)>,
+) -> Result<(GpuLight, LightMap)> {
+    let z = unit3(&format!("{field}.direction"), d.direction)?;
+    let (x, y) = light_frame(field, z, d.up)?;
+    // Without an explicit entry plane, the light enters the medium where
+    // it first meets the scene's bounding sphere.
+    let (center, radius) = match bounds {
+        Some((lo, hi)) => ((lo + hi) * 0.5, ((hi - lo) * 0.5).length().max(1e-3)),
+        None => (Vec3::ZERO, 1.0),
+    };
+    let origin = match d.origin {
+        Some(o) => finite3(&format!("{field}.origin"), o)?,
+        None => center - z * radius,
+    };
+    let mut light = GpuLight {
+        position: origin.extend(1.0),
+        axis_x: x.extend(0.0),
+        axis_y: y.extend(0.0),
+        axis_z: z.extend(0.0),
+        power: non_negative3(&format!("{field}.irradiance"), d.irradiance)?.extend(0.0),
+        kind: LIGHT_DIRECTIONAL,
+        half_extent_x: radius,
+        half_extent_y: radius,
+        shadow_resolution: shadow_resolution(&format!("{field}.shadow_map_resolution"), d.shadow_map_resolution)?,
+        ..Default::default()
+    };
+    if let Some(size) = d.size {
+        if !(size.iter().all(|s| s.is_finite() && *s > 0.0)) {
+            bail!(invalid(&format!("{field}.size"), "two positive sizes in metres", size));
+        }
+        light.half_extent_x = size[0] * 0.5;
+        light.half_extent_y = size[1] * 0.5;
+        light.bounded = 1;
+    }
+    let map = match &d.light_map {
+        Some(_) if d.size.is_none() => {
+            bail!(invalid(
+                &format!("{field}.size"),
+                "the window's [width, height] in metres when a light_map is given",
+                "nothing"
+            ))
+        }
+        Some(file) => Some(load_light_map(&format!("{field}.light_map"), base, file)?),
+        None => None,
+    };
+    Ok((light, map))
+}
+
+/// An orthonormal light frame: `z` along the light, `x` to its right, `y`
+/// down, seen from behind the light with `up` up (so a light map's first row
+/// lands at the top, like a slide projector's). Without an `up`, it is +y, or
+/// -z for a light that points straight up or down.
+fn light_frame(field: &str, z: Vec3, up: Option<[f32; 3]>) -> Result<(Vec3, Vec3)> {
+    let up = match up {
+        Some(up) => unit3(&format!("{field}.up"), up)?,
+        None if z.y.abs() > 0.999 => Vec3::NEG_Z,
+        None => Vec3::Y,
+    };
+    let x = z.cross(up);
+    if x.length() < 1e-4 {
+        return Err(invalid(
+            &format!("{field}.up"),
+            "an up vector not parallel to the direction",
+            up,
+        ));
+    }
+    let x = x.normalize();
+    Ok((x, z.cross(x)))
+}
+
+/// Decodes an image into linear-light texels (sRGB transfer undone).
+fn load_light_map(field: &str, base: &Path, file: &Path) -> Result<(u32, u32, Vec<Vec4>)> {
+    let path = base.join(file);
+    let img = image::open(&path).map_err(|e| anyhow!("{field}: cannot read light map '{}': {e}", path.display()))?;
+    let img = img.to_rgb32f();
+    let texels = img
+        .pixels()
+        .map(|p| Vec4::new(srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2]), 1.0))
+        .collect();
+    Ok((img.width(), img.height(), texels))
+}
+
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}

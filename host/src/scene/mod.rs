@@ -1,0 +1,238 @@
+//! Scene files (TOML): parsing, validation with errors that name the file and
+//! the field, and conversion to the buffers the kernels read.
+//!
+//! The format is documented in `scenes/README.md`; `schema` is its serde
+//! form, `validate` the field checks, `geometry` and `lights` the conversions.
+
+use anyhow::{anyhow, bail, Context, Result};
+use glam::{Vec3, Vec4};
+use slicelight_shaders::geometry::Geometry;
+use slicelight_shaders::types::{
+    CommonParams, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle, PHASE_DOBASHI, PHASE_HENYEY_GREENSTEIN,
+    PHASE_ISOTROPIC, PHASE_RAYLEIGH,
+};
+use std::path::Path;
+
+pub mod geometry;
+pub mod lights;
+pub mod schema;
+pub mod validate;
+
+pub use crate::passes::shafts::{Settings as Shafts, ShaftMode};
+pub use lights::srgb_to_linear;
+pub use schema::*;
+use validate::{finite3, non_negative3, unit3};
+pub use validate::{invalid, DEFAULT_SHADOW_MAP_RESOLUTION};
+
+/// Most sub-pixel samples per pixel a scene or `--spp` may ask for.
+pub const MAX_SAMPLES_PER_PIXEL: u32 = 4096;
+
+/// A scene ready for the kernels: every buffer they read, plus what the host
+/// needs to write the image.
+#[derive(Debug, Clone)]
+pub struct SceneData {
+    pub common: CommonParams,
+    pub lights: Vec<GpuLight>,
+    pub spheres: Vec<GpuSphere>,
+    /// Triangles in BVH order.
+    pub triangles: Vec<GpuTriangle>,
+    pub bvh_nodes: Vec<GpuBvhNode>,
+    /// One per object.
+    pub materials: Vec<GpuMaterial>,
+    pub light_map: Vec<Vec4>,
+    /// Axis-aligned bounds of the geometry, if there is any.
+    pub bounds: Option<(Vec3, Vec3)>,
+    pub exposure: f32,
+    /// The shafts pass's settings, parameter block and tables.
+    pub shafts: crate::passes::shafts::Setup,
+    /// Passes a scene never needs that were asked for by name (self-checks).
+    pub requested_passes: Vec<String>,
+}
+
+impl SceneData {
+    pub fn width(&self) -> u32 {
+        self.common.width
+    }
+    pub fn height(&self) -> u32 {
+        self.common.height
+    }
+    pub fn pixel_count(&self) -> u32 {
+        self.common.width * self.common.height
+    }
+    pub fn samples_per_pixel(&self) -> u32 {
+        self.common.samples_per_pixel
+    }
+    pub fn has_geometry(&self) -> bool {
+        !self.spheres.is_empty() || !self.triangles.is_empty()
+    }
+    /// Whether the medium scatters light at all (in any channel).
+    pub fn scatters(&self) -> bool {
+        self.common.sigma_s.truncate().max_element() > 0.0
+    }
+
+    /// The geometry as the kernels see it.
+    pub fn geometry(&self) -> Geometry<'_> {
+        Geometry {
+            spheres: &self.spheres,
+            sphere_count: self.common.sphere_count,
+            triangles: &self.triangles,
+            nodes: &self.bvh_nodes,
+            node_count: self.common.bvh_node_count,
+        }
+    }
+
+    /// Applies shaft settings (see `passes::shafts::configure`).
+    pub fn configure_shafts(&mut self, s: Shafts) -> Result<()> {
+        crate::passes::shafts::configure(self, s)
+    }
+
+    /// Sets the sub-pixel samples per pixel (`[camera] samples_per_pixel`, `--spp`).
+    pub fn set_samples_per_pixel(&mut self, spp: u32) -> Result<()> {
+        if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&spp) {
+            bail!(invalid(
+                "samples_per_pixel",
+                &format!("a sample count in 1..={MAX_SAMPLES_PER_PIXEL}"),
+                spp
+            ));
+        }
+        self.common.samples_per_pixel = spp;
+        Ok(())
+    }
+
+    /// Turns shadow maps off (every light then sees every point), for scenes
+    /// with nothing to cast a shadow.
+    pub fn without_shadow_maps(&mut self) {
+        for l in &mut self.lights {
+            l.shadow_resolution = 0;
+            l.shadow_offset = 0;
+        }
+        self.common.shadow_texel_count = 0;
+    }
+}
+
+/// Reads, validates and converts a scene file. Relative paths inside it are
+/// taken relative to the file's folder.
+pub fn load(path: &Path) -> Result<SceneData> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the scene file", path.display()))?;
+    let file: SceneFile = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    build(&file, base).map_err(|e| anyhow!("{}: {}", path.display(), e))
+}
+
+/// The camera's part of the common block.
+fn camera(cam: &Camera) -> Result<CommonParams> {
+    let [w, h] = cam.resolution;
+    if w == 0 || h == 0 {
+        bail!(invalid(
+            "camera.resolution",
+            "two positive pixel counts",
+            cam.resolution
+        ));
+    }
+    if (w as u64) * (h as u64) > u32::MAX as u64 / 4 {
+        bail!(invalid("camera.resolution", "at most 2^30 pixels", cam.resolution));
+    }
+    if !(cam.vfov_deg > 0.0 && cam.vfov_deg < 180.0) {
+        bail!(invalid("camera.vfov_deg", "an angle in (0, 180) degrees", cam.vfov_deg));
+    }
+    if !(cam.exposure.is_finite() && cam.exposure > 0.0) {
+        bail!(invalid("camera.exposure", "a positive number", cam.exposure));
+    }
+    if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&cam.samples_per_pixel) {
+        bail!(invalid(
+            "camera.samples_per_pixel",
+            &format!("a sample count in 1..={MAX_SAMPLES_PER_PIXEL}"),
+            cam.samples_per_pixel
+        ));
+    }
+    let position = finite3("camera.position", cam.position)?;
+    let look_at = finite3("camera.look_at", cam.look_at)?;
+    let forward = unit3("camera.look_at", (look_at - position).into())
+        .map_err(|_| invalid("camera.look_at", "a point different from camera.position", cam.look_at))?;
+    let up = unit3("camera.up", cam.up)?;
+    let right = forward.cross(up);
+    if right.length() < 1e-4 {
+        bail!(invalid(
+            "camera.up",
+            "an up vector not parallel to the view direction",
+            cam.up
+        ));
+    }
+    let right = right.normalize();
+    let true_up = right.cross(forward);
+    let tan_half = (cam.vfov_deg.to_radians() * 0.5).tan();
+    let aspect = w as f32 / h as f32;
+    Ok(CommonParams {
+        camera_position: position.extend(1.0),
+        camera_forward: forward.extend(0.0),
+        camera_right: (right * tan_half * aspect).extend(0.0),
+        camera_up: (true_up * tan_half).extend(0.0),
+        width: w,
+        height: h,
+        band_start: 0,
+        band_pixels: w * h,
+        samples_per_pixel: cam.samples_per_pixel,
+        ..Default::default()
+    })
+}
+
+/// Sets the medium's part of the common block.
+fn medium(m: &Medium, common: &mut CommonParams) -> Result<()> {
+    let sigma_s = non_negative3("medium.sigma_s", m.sigma_s)?;
+    let sigma_t = non_negative3("medium.sigma_t", m.sigma_t)?;
+    if sigma_s.cmpgt(sigma_t).any() {
+        bail!(invalid(
+            "medium.sigma_s",
+            "no channel above medium.sigma_t (scattering is part of extinction)",
+            m.sigma_s
+        ));
+    }
+    (common.phase_kind, common.phase_g) = match m.phase {
+        Phase::Isotropic => (PHASE_ISOTROPIC, 0.0),
+        Phase::Rayleigh => (PHASE_RAYLEIGH, 0.0),
+        Phase::Dobashi2002 => (PHASE_DOBASHI, 0.0),
+        Phase::HenyeyGreenstein { g } => {
+            if !(g > -1.0 && g < 1.0) {
+                bail!(invalid("medium.phase.g", "a number in (-1, 1)", g));
+            }
+            (PHASE_HENYEY_GREENSTEIN, g)
+        }
+    };
+    common.sigma_s = sigma_s.extend(0.0);
+    common.sigma_t = sigma_t.extend(0.0);
+    Ok(())
+}
+
+/// Validates a parsed scene and converts it to kernel buffers.
+pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
+    let mut common = camera(&file.camera)?;
+    medium(&file.medium, &mut common)?;
+    let objects = geometry::build(&file.object, base)?;
+    let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
+    let lights = lights::build(&file.spotlight, &file.directional_light, base, bounds)?;
+    let bvh = crate::bvh::Bvh::build(objects.triangles);
+    common.light_count = lights.lights.len() as u32;
+    common.sphere_count = objects.spheres.len() as u32;
+    common.triangle_count = bvh.triangles.len() as u32;
+    common.bvh_node_count = bvh.nodes.len() as u32;
+    common.shadow_texel_count = lights.shadow_texels;
+    let mut data = SceneData {
+        common,
+        lights: lights.lights,
+        spheres: objects.spheres,
+        triangles: bvh.triangles,
+        bvh_nodes: bvh.nodes,
+        materials: objects.materials,
+        light_map: lights.light_map,
+        bounds,
+        exposure: file.camera.exposure,
+        shafts: Default::default(),
+        requested_passes: Vec::new(),
+    };
+    if !data.has_geometry() {
+        data.without_shadow_maps();
+    }
+    data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;
+    Ok(data)
+}

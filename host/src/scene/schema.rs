@@ -1,0 +1,184 @@
+//! The scene file's format (TOML), as serde reads it. Documented for users
+//! in `scenes/README.md`.
+
+use serde::Deserialize;
+use std::path::PathBuf;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub camera: Camera,
+    #[serde(default)]
+    pub medium: Medium,
+    #[serde(default)]
+    pub spotlight: Vec<Spotlight>,
+    #[serde(default)]
+    pub directional_light: Vec<DirectionalLight>,
+    #[serde(default)]
+    pub object: Vec<Object>,
+    #[serde(default)]
+    pub shafts: crate::passes::shafts::Settings,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    pub position: [f32; 3],
+    pub look_at: [f32; 3],
+    #[serde(default = "default_up")]
+    pub up: [f32; 3],
+    pub vfov_deg: f32,
+    pub resolution: [u32; 2],
+    #[serde(default = "one")]
+    pub exposure: f32,
+    /// Sub-pixel samples per pixel, box-filtered (1: the pixel centre).
+    #[serde(default = "one_u32")]
+    pub samples_per_pixel: u32,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Medium {
+    /// 1/m per channel.
+    pub sigma_s: [f32; 3],
+    /// 1/m per channel.
+    pub sigma_t: [f32; 3],
+    #[serde(default)]
+    pub phase: Phase,
+}
+
+impl Default for Medium {
+    fn default() -> Self {
+        Medium {
+            sigma_s: [0.0; 3],
+            sigma_t: [0.0; 3],
+            phase: Phase::Isotropic,
+        }
+    }
+}
+
+#[derive(Debug, Default, Deserialize, Clone, Copy)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Phase {
+    #[default]
+    Isotropic,
+    HenyeyGreenstein {
+        g: f32,
+    },
+    Rayleigh,
+    /// `1 + 9 cos^16(a/2)` of the 2002 paper, normalised.
+    Dobashi2002,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Spotlight {
+    pub position: [f32; 3],
+    pub direction: [f32; 3],
+    pub up: Option<[f32; 3]>,
+    pub cutoff_deg: f32,
+    pub beam_deg: Option<f32>,
+    /// W/sr per channel.
+    pub intensity: [f32; 3],
+    pub light_map: Option<PathBuf>,
+    pub shadow_map_resolution: Option<u32>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DirectionalLight {
+    pub direction: [f32; 3],
+    pub up: Option<[f32; 3]>,
+    /// W/m^2 per channel, on a surface facing the light.
+    pub irradiance: [f32; 3],
+    pub origin: Option<[f32; 3]>,
+    pub light_map: Option<PathBuf>,
+    /// Width and height of the window the light map covers, metres.
+    pub size: Option<[f32; 2]>,
+    pub shadow_map_resolution: Option<u32>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Object {
+    Sphere(SphereObject),
+    Box(BoxObject),
+    Quad(QuadObject),
+    Mesh(MeshObject),
+    Torus(TorusObject),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SphereObject {
+    pub center: [f32; 3],
+    pub radius: f32,
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoxObject {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+/// The rectangle `center +- u/2 +- v/2`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QuadObject {
+    pub center: [f32; 3],
+    pub u: [f32; 3],
+    pub v: [f32; 3],
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshObject {
+    pub file: PathBuf,
+    #[serde(default = "one")]
+    pub scale: f32,
+    #[serde(default)]
+    pub translate: [f32; 3],
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+/// A torus around `axis` through `center`: tube radius `minor_radius` swept
+/// around a circle of radius `major_radius`, tessellated into
+/// `segments[0] x segments[1] x 2` triangles (around the axis, around the tube).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TorusObject {
+    pub center: [f32; 3],
+    #[serde(default = "default_up")]
+    pub axis: [f32; 3],
+    pub major_radius: f32,
+    pub minor_radius: f32,
+    #[serde(default = "default_torus_segments")]
+    pub segments: [u32; 2],
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+}
+
+fn default_torus_segments() -> [u32; 2] {
+    [96, 48]
+}
+
+fn default_up() -> [f32; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn one() -> f32 {
+    1.0
+}
+fn one_u32() -> u32 {
+    1
+}
+fn default_albedo() -> [f32; 3] {
+    [0.8; 3]
+}

@@ -279,7 +279,7 @@ fn layered_exr_holds_each_pass_and_reads_back_as_the_beauty_image() {
     assert_eq!(names, ["surface", "shafts"]);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("layers.exr");
-    slicelight::output::write_layered(&path, &r.image, &r.layers, data.width(), data.height(), 1.0).unwrap();
+    slicelight::output::write_layered(&path, &r.image, &r.layer_slices(), data.width(), data.height(), 1.0).unwrap();
     // The beauty image, as an RGB-only reader sees it.
     let img = image::open(&path).unwrap().to_rgb32f();
     for (p, q) in img.pixels().zip(&r.image) {
@@ -307,7 +307,8 @@ fn layered_exr_holds_each_pass_and_reads_back_as_the_beauty_image() {
         assert!(channels.contains(c), "no channel {c} in {channels:?}");
     }
     // And beauty = surface + shafts.
-    for ((s, f), b) in r.layers[0].1.iter().zip(&r.layers[1].1).zip(&r.image) {
+    let l = r.layer_slices();
+    for ((s, f), b) in l[0].1.iter().zip(l[1].1).zip(&r.image) {
         assert!((*s + *f - *b).abs().max_element() <= 1e-6 * b.max_element().max(1e-6));
     }
 }

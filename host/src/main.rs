@@ -141,7 +141,7 @@ fn check_outputs(outputs: &[PathBuf]) -> Result<()> {
 fn write_outputs(
     outputs: &[PathBuf],
     pixels: &[Vec4],
-    layers: &[(&str, Vec<Vec4>)],
+    layers: &[(&str, &[Vec4])],
     data: &scene::SceneData,
 ) -> Result<()> {
     for o in outputs {
@@ -227,7 +227,7 @@ fn run(cli: Cli) -> Result<()> {
                     failed.report.as_deref().unwrap_or_default()
                 ));
             }
-            write_outputs(&output, &rendered.image, &rendered.layers, &data)?;
+            write_outputs(&output, &rendered.image, &rendered.layer_slices(), &data)?;
             if let Some(path) = stats {
                 let json = serde_json::to_vec_pretty(st)?;
                 output::write_atomically(&path, &json)?;

@@ -67,7 +67,7 @@ pub fn write_image(path: &Path, pixels: &[Vec4], width: u32, height: u32, exposu
 pub fn write_layered(
     path: &Path,
     pixels: &[Vec4],
-    layers: &[(&str, Vec<Vec4>)],
+    layers: &[(&str, &[Vec4])],
     width: u32,
     height: u32,
     exposure: f32,
@@ -92,7 +92,7 @@ pub fn write_layered(
     write_atomically(path, bytes.get_ref())
 }
 
-fn layered_exr(pixels: &[Vec4], layers: &[(&str, Vec<Vec4>)], width: u32, height: u32) -> Result<Vec<u8>> {
+fn layered_exr(pixels: &[Vec4], layers: &[(&str, &[Vec4])], width: u32, height: u32) -> Result<Vec<u8>> {
     use exr::prelude::*;
     let channel = |name: String, img: &[Vec4], c: usize| {
         AnyChannel::new(name.as_str(), FlatSamples::F32(img.iter().map(|p| p[c]).collect()))

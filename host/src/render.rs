@@ -110,7 +110,7 @@ impl RenderStats {
 /// each radiance layer that summed into it, by pass name.
 pub struct Rendered {
     pub image: Vec<Vec4>,
-    pub layers: Vec<(&'static str, Vec<Vec4>)>,
+    pub layers: Vec<(&'static str, Buffer)>,
     pub stats: RenderStats,
 }
 
@@ -187,7 +187,9 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     let pixels = data.pixel_count() as usize;
     // The results: `Whole` outputs and the layers summed over samples.
     let mut result = Frame::default();
-    let mut sums: Vec<Vec<Vec4>> = vec![vec![Vec4::ZERO; pixels]; layers.len()];
+    // Each layer's sum over the sub-pixel samples (on the CPU the first
+    // sample's buffer itself, moved, not copied).
+    let mut sums: Vec<Option<Buffer>> = (0..layers.len()).map(|_| None).collect();
     let spp = data.samples_per_pixel();
     let pass_timing = match backend {
         Backend::Cpu => {
@@ -197,8 +199,10 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
                 let written = running
                     .iter()
                     .any(|(_, p, _)| p.writes().iter().any(|w| w.binding == r.binding));
-                if let (false, Some(blank)) = (written, r.blank(pixels)) {
-                    frame.insert(r, blank);
+                if !written && !frame.contains(r) {
+                    if let Some(blank) = r.blank(pixels) {
+                        frame.insert(r, blank);
+                    }
                 }
             }
             for &(k, pass, _) in running.iter().filter(|r| r.1.dispatch() == Dispatch::Whole) {
@@ -217,8 +221,17 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
                     stats[k].seconds += t.elapsed().as_secs_f64();
                 }
                 for (sum, pass) in sums.iter_mut().zip(&layers) {
-                    let layer = frame.get::<Vec4>(pass.radiance_layer().expect("a layer"));
-                    sum.iter_mut().zip(layer).for_each(|(s, v)| *s += *v);
+                    let resource = pass.radiance_layer().expect("a layer");
+                    match sum {
+                        None => *sum = frame.remove(resource),
+                        Some(sum) => {
+                            let layer = frame.get::<Vec4>(resource);
+                            sum.as_mut_slice::<Vec4>()
+                                .iter_mut()
+                                .zip(layer)
+                                .for_each(|(s, v)| *s += *v);
+                        }
+                    }
                 }
             }
             for (_, pass, _) in running.iter().filter(|r| r.1.dispatch() == Dispatch::Whole) {
@@ -270,7 +283,8 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
                     }
                     for (sum, pass) in sums.iter_mut().zip(&layers) {
                         let layer = frame.read(pass.radiance_layer().expect("a layer"), count as u64 * 16)?;
-                        let range = &mut sum[first as usize..(first + count) as usize];
+                        let sum = sum.get_or_insert_with(|| Buffer::zeroed::<Vec4>(pixels));
+                        let range = &mut sum.as_mut_slice::<Vec4>()[first as usize..(first + count) as usize];
                         range
                             .iter_mut()
                             .zip(layer.as_slice::<Vec4>())
@@ -287,11 +301,9 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         }
     };
     pb.finish_and_clear();
-    for (sum, pass) in sums.iter().zip(&layers) {
-        result.insert(
-            pass.radiance_layer().expect("a layer"),
-            Buffer::from_bytes(bytemuck::cast_slice(sum)),
-        );
+    for (sum, pass) in sums.into_iter().zip(&layers) {
+        let sum = sum.unwrap_or_else(|| Buffer::zeroed::<Vec4>(pixels));
+        result.insert(pass.radiance_layer().expect("a layer"), sum);
     }
     let mut counters = BTreeMap::new();
     for &(k, pass, _) in &running {
@@ -302,12 +314,15 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     let inv = 1.0 / spp as f32;
     let mut image = vec![Vec4::ZERO; pixels];
     let mut named = Vec::new();
-    for (mut sum, pass) in sums.into_iter().zip(&layers) {
-        for (px, s) in image.iter_mut().zip(sum.iter_mut()) {
+    for pass in &layers {
+        let mut layer = result
+            .remove(pass.radiance_layer().expect("a layer"))
+            .expect("inserted above");
+        for (px, s) in image.iter_mut().zip(layer.as_mut_slice::<Vec4>()) {
             *s = (*s * inv).truncate().extend(0.0);
             *px += *s;
         }
-        named.push((pass.name(), sum));
+        named.push((pass.name(), layer));
     }
     let stats = RenderStats {
         backend: backend.name(),
@@ -325,4 +340,11 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         layers: named,
         stats,
     })
+}
+
+impl Rendered {
+    /// The layers as slices of radiance, for `output::write_layered`.
+    pub fn layer_slices(&self) -> Vec<(&'static str, &[Vec4])> {
+        self.layers.iter().map(|(n, b)| (*n, b.as_slice::<Vec4>())).collect()
+    }
 }

@@ -45,6 +45,21 @@ pub fn dobashi(cos_theta: f32) -> f32 {
     (1.0 + 9.0 * c16) / (8.0 * PI)
 }
 
+/// The angular width of the phase function's sharpest feature, radians: the
+/// scale on which it may change by a large factor. Henyey-Greenstein's peak
+/// is `1 - |g|` wide (`(1-g)^2 + 2g(1 - cos a)` doubles at `a ~ (1-g)/sqrt(g)`);
+/// the 2002 function's `cos^16(a/2) ~ exp(-2 a^2)` is about 0.7 wide;
+/// Rayleigh and isotropic scattering vary over a radian or more.
+pub fn angular_scale(kind: u32, g: f32) -> f32 {
+    if kind == PHASE_HENYEY_GREENSTEIN {
+        (1.0 - g.abs()).max(1e-3)
+    } else if kind == PHASE_DOBASHI {
+        0.7
+    } else {
+        1.0
+    }
+}
+
 /// The phase function chosen by `kind` (a `PHASE_*` constant), 1/sr.
 pub fn evaluate(kind: u32, cos_theta: f32, g: f32) -> f32 {
     if kind == PHASE_HENYEY_GREENSTEIN {

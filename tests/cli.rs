@@ -317,3 +317,20 @@ fn bad_shaft_settings() {
     let run = render(&format!("{GOOD}\n[shafts]\nmode = \"fast\"\n"));
     assert_rejected(&run, &["scene.toml", "mode", "exact", "tables"]);
 }
+
+#[test]
+fn a_headless_gpu_render_prints_no_runtime_dir_warning() {
+    // The Vulkan loader complains about a missing XDG_RUNTIME_DIR on
+    // headless machines; the binary gives it a private one. (This runs the
+    // GPU backend: CI has lavapipe.)
+    let dir = scene_dir(GOOD);
+    let out = Command::new(env!("CARGO_BIN_EXE_slicelight"))
+        .args(["render", "scene.toml", "-o", "out.png", "--backend", "gpu"])
+        .env_remove("XDG_RUNTIME_DIR")
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+}

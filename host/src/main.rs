@@ -121,7 +121,29 @@ impl ShaftOverrides {
     }
 }
 
+/// The Vulkan loader and Mesa's drivers print "XDG_RUNTIME_DIR is invalid or
+/// not set" on a headless machine without one. Give them a private folder
+/// (mode 0700, as the XDG spec asks) before any thread starts.
+fn ensure_runtime_dir() {
+    let usable = std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| Path::new(&d).is_dir());
+    if usable {
+        return;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+        let uid = std::fs::metadata("/proc/self").map(|m| m.uid()).unwrap_or(0);
+        let dir = std::env::temp_dir().join(format!("slicelight-runtime-{uid}"));
+        let made = std::fs::DirBuilder::new().mode(0o700).create(&dir);
+        if made.is_ok() || dir.is_dir() {
+            // Single-threaded here: nothing else reads the environment yet.
+            std::env::set_var("XDG_RUNTIME_DIR", &dir);
+        }
+    }
+}
+
 fn main() {
+    ensure_runtime_dir();
     if let Err(e) = run(Cli::parse()) {
         eprintln!("slicelight: error: {e:#}");
         std::process::exit(1);

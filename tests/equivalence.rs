@@ -84,6 +84,8 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
     aa.common.sample_index = 3;
     let mut fog = fog_spot();
     fog.requested_passes.push("scatter_check".into());
+    let mut mapped = window_scene();
+    mapped.common.surface_shadows = slicelight::shaders::types::SHADOWS_MAP;
     vec![
         ("fog_spot", fog),
         ("fog_spot, tables", tables),

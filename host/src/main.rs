@@ -42,6 +42,9 @@ enum Command {
         /// (overrides `[camera] samples_per_pixel`; 1 is the pixel centre).
         #[arg(long)]
         spp: Option<u32>,
+        /// How directly seen surfaces find their shadows (overrides `[surface] shadows`).
+        #[arg(long, value_enum)]
+        surface_shadows: Option<slicelight::passes::surface::SurfaceShadows>,
         /// Also run a pass no scene needs, by name (`scatter_check`: the
         /// scatter accumulation's self-check). Give it more than once for several.
         #[arg(long = "pass")]
@@ -192,6 +195,7 @@ fn run(cli: Cli) -> Result<()> {
             quiet,
             shafts,
             spp,
+            surface_shadows,
             passes,
         } => {
             check_outputs(&output)?;
@@ -201,6 +205,9 @@ fn run(cli: Cli) -> Result<()> {
             let mut data = scene::load(&scene)?;
             shafts.apply(&mut data)?;
             set_spp(&mut data, spp)?;
+            if let Some(s) = surface_shadows {
+                data.common.surface_shadows = s.code();
+            }
             for name in &passes {
                 if slicelight::passes::by_name(name).is_none() {
                     let known: Vec<_> = slicelight::passes::PASSES.iter().map(|p| p.name()).collect();

@@ -176,6 +176,50 @@ pub fn trace_nearest(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: 
     hit
 }
 
+/// Whether anything lies on the ray between `t_min` and `t_max` (a shadow
+/// ray): the BVH walk of `trace_nearest`, stopping at the first hit.
+pub fn occluded(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry) -> bool {
+    let mut i = 0;
+    while i < geometry.sphere_count as usize {
+        let s = geometry.spheres[i];
+        if ray_sphere(origin, dir, s.center_radius.xyz(), s.center_radius.w, t_min) < t_max {
+            return true;
+        }
+        i += 1;
+    }
+    let inv_dir = Vec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
+    let mut n = 0;
+    while n < geometry.node_count {
+        let node = geometry.nodes[n as usize];
+        if !ray_hits_box(
+            origin,
+            inv_dir,
+            node.bounds_min.xyz(),
+            node.bounds_max.xyz(),
+            t_min,
+            t_max,
+        ) {
+            n = node.skip;
+            continue;
+        }
+        if node.count == 0 {
+            n += 1;
+            continue;
+        }
+        let mut j = node.first as usize;
+        let end = j + node.count as usize;
+        while j < end {
+            let tri = geometry.triangles[j];
+            if ray_triangle(origin, dir, tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz(), t_min) < t_max {
+                return true;
+            }
+            j += 1;
+        }
+        n = node.skip;
+    }
+    false
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

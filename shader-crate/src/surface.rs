@@ -4,11 +4,12 @@
 //! It also writes the G-buffer that later passes read.
 
 use crate::camera::camera_ray;
-use crate::geometry::{trace_nearest, Geometry, NO_HIT};
+use crate::geometry::{occluded, trace_nearest, Geometry, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::light::{emitted, light_local, shadow_visibility, transmittance};
 use crate::types::{
-    CommonParams, GBufferTexel, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL, NO_OBJECT,
+    CommonParams, GBufferTexel, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL,
+    NO_OBJECT, SHADOWS_MAP,
 };
 use core::f32::consts::FRAC_1_PI;
 use spirv_std::spirv;
@@ -32,9 +33,15 @@ pub fn no_surface() -> GBufferTexel {
 /// `E = I_l H cos(theta) exp(-sigma_t s) / s^2` (the `I_o` of eq. 1) and a
 /// directional light `E = E_l H cos(theta) exp(-sigma_t z)`, `z` the distance
 /// travelled from its entry plane.
+///
+/// The shadow test `H` is an exact shadow ray through the BVH
+/// (`SHADOWS_RAYS`, the default) or the light's shadow map (`SHADOWS_MAP`,
+/// the 2002 paper's method, which misjudges pixels on shadow outlines).
+#[allow(clippy::too_many_arguments)]
 pub fn direct_radiance(
     params: &CommonParams,
     lights: &[GpuLight],
+    geometry: &Geometry,
     light_map: &[Vec4],
     shadow: &[f32],
     p: Vec3,
@@ -57,7 +64,11 @@ pub fn direct_radiance(
         if cos_incidence > 0.0 {
             let color = emitted(&light, light_map, local);
             if color.x > 0.0 || color.y > 0.0 || color.z > 0.0 {
-                let visible = shadow_visibility(&light, shadow, local, cos_incidence);
+                let visible = if params.surface_shadows == SHADOWS_MAP {
+                    shadow_visibility(&light, shadow, local, cos_incidence)
+                } else {
+                    shadow_ray_visibility(geometry, p, normal, to_light, distance)
+                };
                 irradiance += color * transmittance(params.sigma_t, distance) * (visible * cos_incidence * falloff);
             }
         }
@@ -65,6 +76,21 @@ pub fn direct_radiance(
     }
     let radiance = albedo * irradiance * FRAC_1_PI;
     Vec4::new(radiance.x, radiance.y, radiance.z, 0.0)
+}
+
+/// 1 if the segment from the surface point `p` (unit `normal`, facing the
+/// light) toward the light is free of geometry, else 0. It starts a hair off
+/// the surface along the normal and stops a hair short of the light (or of
+/// a directional light's entry plane), both relative to the scene's scale
+/// at `p` and to the distance, so the surface does not shadow itself in f32.
+pub fn shadow_ray_visibility(geometry: &Geometry, p: Vec3, normal: Vec3, to_light: Vec3, distance: f32) -> f32 {
+    let scale = p.abs().max_element().max(distance).max(1.0);
+    let origin = p + normal * (1e-5 * scale);
+    if occluded(origin, to_light, 1e-5 * scale, distance * (1.0 - 1e-5), geometry) {
+        0.0
+    } else {
+        1.0
+    }
 }
 
 /// Per-pixel kernel of the lit-surface pass, at the current sub-pixel
@@ -94,7 +120,7 @@ pub fn surface_pixel(
         hit.normal
     };
     let albedo = materials[hit.material as usize].albedo;
-    let radiance = direct_radiance(params, lights, light_map, shadow, p, normal, albedo)
+    let radiance = direct_radiance(params, lights, geometry, light_map, shadow, p, normal, albedo)
         * transmittance(params.sigma_t, hit.distance);
     let texel = GBufferTexel {
         normal_distance: normal.extend(hit.distance),

@@ -47,7 +47,10 @@ pub struct CommonParams {
     pub samples_per_pixel: u32,
     /// Which of the `samples_per_pixel` positions this dispatch renders.
     pub sample_index: u32,
-    pub _pad: [u32; 3],
+    /// `SHADOWS_RAYS` or `SHADOWS_MAP`: how directly seen surfaces test
+    /// their visibility of each light.
+    pub surface_shadows: u32,
+    pub _pad: [u32; 2],
 }
 
 pub const PHASE_ISOTROPIC: u32 = 0;
@@ -55,6 +58,11 @@ pub const PHASE_HENYEY_GREENSTEIN: u32 = 1;
 pub const PHASE_RAYLEIGH: u32 = 2;
 /// `1 + 9 cos^16(a/2)` of the 2002 shafts-of-light paper, normalised.
 pub const PHASE_DOBASHI: u32 = 3;
+
+/// Surfaces seen directly cast a shadow ray to each light through the BVH.
+pub const SHADOWS_RAYS: u32 = 0;
+/// Surfaces seen directly look their shadows up in the lights' shadow maps.
+pub const SHADOWS_MAP: u32 = 1;
 
 pub const LIGHT_SPOT: u32 = 0;
 pub const LIGHT_DIRECTIONAL: u32 = 1;

@@ -38,6 +38,10 @@ impl Pass for ShadowMaps {
             Plan::skip("no lights")
         } else if !scene.has_geometry() {
             Plan::skip("no geometry to cast shadows")
+        } else if scene.common.surface_shadows != slicelight_shaders::types::SHADOWS_MAP
+            && !super::shafts::Shafts.plan(scene).runs
+        {
+            Plan::skip("surfaces use shadow rays and no shafts are rendered")
         } else {
             Plan::run(format!("{lights} light(s), {texels} shadow-map texels"), texels as u64)
         }

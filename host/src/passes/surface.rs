@@ -18,6 +18,33 @@ pub static SURFACE_RADIANCE: Resource = Resource {
     kind: ResourceKind::PerPixel { blank: no_radiance },
 };
 
+/// Settings of the surface pass (the scene's `[surface]` table).
+#[derive(Debug, Clone, Copy, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Settings {
+    /// How directly seen surfaces test their visibility of each light.
+    pub shadows: SurfaceShadows,
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum SurfaceShadows {
+    /// An exact shadow ray per pixel and light, through the BVH.
+    #[default]
+    Rays,
+    /// The lights' shadow maps (the 2002 paper's method).
+    ShadowMap,
+}
+
+impl SurfaceShadows {
+    pub fn code(self) -> u32 {
+        match self {
+            SurfaceShadows::Rays => slicelight_shaders::types::SHADOWS_RAYS,
+            SurfaceShadows::ShadowMap => slicelight_shaders::types::SHADOWS_MAP,
+        }
+    }
+}
+
 pub struct Surface;
 
 impl Pass for Surface {
@@ -51,7 +78,15 @@ impl Pass for Surface {
 
     fn plan(&self, scene: &SceneData) -> Plan {
         if scene.has_geometry() {
-            Plan::run("surfaces seen through the medium (eq. 1, first term), G-buffer", 0)
+            let shadows = if scene.common.surface_shadows == slicelight_shaders::types::SHADOWS_MAP {
+                "shadow maps"
+            } else {
+                "shadow rays"
+            };
+            Plan::run(
+                format!("surfaces seen through the medium (eq. 1, first term), {shadows}, G-buffer"),
+                0,
+            )
         } else {
             Plan::skip("no geometry")
         }

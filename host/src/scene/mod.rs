@@ -207,6 +207,7 @@ fn medium(m: &Medium, common: &mut CommonParams) -> Result<()> {
 /// Validates a parsed scene and converts it to kernel buffers.
 pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     let mut common = camera(&file.camera)?;
+    common.surface_shadows = file.surface.shadows.code();
     medium(&file.medium, &mut common)?;
     let objects = geometry::build(&file.object, base)?;
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);

@@ -18,6 +18,8 @@ pub struct SceneFile {
     pub object: Vec<Object>,
     #[serde(default)]
     pub shafts: crate::passes::shafts::Settings,
+    #[serde(default)]
+    pub surface: crate::passes::surface::Settings,
 }
 
 #[derive(Debug, Deserialize)]

@@ -318,6 +318,12 @@ fn clear_air_skips_the_shafts_pass() {
     let plan = render::plan(&data);
     let shafts = plan.iter().find(|p| p.name == "shafts").unwrap();
     assert!(!shafts.ran && shafts.reason.contains("does not scatter"), "{shafts:?}");
+    // Surfaces cast shadow rays, so nothing needs the shadow maps either;
+    // with shadow-mapped surfaces they run again.
+    let maps = plan.iter().find(|p| p.name == "shadow_maps").unwrap();
+    assert!(!maps.ran, "{maps:?}");
+    data.common.surface_shadows = slicelight::shaders::types::SHADOWS_MAP;
+    assert!(render::plan(&data).iter().any(|p| p.name == "shadow_maps" && p.ran));
 }
 
 #[test]

@@ -114,6 +114,18 @@ pub fn ray_hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_min: f32,
 /// a stack the children are not visited nearest-first; the pruning by the
 /// nearest hit still keeps the cost about logarithmic in the triangle count.
 pub fn trace_nearest(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry) -> Hit {
+    trace(origin, dir, t_min, t_max, geometry, false)
+}
+
+/// Whether anything lies on the ray between `t_min` and `t_max` (a shadow
+/// ray): the same walk, stopping at the first hit.
+pub fn occluded(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry) -> bool {
+    trace(origin, dir, t_min, t_max, geometry, true).distance < t_max
+}
+
+/// The walk behind `trace_nearest` and `occluded`: with `any_hit`, it
+/// returns the first hit found rather than the nearest.
+fn trace(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, any_hit: bool) -> Hit {
     let mut hit = Hit {
         distance: NO_HIT,
         normal: Vec3::ZERO,
@@ -133,6 +145,9 @@ pub fn trace_nearest(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: 
             hit.normal = (origin + dir * t - center).normalize();
             hit.object = s.object;
             hit.material = s.material;
+            if any_hit {
+                return hit;
+            }
         }
         i += 1;
     }
@@ -141,14 +156,7 @@ pub fn trace_nearest(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: 
     while n < geometry.node_count {
         let node = geometry.nodes[n as usize];
         hit.visits += 1;
-        if !ray_hits_box(
-            origin,
-            inv_dir,
-            node.bounds_min.xyz(),
-            node.bounds_max.xyz(),
-            t_min,
-            best,
-        ) {
+        if !ray_hits_box(origin, inv_dir, node.bounds_min.xyz(), node.bounds_max.xyz(), t_min, best) {
             n = node.skip;
             continue;
         }
@@ -168,56 +176,15 @@ pub fn trace_nearest(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: 
                 hit.normal = (v1 - v0).cross(v2 - v0).normalize();
                 hit.object = tri.object;
                 hit.material = tri.material;
+                if any_hit {
+                    return hit;
+                }
             }
             j += 1;
         }
         n = node.skip;
     }
     hit
-}
-
-/// Whether anything lies on the ray between `t_min` and `t_max` (a shadow
-/// ray): the BVH walk of `trace_nearest`, stopping at the first hit.
-pub fn occluded(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry) -> bool {
-    let mut i = 0;
-    while i < geometry.sphere_count as usize {
-        let s = geometry.spheres[i];
-        if ray_sphere(origin, dir, s.center_radius.xyz(), s.center_radius.w, t_min) < t_max {
-            return true;
-        }
-        i += 1;
-    }
-    let inv_dir = Vec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
-    let mut n = 0;
-    while n < geometry.node_count {
-        let node = geometry.nodes[n as usize];
-        if !ray_hits_box(
-            origin,
-            inv_dir,
-            node.bounds_min.xyz(),
-            node.bounds_max.xyz(),
-            t_min,
-            t_max,
-        ) {
-            n = node.skip;
-            continue;
-        }
-        if node.count == 0 {
-            n += 1;
-            continue;
-        }
-        let mut j = node.first as usize;
-        let end = j + node.count as usize;
-        while j < end {
-            let tri = geometry.triangles[j];
-            if ray_triangle(origin, dir, tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz(), t_min) < t_max {
-                return true;
-            }
-            j += 1;
-        }
-        n = node.skip;
-    }
-    false
 }
 
 #[cfg(test)]

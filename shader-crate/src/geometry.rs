@@ -156,7 +156,14 @@ fn trace(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, a
     while n < geometry.node_count {
         let node = geometry.nodes[n as usize];
         hit.visits += 1;
-        if !ray_hits_box(origin, inv_dir, node.bounds_min.xyz(), node.bounds_max.xyz(), t_min, best) {
+        if !ray_hits_box(
+            origin,
+            inv_dir,
+            node.bounds_min.xyz(),
+            node.bounds_max.xyz(),
+            t_min,
+            best,
+        ) {
             n = node.skip;
             continue;
         }

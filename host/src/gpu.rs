@@ -251,16 +251,21 @@ impl GpuContext {
         Ok(())
     }
 
-    /// Copies `src` to a mappable buffer and returns its bytes.
+    /// Copies the first `bytes` of `src` to a mappable buffer and returns them.
     fn read_buffer(&self, src: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
+        // Copies move whole 4-byte words; every element type is made of them.
+        let size = bytes.next_multiple_of(4).min(src.size());
+        if size == 0 {
+            return Ok(Vec::new());
+        }
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
-            size: src.size(),
+            size,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(src, 0, &staging, 0, src.size());
+        encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
         let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();

@@ -15,7 +15,7 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use crate::gpu::GpuContext;
-use crate::passes::{Buffer, Dispatch, Frame, Pass, Plan, ResourceKind, PASSES};
+use crate::passes::{Buffer, Dispatch, Frame, Pass, Plan, Resource, ResourceKind, PASSES};
 use crate::scene::SceneData;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -156,6 +156,28 @@ fn progress_bar(total: u64) -> ProgressBar {
     pb
 }
 
+/// `sum += layer`, pixel by pixel.
+fn add_into(sum: &mut [Vec4], layer: &[Vec4]) {
+    sum.iter_mut().zip(layer).for_each(|(s, v)| *s += *v);
+}
+
+/// What the `Whole` passes write that no running pass reads (a self-check's
+/// accumulators): the frame's results for `Pass::report` and `counters`.
+/// Intermediates such as the shadow maps stay on the device.
+fn final_outputs(running: &[(usize, &'static dyn Pass, u64)]) -> Vec<&'static Resource> {
+    let read = |r: &Resource| {
+        running
+            .iter()
+            .any(|(_, p, _)| p.reads().iter().any(|x| x.binding == r.binding))
+    };
+    running
+        .iter()
+        .filter(|r| r.1.dispatch() == Dispatch::Whole)
+        .flat_map(|r| r.1.writes().iter().copied())
+        .filter(|w| !read(w))
+        .collect()
+}
+
 /// Renders a scene: rgb radiance per pixel (W/(m^2 sr)).
 pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<(Vec<Vec4>, RenderStats)> {
     let r = render_layers(data, backend, show_progress)?;
@@ -185,7 +207,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         .filter(|p| p.radiance_layer().is_some())
         .collect();
     let pixels = data.pixel_count() as usize;
-    // The results: `Whole` outputs and the layers summed over samples.
+    // The results: `Whole` passes' final outputs and the layers summed over samples.
     let mut result = Frame::default();
     // Each layer's sum over the sub-pixel samples (on the CPU the first
     // sample's buffer itself, moved, not copied).
@@ -224,21 +246,13 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
                     let resource = pass.radiance_layer().expect("a layer");
                     match sum {
                         None => *sum = frame.remove(resource),
-                        Some(sum) => {
-                            let layer = frame.get::<Vec4>(resource);
-                            sum.as_mut_slice::<Vec4>()
-                                .iter_mut()
-                                .zip(layer)
-                                .for_each(|(s, v)| *s += *v);
-                        }
+                        Some(sum) => add_into(sum.as_mut_slice(), frame.get(resource)),
                     }
                 }
             }
-            for (_, pass, _) in running.iter().filter(|r| r.1.dispatch() == Dispatch::Whole) {
-                for w in pass.writes() {
-                    if let Some(b) = frame.remove(w) {
-                        result.insert(w, b);
-                    }
+            for w in final_outputs(&running) {
+                if let Some(b) = frame.remove(w) {
+                    result.insert(w, b);
                 }
             }
             "wall clock"
@@ -257,11 +271,9 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
                 stats[*k].seconds += t;
                 pb.inc(*n as u64);
             }
-            for (_, pass, _) in &whole {
-                for w in pass.writes() {
-                    if let ResourceKind::Frame(len) = w.kind {
-                        result.insert(w, frame.read(w, len(data))?);
-                    }
+            for w in final_outputs(&running) {
+                if let ResourceKind::Frame(len) = w.kind {
+                    result.insert(w, frame.read(w, len(data))?);
                 }
             }
             let per_pixel: Vec<(usize, &'static dyn Pass)> = running
@@ -285,10 +297,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
                         let layer = frame.read(pass.radiance_layer().expect("a layer"), count as u64 * 16)?;
                         let sum = sum.get_or_insert_with(|| Buffer::zeroed::<Vec4>(pixels));
                         let range = &mut sum.as_mut_slice::<Vec4>()[first as usize..(first + count) as usize];
-                        range
-                            .iter_mut()
-                            .zip(layer.as_slice::<Vec4>())
-                            .for_each(|(s, v)| *s += *v);
+                        add_into(range, layer.as_slice());
                     }
                 }
                 first += count;

@@ -198,8 +198,8 @@ pub trait Pass: Sync {
         None
     }
     /// What the pass found, for the stats (a self-check's verdict). `frame`
-    /// holds the frame's results: what `Whole` passes wrote, and each
-    /// radiance layer summed over the sub-pixel samples.
+    /// holds the frame's results: what `Whole` passes wrote that no pass
+    /// reads, and each radiance layer summed over the sub-pixel samples.
     fn report(&self, _scene: &SceneData, _frame: &Frame) -> Option<String> {
         None
     }

@@ -72,13 +72,7 @@ impl SceneData {
 
     /// The geometry as the kernels see it.
     pub fn geometry(&self) -> Geometry<'_> {
-        Geometry {
-            spheres: &self.spheres,
-            sphere_count: self.common.sphere_count,
-            triangles: &self.triangles,
-            nodes: &self.bvh_nodes,
-            node_count: self.common.bvh_node_count,
-        }
+        slicelight_shaders::scene_geometry(&self.common, &self.spheres, &self.triangles, &self.bvh_nodes)
     }
 
     /// Applies shaft settings (see `passes::shafts::configure`).

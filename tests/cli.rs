@@ -47,32 +47,13 @@ fn render(scene: &str) -> Run {
     let dir = scene_dir(scene);
     run_in(
         dir,
-        &[
-            "render",
-            "scene.toml",
-            "-o",
-            "out.png",
-            "-o",
-            "out.exr",
-            "--stats",
-            "stats.json",
-            "--backend",
-            "cpu",
-        ],
+        &["render", "scene.toml", "-o", "out.png", "-o", "out.exr", "--stats", "stats.json", "--backend", "cpu"],
     )
 }
 
 fn run_in(dir: tempfile::TempDir, args: &[&str]) -> Run {
-    let out = Command::new(env!("CARGO_BIN_EXE_slicelight"))
-        .args(args)
-        .current_dir(dir.path())
-        .output()
-        .unwrap();
-    Run {
-        code: out.status.code().unwrap_or(-1),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-        dir,
-    }
+    let out = Command::new(env!("CARGO_BIN_EXE_slicelight")).args(args).current_dir(dir.path()).output().unwrap();
+    Run { code: out.status.code().unwrap_or(-1), stderr: String::from_utf8_lossy(&out.stderr).into_owned(), dir }
 }
 
 fn assert_rejected(run: &Run, needles: &[&str]) {
@@ -105,12 +86,7 @@ fn good_scene_writes_png_exr_and_stats() {
     assert!(stats["counters"]["shaft_samples"].as_u64().unwrap() > 0);
     // The EXR holds each pass's layer beside the beauty image.
     let layers = exr::prelude::read_all_flat_layers_from_file(run.out("out.exr")).unwrap();
-    let channels: Vec<String> = layers.layer_data[0]
-        .channel_data
-        .list
-        .iter()
-        .map(|c| c.name.to_string())
-        .collect();
+    let channels: Vec<String> = layers.layer_data[0].channel_data.list.iter().map(|c| c.name.to_string()).collect();
     for c in ["R", "surface.R", "shafts.B"] {
         assert!(channels.iter().any(|n| n == c), "no channel {c} in {channels:?}");
     }
@@ -139,12 +115,7 @@ fn antialiasing_and_the_self_check_from_the_command_line() {
     assert_eq!(run.code, 0, "{}", run.stderr);
     let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(run.out("stats.json")).unwrap()).unwrap();
     assert_eq!(stats["samples_per_pixel"], 4);
-    let check = stats["passes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == "scatter_check")
-        .unwrap();
+    let check = stats["passes"].as_array().unwrap().iter().find(|p| p["name"] == "scatter_check").unwrap();
     assert_eq!(check["ran"], true);
     assert!(check["report"].as_str().unwrap().contains("exactly"), "{check}");
 }
@@ -156,10 +127,7 @@ fn bad_spp_pass_and_output_folder() {
         &["--spp", "samples_per_pixel", "1..=4096"],
     );
     assert_rejected(
-        &run_in(
-            scene_dir(GOOD),
-            &["render", "scene.toml", "-o", "o.png", "--pass", "nope"],
-        ),
+        &run_in(scene_dir(GOOD), &["render", "scene.toml", "-o", "o.png", "--pass", "nope"]),
         &["--pass", "scatter_check"],
     );
     assert_rejected(
@@ -167,10 +135,7 @@ fn bad_spp_pass_and_output_folder() {
         &["no/such/dir", "does not exist"],
     );
     let bad = GOOD.replace("[camera]", "[camera]\nsamples_per_pixel = 0");
-    assert_rejected(
-        &run_in(scene_dir(&bad), &["render", "scene.toml", "-o", "o.png"]),
-        &["camera.samples_per_pixel"],
-    );
+    assert_rejected(&run_in(scene_dir(&bad), &["render", "scene.toml", "-o", "o.png"]), &["camera.samples_per_pixel"]);
 }
 
 fn scene_dir(toml: &str) -> tempfile::TempDir {
@@ -206,10 +171,8 @@ fn missing_mesh() {
 
 #[test]
 fn missing_light_map() {
-    let run = render(&GOOD.replace(
-        "shadow_map_resolution = 64",
-        "shadow_map_resolution = 64\nlight_map = \"slide.png\"",
-    ));
+    let run =
+        render(&GOOD.replace("shadow_map_resolution = 64", "shadow_map_resolution = 64\nlight_map = \"slide.png\""));
     assert_rejected(&run, &["scene.toml", "spotlight[0].light_map", "slide.png"]);
 }
 
@@ -254,19 +217,7 @@ fn cutoff_outside_range() {
 #[test]
 fn unknown_output_format() {
     let dir = scene_dir(GOOD);
-    let run = run_in(
-        dir,
-        &[
-            "render",
-            "scene.toml",
-            "-o",
-            "out.png",
-            "-o",
-            "out.jpg",
-            "--backend",
-            "cpu",
-        ],
-    );
+    let run = run_in(dir, &["render", "scene.toml", "-o", "out.png", "-o", "out.jpg", "--backend", "cpu"]);
     assert_rejected(&run, &["out.jpg", ".png", ".exr"]);
 }
 
@@ -274,11 +225,7 @@ fn unknown_output_format() {
 fn failed_render_keeps_an_existing_output() {
     // The old image survives a failing run: nothing is half-written over it.
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(
-        dir.path().join("scene.toml"),
-        GOOD.replace("radius = 0.5", "radius = -1.0"),
-    )
-    .unwrap();
+    std::fs::write(dir.path().join("scene.toml"), GOOD.replace("radius = 0.5", "radius = -1.0")).unwrap();
     std::fs::write(dir.path().join("keep.png"), b"old").unwrap();
     let run = run_in(dir, &["render", "scene.toml", "-o", "keep.png", "--backend", "cpu"]);
     assert_ne!(run.code, 0);

@@ -86,12 +86,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
     fog.requested_passes.push("scatter_check".into());
     let mut mapped = window_scene();
     mapped.common.surface_shadows = slicelight::shaders::types::SHADOWS_MAP;
-    vec![
-        ("fog_spot", fog),
-        ("fog_spot, tables", tables),
-        ("window", window_scene()),
-        ("window, sample 3 of 4", aa),
-    ]
+    vec![("fog_spot", fog), ("fog_spot, tables", tables), ("window", window_scene()), ("window, sample 3 of 4", aa)]
 }
 
 /// Every registered pass, on every scene that runs it: the CPU runs all
@@ -136,11 +131,7 @@ fn every_pass_matches_cpu() {
         }
     }
     for p in PASSES {
-        assert!(
-            checked.contains(p.name()),
-            "pass {} was not checked on any scene",
-            p.name()
-        );
+        assert!(checked.contains(p.name()), "pass {} was not checked on any scene", p.name());
     }
 }
 
@@ -204,9 +195,5 @@ fn scatter_self_check_passes_on_the_device() {
     let check = stats.passes.iter().find(|p| p.name == "scatter_check").unwrap();
     println!("{:?}", check.report);
     assert!(check.ran);
-    assert!(
-        !check.report.as_deref().unwrap().starts_with("FAILED"),
-        "{:?}",
-        check.report
-    );
+    assert!(!check.report.as_deref().unwrap().starts_with("FAILED"), "{:?}", check.report);
 }

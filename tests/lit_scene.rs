@@ -55,11 +55,7 @@ fn spotlight_on_floor_matches_closed_form() {
         albedo / std::f64::consts::PI * intensity / (h * h) * (-sigma_t * h).exp() * (-sigma_t * cam_h).exp();
     // f32 kernel against an f64 closed form: exp, sqrt and the division leave
     // a few ulps (1e-6 relative); 1e-5 is the bound.
-    assert!(
-        (centre.x - expected).abs() < 1e-5 * expected,
-        "{} vs {expected}",
-        centre.x
-    );
+    assert!((centre.x - expected).abs() < 1e-5 * expected, "{} vs {expected}", centre.x);
     // And the cone: column 1 sees the floor 2.75 m off the axis, 42 degrees from the light: dark.
     let outside = img[31 * 63 + 1];
     assert_eq!(outside, DVec3::ZERO);
@@ -72,13 +68,8 @@ fn spotlight_on_floor_matches_closed_form() {
 fn window_light_map_lands_where_projected() {
     let dir = tempfile::tempdir().unwrap();
     // Left half red, right half blue (in the light's frame, x to the right).
-    let img = image::RgbImage::from_fn(64, 2, |x, _| {
-        if x < 32 {
-            image::Rgb([255, 0, 0])
-        } else {
-            image::Rgb([0, 0, 255])
-        }
-    });
+    let img =
+        image::RgbImage::from_fn(64, 2, |x, _| if x < 32 { image::Rgb([255, 0, 0]) } else { image::Rgb([0, 0, 255]) });
     img.save(dir.path().join("map.png")).unwrap();
     let toml = r#"
         [camera]
@@ -121,14 +112,8 @@ fn window_light_map_lands_where_projected() {
     let (blue, e_blue) = (img[50 * 101 + 60], expected(60));
     // Texels are bilinear but both points are 10 texels from the colour edge,
     // so the map is exactly 0 or 1 there; f32 rounding leaves ~1e-6.
-    assert!(
-        (red.x - e_red).abs() < 1e-5 * e_red && red.z < 1e-6,
-        "{red:?} vs {e_red}"
-    );
-    assert!(
-        (blue.z - e_blue).abs() < 1e-5 * e_blue && blue.x < 1e-6,
-        "{blue:?} vs {e_blue}"
-    );
+    assert!((red.x - e_red).abs() < 1e-5 * e_red && red.z < 1e-6, "{red:?} vs {e_red}");
+    assert!((blue.z - e_blue).abs() < 1e-5 * e_blue && blue.x < 1e-6, "{blue:?} vs {e_blue}");
     // Outside the window (x ~ +2.4 m): dark.
     assert_eq!(img[50 * 101 + 100], DVec3::ZERO);
 }
@@ -145,11 +130,7 @@ fn fog_spot_matches_reference_away_from_shadow_edges() {
     let d = difference(&img, &refimg, data.exposure);
     println!("fog_spot surface pass vs reference: {d:?}");
     let peak = refimg.iter().map(|p| p.max_element()).fold(0.0, f64::max);
-    let off = img
-        .iter()
-        .zip(&refimg)
-        .filter(|(a, b)| (**a - **b).abs().max_element() > 1e-3 * peak)
-        .count();
+    let off = img.iter().zip(&refimg).filter(|(a, b)| (**a - **b).abs().max_element() > 1e-3 * peak).count();
     let fraction = off as f64 / img.len() as f64;
     println!("pixels off by more than 0.1% of peak: {off} ({:.3}%)", fraction * 100.0);
     // Measured: 16 pixels of 345600 (0.005%), all on shadow outlines where a
@@ -234,17 +215,9 @@ fn every_shipped_scene_renders() {
         data.common.band_pixels = data.common.width * data.common.height;
         let (img, stats) = render::render(&data, &Backend::Cpu, false).unwrap();
         let lit = img.iter().filter(|p| p.truncate().max_element() > 0.0).count();
-        assert!(
-            img.iter().all(|p| p.truncate().is_finite()),
-            "{}: not finite",
-            path.display()
-        );
+        assert!(img.iter().all(|p| p.truncate().is_finite()), "{}: not finite", path.display());
         assert!(lit > img.len() / 20, "{}: only {lit} pixels lit", path.display());
-        println!(
-            "{}: {:?}",
-            path.display(),
-            stats.passes.iter().map(|p| (p.name, p.ran)).collect::<Vec<_>>()
-        );
+        println!("{}: {:?}", path.display(), stats.passes.iter().map(|p| (p.name, p.ran)).collect::<Vec<_>>());
         count += 1;
     }
     assert!(count >= 4, "found {count} scenes");

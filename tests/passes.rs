@@ -37,17 +37,10 @@ fn declared_bindings() -> BTreeMap<String, BTreeMap<u32, bool>> {
                 );
                 continue;
             };
-            assert_eq!(
-                binding.group, 0,
-                "{}: binding {} in group {}",
-                ep.name, binding.binding, binding.group
-            );
+            assert_eq!(binding.group, 0, "{}: binding {} in group {}", ep.name, binding.binding, binding.group);
             let writes = match var.space {
                 naga::AddressSpace::Storage { access } => access.contains(naga::StorageAccess::STORE),
-                other => panic!(
-                    "{}: binding {} in {other:?}, expected a storage buffer",
-                    ep.name, binding.binding
-                ),
+                other => panic!("{}: binding {} in {other:?}, expected a storage buffer", ep.name, binding.binding),
             };
             used.insert(binding.binding, writes);
         }
@@ -60,35 +53,21 @@ fn declared_bindings() -> BTreeMap<String, BTreeMap<u32, bool>> {
 fn every_pass_binds_what_its_kernel_declares() {
     let declared = declared_bindings();
     for pass in PASSES {
-        let kernel = declared
-            .get(pass.kernel())
-            .unwrap_or_else(|| panic!("{}: no entry point {}", pass.name(), pass.kernel()));
+        let kernel =
+            declared.get(pass.kernel()).unwrap_or_else(|| panic!("{}: no entry point {}", pass.name(), pass.kernel()));
         let mut host = BTreeMap::new();
         for r in pass.reads() {
             host.insert(r.binding, false);
         }
         for r in pass.writes() {
-            assert!(
-                host.insert(r.binding, true).is_none(),
-                "{}: {} both read and written",
-                pass.name(),
-                r.name
-            );
+            assert!(host.insert(r.binding, true).is_none(), "{}: {} both read and written", pass.name(), r.name);
         }
-        assert_eq!(
-            &host,
-            kernel,
-            "{}: host bindings (binding -> written) differ from the SPIR-V's",
-            pass.name()
-        );
+        assert_eq!(&host, kernel, "{}: host bindings (binding -> written) differ from the SPIR-V's", pass.name());
     }
     // Every entry point belongs to a registered pass.
     let kernels: BTreeSet<_> = PASSES.iter().map(|p| p.kernel()).collect();
     for name in declared.keys() {
-        assert!(
-            kernels.contains(name.as_str()),
-            "entry point {name} is not registered as a pass"
-        );
+        assert!(kernels.contains(name.as_str()), "entry point {name} is not registered as a pass");
     }
 }
 
@@ -118,11 +97,7 @@ fn scatter_accumulation_is_exact_and_order_independent_on_the_cpu() {
         let report = pass.report(&data, &frame).unwrap();
         println!("{report}");
         assert!(!report.starts_with("FAILED"), "{report}");
-        words.push(
-            frame
-                .get::<u32>(&slicelight::passes::scatter_check::CHECK_WORDS)
-                .to_vec(),
-        );
+        words.push(frame.get::<u32>(&slicelight::passes::scatter_check::CHECK_WORDS).to_vec());
     }
     assert_eq!(words[0], words[1]);
 }
@@ -192,9 +167,7 @@ fn bvh_finds_the_same_nearest_hit_as_testing_every_triangle() {
     let geometry = data.geometry();
     let mut state = 99u64;
     let mut next = move || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         ((state >> 40) as f32) / (1u64 << 24) as f32 * 2.0 - 1.0
     };
     for _ in 0..20_000 {
@@ -245,11 +218,7 @@ fn antialiasing_averages_the_sub_pixel_samples() {
             }
         }
     }
-    let worst = aa
-        .iter()
-        .zip(&mean)
-        .map(|(a, b)| (*a - *b).abs().max_element())
-        .fold(0.0, f32::max);
+    let worst = aa.iter().zip(&mean).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0, f32::max);
     let peak = mean.iter().map(|p| p.max_element()).fold(0.0, f32::max);
     // The same f32 sums in a different order: a few ulps of the peak.
     assert!(worst <= 1e-6 * peak, "worst {worst} of peak {peak}");
@@ -260,20 +229,16 @@ fn antialiasing_averages_the_sub_pixel_samples() {
         d1.set_samples_per_pixel(1).unwrap();
         render::render(&d1, &Backend::Cpu, false).unwrap()
     };
-    let changed = one
-        .iter()
-        .zip(&aa)
-        .filter(|(a, b)| (**a - **b).abs().max_element() > 1e-3 * peak)
-        .count();
+    let changed = one.iter().zip(&aa).filter(|(a, b)| (**a - **b).abs().max_element() > 1e-3 * peak).count();
     assert!(changed > 20, "only {changed} pixels changed with 4 samples");
 }
 
 #[test]
 fn layered_exr_holds_each_pass_and_reads_back_as_the_beauty_image() {
-    let data = common::scene_from_str(&torus_scene([48, 24]).replace(
-        "[camera]",
-        "[medium]\nsigma_s = [0.05, 0.05, 0.05]\nsigma_t = [0.06, 0.06, 0.06]\n[camera]",
-    ));
+    let data = common::scene_from_str(
+        &torus_scene([48, 24])
+            .replace("[camera]", "[medium]\nsigma_s = [0.05, 0.05, 0.05]\nsigma_t = [0.06, 0.06, 0.06]\n[camera]"),
+    );
     let r = render::render_layers(&data, &Backend::Cpu, false).unwrap();
     let names: Vec<_> = r.layers.iter().map(|(n, _)| *n).collect();
     assert_eq!(names, ["surface", "shafts"]);
@@ -287,23 +252,8 @@ fn layered_exr_holds_each_pass_and_reads_back_as_the_beauty_image() {
     }
     // Every layer's channels, as a layer-aware reader sees them.
     let exr = exr::prelude::read_all_flat_layers_from_file(&path).unwrap();
-    let channels: BTreeSet<String> = exr.layer_data[0]
-        .channel_data
-        .list
-        .iter()
-        .map(|c| c.name.to_string())
-        .collect();
-    for c in [
-        "R",
-        "G",
-        "B",
-        "surface.R",
-        "surface.G",
-        "surface.B",
-        "shafts.R",
-        "shafts.G",
-        "shafts.B",
-    ] {
+    let channels: BTreeSet<String> = exr.layer_data[0].channel_data.list.iter().map(|c| c.name.to_string()).collect();
+    for c in ["R", "G", "B", "surface.R", "surface.G", "surface.B", "shafts.R", "shafts.G", "shafts.B"] {
         assert!(channels.contains(c), "no channel {c} in {channels:?}");
     }
     // And beauty = surface + shafts.

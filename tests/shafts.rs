@@ -38,10 +38,7 @@ fn error(data: &SceneData, reference: &[DVec3]) -> Difference {
 }
 
 fn assert_finite(img: &[Vec4], what: &str) {
-    let bad = img
-        .iter()
-        .filter(|p| !p.truncate().is_finite() || p.truncate().min_element() < 0.0)
-        .count();
+    let bad = img.iter().filter(|p| !p.truncate().is_finite() || p.truncate().min_element() < 0.0).count();
     assert_eq!(bad, 0, "{what}: {bad} pixels are NaN, infinite or negative");
 }
 
@@ -64,10 +61,7 @@ fn error_falls_as_planes_and_subplanes_grow() {
         .map(|&n| error(&with_shafts(&data, n, 6, ShaftMode::Exact, false), &refimg).rms_relative)
         .collect();
     println!("rms error vs planes 4, 16, 64 (6 sub-planes): {by_planes:?}");
-    assert!(
-        by_planes[0] > by_planes[1] && by_planes[1] > by_planes[2],
-        "{by_planes:?}"
-    );
+    assert!(by_planes[0] > by_planes[1] && by_planes[1] > by_planes[2], "{by_planes:?}");
     let by_sub: Vec<f64> = [1, 4, 16]
         .iter()
         .map(|&m| error(&with_shafts(&data, 8, m, ShaftMode::Exact, false), &refimg).rms_relative)
@@ -175,21 +169,13 @@ fn extinction_from_1e_minus_6_to_1e3() {
 
 #[test]
 fn camera_inside_the_cone_and_at_the_light() {
-    let inside = stress(
-        "camera inside cone",
-        &stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 40.0, [0.0, 2.5, 0.8], ISO),
-    );
+    let inside =
+        stress("camera inside cone", &stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 40.0, [0.0, 2.5, 0.8], ISO));
     assert!(inside < 0.05, "{inside}");
     // The eye at the light: every view ray starts at the apex, where 1/s^2
     // is largest. Finite is the requirement (the radiance is huge).
-    let data = common::scene_from_str(&stress_scene(
-        0.1,
-        [0.0, 4.0, 0.01],
-        [0.0, -1.0, 0.0],
-        40.0,
-        [0.0, 4.0, 0.01],
-        ISO,
-    ));
+    let data =
+        common::scene_from_str(&stress_scene(0.1, [0.0, 4.0, 0.01], [0.0, -1.0, 0.0], 40.0, [0.0, 4.0, 0.01], ISO));
     assert_finite(&render_cpu(&data), "camera at the light");
 }
 
@@ -210,14 +196,8 @@ fn cone_angles_near_0_and_90_degrees() {
     // ray to the cone analytically, still sees it in the centre column (whose
     // rays cross the axis) and stays finite.
     for cutoff in [0.05, 0.5] {
-        let data = common::scene_from_str(&stress_scene(
-            0.1,
-            [0.0, 4.0, 0.0],
-            [0.0, -1.0, 0.0],
-            cutoff,
-            [0.0, 1.5, 6.0],
-            ISO,
-        ));
+        let data =
+            common::scene_from_str(&stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], cutoff, [0.0, 1.5, 6.0], ISO));
         let img = render_cpu(&data);
         assert_finite(&img, &format!("cutoff {cutoff}"));
         let centre_column_lit = (0..33).any(|y| img[y * 49 + 24].x > 0.0);
@@ -276,14 +256,8 @@ fn scene_1e5_metres_away() {
 
 #[test]
 fn one_plane_and_ten_thousand_planes() {
-    let data = common::scene_from_str(&stress_scene(
-        0.1,
-        [0.0, 4.0, 0.0],
-        [0.0, -1.0, 0.0],
-        30.0,
-        [0.0, 1.5, 6.0],
-        ISO,
-    ));
+    let data =
+        common::scene_from_str(&stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 30.0, [0.0, 1.5, 6.0], ISO));
     let (refimg, _) = reference::render_converged(&data, 1e-3);
     let one = render_cpu(&with_shafts(&data, 1, 1, ShaftMode::Exact, true));
     assert_finite(&one, "1 plane");
@@ -294,10 +268,7 @@ fn one_plane_and_ten_thousand_planes() {
     println!("1 plane: {d_one:?}\n10000 planes: {d_many:?}");
     // 10000 planes is a fine midpoint rule: it must sit at the reference's
     // own noise level, and far below a single plane.
-    assert!(
-        d_many.rms_relative < 0.01 && d_many.rms_relative < d_one.rms_relative,
-        "{d_many:?} vs {d_one:?}"
-    );
+    assert!(d_many.rms_relative < 0.01 && d_many.rms_relative < d_one.rms_relative, "{d_many:?} vs {d_one:?}");
 }
 
 #[test]
@@ -335,14 +306,8 @@ fn a_light_behind_the_camera_is_culled() {
     let plan = render::plan(&data);
     assert!(!plan.iter().find(|p| p.name == "shafts").unwrap().ran);
     // And one in front is kept.
-    let data = common::scene_from_str(&stress_scene(
-        0.1,
-        [0.0, 4.0, 0.0],
-        [0.0, -1.0, 0.0],
-        30.0,
-        [0.0, 1.5, 6.0],
-        ISO,
-    ));
+    let data =
+        common::scene_from_str(&stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 30.0, [0.0, 1.5, 6.0], ISO));
     assert_eq!(data.lights[0].in_view, 1);
 }
 
@@ -447,10 +412,7 @@ fn looking_across_a_lights_apex_stays_within_one_percent() {
     // (where the 1/s^2 weight is uniform) must keep them within 1 % on
     // average. The worst pixel may also carry the cone edge's and the
     // dither's error (a pixel the cone's edge crosses), so it gets 5 %.
-    for phase in [
-        r#"{ kind = "henyey-greenstein", g = 0.9 }"#,
-        r#"{ kind = "dobashi2002" }"#,
-    ] {
+    for phase in [r#"{ kind = "henyey-greenstein", g = 0.9 }"#, r#"{ kind = "dobashi2002" }"#] {
         let (mean, worst) = apex_error(phase);
         assert!(mean < 0.01 && worst < 0.05, "{phase}: mean {mean}, worst {worst}");
     }

@@ -65,20 +65,12 @@ pub fn sweep(quick: bool) -> Vec<Config> {
         jitter: true,
         quantize_8bit: false,
     };
-    let planes: &[u32] = if quick {
-        &[5, 30, 120]
-    } else {
-        &[5, 10, 20, 30, 60, 120, 240]
-    };
+    let planes: &[u32] = if quick { &[5, 30, 120] } else { &[5, 10, 20, 30, 60, 120, 240] };
     let subs: &[u32] = if quick { &[1, 6, 24] } else { &[1, 2, 4, 6, 12, 24] };
     let tables: &[u32] = if quick { &[16, 256] } else { &[16, 64, 256] };
     let mut v = Vec::new();
     for &n in planes {
-        v.push(Config {
-            series: "planes",
-            planes: n,
-            ..base
-        });
+        v.push(Config { series: "planes", planes: n, ..base });
         // The paper's hardware: 8-bit tables, 8-bit blending of each plane,
         // no sub-planes, no dither. The 1/s^2 stays analytic: an 8-bit h table
         // that includes it is all zeros but its first column (1/s^2 spans six
@@ -95,25 +87,12 @@ pub fn sweep(quick: bool) -> Vec<Config> {
         });
     }
     for &m in subs {
-        v.push(Config {
-            series: "subplanes",
-            subplanes: m,
-            ..base
-        });
+        v.push(Config { series: "subplanes", subplanes: m, ..base });
     }
     for &t in tables {
-        v.push(Config {
-            series: "tables",
-            mode: ShaftMode::Tables,
-            table_size: t,
-            ..base
-        });
+        v.push(Config { series: "tables", mode: ShaftMode::Tables, table_size: t, ..base });
     }
-    v.push(Config {
-        series: "no-jitter",
-        jitter: false,
-        ..base
-    });
+    v.push(Config { series: "no-jitter", jitter: false, ..base });
     v
 }
 
@@ -340,9 +319,7 @@ fn save_plot(
 fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[Series]) -> Result<()> {
     save_plot(path, |root| {
         let xs = series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
-        let (x0, x1) = xs
-            .clone()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        let (x0, x1) = xs.clone().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
         let y1 = series.iter().flat_map(|s| s.1.iter().map(|p| p.1)).fold(0.0, f64::max) * 1.1 + 1e-9;
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 24))
@@ -413,9 +390,8 @@ fn plot(dir: &Path, rows: &[Row]) -> Result<()> {
 
     // Time against error, every configuration, Pareto front per group.
     save_plot(&dir.join("time_vs_error.png"), |root| {
-        let (t0, t1) = rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
-            (a.min(r.median_seconds), b.max(r.median_seconds))
-        });
+        let (t0, t1) =
+            rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r.median_seconds), b.max(r.median_seconds)));
         let e1 = rows.iter().map(|r| r.rms_8bit_percent).fold(0.0, f64::max) * 1.1 + 1e-9;
         let mut chart = ChartBuilder::on(&root)
             .caption("Run time against error (lines: Pareto fronts)", ("sans-serif", 24))

@@ -29,21 +29,12 @@ struct Aabb {
 }
 
 impl Aabb {
-    const EMPTY: Aabb = Aabb {
-        lo: Vec3::splat(f32::INFINITY),
-        hi: Vec3::splat(f32::NEG_INFINITY),
-    };
+    const EMPTY: Aabb = Aabb { lo: Vec3::splat(f32::INFINITY), hi: Vec3::splat(f32::NEG_INFINITY) };
     fn grow(self, p: Vec3) -> Aabb {
-        Aabb {
-            lo: self.lo.min(p),
-            hi: self.hi.max(p),
-        }
+        Aabb { lo: self.lo.min(p), hi: self.hi.max(p) }
     }
     fn union(self, o: Aabb) -> Aabb {
-        Aabb {
-            lo: self.lo.min(o.lo),
-            hi: self.hi.max(o.hi),
-        }
+        Aabb { lo: self.lo.min(o.lo), hi: self.hi.max(o.hi) }
     }
     fn half_area(self) -> f32 {
         let e = (self.hi - self.lo).max(Vec3::ZERO);
@@ -63,11 +54,7 @@ impl Bvh {
             .into_iter()
             .map(|t| {
                 let bounds = [t.v0, t.v1, t.v2].iter().fold(Aabb::EMPTY, |b, v| b.grow(v.truncate()));
-                Item {
-                    bounds,
-                    centroid: (bounds.lo + bounds.hi) * 0.5,
-                    triangle: t,
-                }
+                Item { bounds, centroid: (bounds.lo + bounds.hi) * 0.5, triangle: t }
             })
             .collect();
         let mut nodes = Vec::with_capacity(2 * items.len().div_ceil(MAX_LEAF));
@@ -75,10 +62,7 @@ impl Bvh {
             let n = items.len();
             build_node(&mut items, 0, n, 0, &mut nodes);
         }
-        Bvh {
-            nodes,
-            triangles: items.into_iter().map(|i| i.triangle).collect(),
-        }
+        Bvh { nodes, triangles: items.into_iter().map(|i| i.triangle).collect() }
     }
 }
 
@@ -89,11 +73,7 @@ fn build_node(items: &mut [Item], first: usize, end: usize, depth: u32, nodes: &
     let bounds = slice.iter().fold(Aabb::EMPTY, |b, i| b.union(i.bounds));
     let index = nodes.len();
     nodes.push(padded_node(bounds));
-    let split = if slice.len() <= MAX_LEAF {
-        None
-    } else {
-        choose_split(slice, bounds, depth)
-    };
+    let split = if slice.len() <= MAX_LEAF { None } else { choose_split(slice, bounds, depth) };
     match split {
         None => {
             nodes[index].first = first as u32;
@@ -221,9 +201,7 @@ mod tests {
     fn random_triangles(n: usize) -> Vec<GpuTriangle> {
         let mut state = 12345u64;
         let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             ((state >> 40) as f32) / (1u64 << 24) as f32
         };
         (0..n)
@@ -277,13 +255,8 @@ mod tests {
     #[test]
     fn degenerate_inputs_build() {
         // All triangles at one point, and one triangle.
-        let same: Vec<GpuTriangle> = (0..1000)
-            .map(|_| GpuTriangle {
-                v1: Vec4::X,
-                v2: Vec4::Y,
-                ..Default::default()
-            })
-            .collect();
+        let same: Vec<GpuTriangle> =
+            (0..1000).map(|_| GpuTriangle { v1: Vec4::X, v2: Vec4::Y, ..Default::default() }).collect();
         let bvh = Bvh::build(same);
         assert!(depth(&bvh.nodes) <= 12, "depth {}", depth(&bvh.nodes));
         let one = Bvh::build(random_triangles(1));

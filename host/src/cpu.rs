@@ -46,14 +46,11 @@ pub fn for_each_invocation2<T: Send, U: Send>(
     progress: &ProgressBar,
     kernel: impl Fn(u32, &mut T, &mut U) + Sync,
 ) {
-    a.par_chunks_mut(CHUNK)
-        .zip(b.par_chunks_mut(CHUNK))
-        .enumerate()
-        .for_each(|(c, (ca, cb))| {
-            let start = first as usize + c * CHUNK;
-            for (k, (va, vb)) in ca.iter_mut().zip(cb.iter_mut()).enumerate() {
-                kernel((start + k) as u32, va, vb);
-            }
-            progress.inc(ca.len() as u64);
-        });
+    a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (ca, cb))| {
+        let start = first as usize + c * CHUNK;
+        for (k, (va, vb)) in ca.iter_mut().zip(cb.iter_mut()).enumerate() {
+            kernel((start + k) as u32, va, vb);
+        }
+        progress.inc(ca.len() as u64);
+    });
 }

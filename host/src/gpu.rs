@@ -64,11 +64,7 @@ impl GpuContext {
         let info = adapter.get_info();
         let limits = adapter.limits();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let required_features = if timestamps {
-            wgpu::Features::TIMESTAMP_QUERY
-        } else {
-            wgpu::Features::empty()
-        };
+        let required_features = if timestamps { wgpu::Features::TIMESTAMP_QUERY } else { wgpu::Features::empty() };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("slicelight"),
             required_limits: limits.clone(),
@@ -108,10 +104,7 @@ impl GpuContext {
     }
 
     pub fn device_name(&self) -> String {
-        format!(
-            "{} ({:?}, {:?})",
-            self.adapter.name, self.adapter.device_type, self.adapter.backend
-        )
+        format!("{} ({:?}, {:?})", self.adapter.name, self.adapter.device_type, self.adapter.backend)
     }
 
     /// Whether per-pass times are the device's own (timestamp queries).
@@ -225,12 +218,7 @@ impl GpuContext {
                 })
                 .collect::<HashMap<_, _>>()
         })?;
-        let frame = GpuFrame {
-            ctx: self,
-            common: scene.common,
-            buffers,
-            bind_groups,
-        };
+        let frame = GpuFrame { ctx: self, common: scene.common, buffers, bind_groups };
         frame.set_band(0, band, 0);
         Ok(frame)
     }
@@ -245,9 +233,7 @@ impl GpuContext {
     }
 
     fn wait(&self, what: &str) -> Result<()> {
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| anyhow!("device lost while {what}: {e}"))?;
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| anyhow!("device lost while {what}: {e}"))?;
         Ok(())
     }
 
@@ -274,21 +260,14 @@ impl GpuContext {
         });
         self.wait("reading a result")?;
         rx.recv()?.map_err(|e| anyhow!("cannot map the result buffer: {e}"))?;
-        let view = slice
-            .get_mapped_range()
-            .map_err(|e| anyhow!("cannot read the result buffer: {e}"))?;
+        let view = slice.get_mapped_range().map_err(|e| anyhow!("cannot read the result buffer: {e}"))?;
         Ok(view[..bytes as usize].to_vec())
     }
 }
 
 fn ensure_one_band(scene: &SceneData, band: u32, r: &Resource) -> Result<()> {
     if band < scene.pixel_count() {
-        bail!(
-            "{}: a given per-pixel input must fit in one band ({} of {} pixels)",
-            r.name,
-            band,
-            scene.pixel_count()
-        );
+        bail!("{}: a given per-pixel input must fit in one band ({} of {} pixels)", r.name, band, scene.pixel_count());
     }
     Ok(())
 }
@@ -351,10 +330,7 @@ impl GpuFrame<'_> {
         self.submit(&list, Some((&query_set, &resolve)))?;
         let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&self.ctx.read_buffer(&resolve, count as u64 * 8)?);
         let period = self.ctx.queue.get_timestamp_period() as f64 * 1e-9;
-        Ok(ticks
-            .chunks(2)
-            .map(|t| t[1].saturating_sub(t[0]) as f64 * period)
-            .collect())
+        Ok(ticks.chunks(2).map(|t| t[1].saturating_sub(t[0]) as f64 * period).collect())
     }
 
     fn submit(
@@ -375,10 +351,8 @@ impl GpuFrame<'_> {
                     beginning_of_pass_write_index: Some(2 * k as u32),
                     end_of_pass_write_index: Some(2 * k as u32 + 1),
                 });
-                let mut cpass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some(pass.name()),
-                    timestamp_writes,
-                });
+                let mut cpass = encoder
+                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(pass.name()), timestamp_writes });
                 cpass.set_pipeline(&self.ctx.pipelines[pass.name()]);
                 cpass.set_bind_group(0, &self.bind_groups[pass.name()], &[]);
                 cpass.dispatch_workgroups(gx, gy, 1);
@@ -393,10 +367,7 @@ impl GpuFrame<'_> {
 
     /// Reads `r` back: `bytes` long (a per-pixel resource: the band's pixels).
     pub fn read(&self, r: &Resource, bytes: u64) -> Result<Buffer> {
-        let buffer = self
-            .buffers
-            .get(&r.binding)
-            .ok_or_else(|| anyhow!("{} is not bound in this frame", r.name))?;
+        let buffer = self.buffers.get(&r.binding).ok_or_else(|| anyhow!("{} is not bound in this frame", r.name))?;
         Ok(Buffer::from_bytes(&self.ctx.read_buffer(buffer, bytes)?))
     }
 }

@@ -10,11 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(Parser)]
-#[command(
-    name = "slicelight",
-    version,
-    about = "Light in participating media, as Rust-GPU compute kernels"
-)]
+#[command(name = "slicelight", version, about = "Light in participating media, as Rust-GPU compute kernels")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -119,8 +115,7 @@ impl ShaftOverrides {
         s.subplanes = self.subplanes.unwrap_or(s.subplanes);
         s.mode = self.mode.unwrap_or(s.mode);
         s.jitter &= !self.no_jitter;
-        data.configure_shafts(s)
-            .map_err(|e| anyhow!("command line: --{}", e.to_string().replace('_', "-")))
+        data.configure_shafts(s).map_err(|e| anyhow!("command line: --{}", e.to_string().replace('_', "-")))
     }
 }
 
@@ -178,26 +173,14 @@ fn write_outputs(
 
 fn set_spp(data: &mut scene::SceneData, spp: Option<u32>) -> Result<()> {
     match spp {
-        Some(n) => data
-            .set_samples_per_pixel(n)
-            .map_err(|e| anyhow!("command line: --spp: {e}")),
+        Some(n) => data.set_samples_per_pixel(n).map_err(|e| anyhow!("command line: --spp: {e}")),
         None => Ok(()),
     }
 }
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Render {
-            scene,
-            output,
-            backend,
-            stats,
-            quiet,
-            shafts,
-            spp,
-            surface_shadows,
-            passes,
-        } => {
+        Command::Render { scene, output, backend, stats, quiet, shafts, spp, surface_shadows, passes } => {
             check_outputs(&output)?;
             if let Some(path) = &stats {
                 check_outputs_dir(path)?;
@@ -211,10 +194,7 @@ fn run(cli: Cli) -> Result<()> {
             for name in &passes {
                 if slicelight::passes::by_name(name).is_none() {
                     let known: Vec<_> = slicelight::passes::PASSES.iter().map(|p| p.name()).collect();
-                    return Err(anyhow!(
-                        "command line: --pass: expected one of {}, got {name:?}",
-                        known.join(", ")
-                    ));
+                    return Err(anyhow!("command line: --pass: expected one of {}, got {name:?}", known.join(", ")));
                 }
             }
             data.requested_passes = passes;
@@ -245,16 +225,10 @@ fn run(cli: Cli) -> Result<()> {
                     100.0 * st.counter("shaft_samples") as f64 / st.counter("shaft_samples_naive") as f64
                 );
             }
-            if let Some(failed) = st
-                .passes
-                .iter()
-                .find(|p| p.report.as_deref().is_some_and(|r| r.starts_with("FAILED")))
+            if let Some(failed) =
+                st.passes.iter().find(|p| p.report.as_deref().is_some_and(|r| r.starts_with("FAILED")))
             {
-                return Err(anyhow!(
-                    "pass {}: {}",
-                    failed.name,
-                    failed.report.as_deref().unwrap_or_default()
-                ));
+                return Err(anyhow!("pass {}: {}", failed.name, failed.report.as_deref().unwrap_or_default()));
             }
             write_outputs(&output, &rendered.image, &rendered.layer_slices(), &data)?;
             if let Some(path) = stats {
@@ -263,32 +237,17 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Reference {
-            scene,
-            output,
-            tolerance,
-            spp,
-        } => {
+        Command::Reference { scene, output, tolerance, spp } => {
             check_outputs(&output)?;
             let mut data = scene::load(&scene)?;
             set_spp(&mut data, spp)?;
             let t = Instant::now();
             let (image, samples) = reference::render_converged(&data, tolerance);
-            eprintln!(
-                "reference: {samples} samples per ray, {:.3} s",
-                t.elapsed().as_secs_f64()
-            );
+            eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
             write_outputs(&output, &pixels, &[], &data)
         }
-        Command::Bench {
-            scenes,
-            backend,
-            repeats,
-            stride,
-            quick,
-            out_dir,
-        } => {
+        Command::Bench { scenes, backend, repeats, stride, quick, out_dir } => {
             let scenes = if scenes.is_empty() {
                 ["fig6_sphere", "fig7_stage", "stained_glass"]
                     .iter()
@@ -297,14 +256,7 @@ fn run(cli: Cli) -> Result<()> {
             } else {
                 scenes
             };
-            let opts = bench::Options {
-                scenes,
-                backends: backend,
-                repeats,
-                stride,
-                quick,
-                out_dir: out_dir.clone(),
-            };
+            let opts = bench::Options { scenes, backends: backend, repeats, stride, quick, out_dir: out_dir.clone() };
             bench::run(&opts)?;
             eprintln!(
                 "wrote {0}/bench.csv, {0}/error_vs_planes.png, {0}/error_vs_subplanes.png, {0}/time_vs_error.png",
@@ -312,20 +264,11 @@ fn run(cli: Cli) -> Result<()> {
             );
             Ok(())
         }
-        Command::Compare {
-            image,
-            reference,
-            exposure,
-            diff,
-        } => {
+        Command::Compare { image, reference, exposure, diff } => {
             let (w, h, a) = read_linear(&image)?;
             let (rw, rh, b) = read_linear(&reference)?;
             if (w, h) != (rw, rh) {
-                return Err(anyhow!(
-                    "{} is {w}x{h} but {} is {rw}x{rh}",
-                    image.display(),
-                    reference.display()
-                ));
+                return Err(anyhow!("{} is {w}x{h} but {} is {rw}x{rh}", image.display(), reference.display()));
             }
             let d = metrics::difference(&a, &b, exposure);
             println!("rms_relative     {:.4e}", d.rms_relative);
@@ -333,17 +276,10 @@ fn run(cli: Cli) -> Result<()> {
             println!("rms_8bit_percent {:.4}", d.rms_8bit_percent);
             println!("max_8bit_percent {:.4}", d.max_8bit_percent);
             if let Some(path) = diff {
-                let largest = a
-                    .iter()
-                    .zip(&b)
-                    .map(|(x, y)| (*x - *y).abs().max_element())
-                    .fold(0.0, f64::max)
-                    .max(1e-300);
-                let pixels: Vec<Vec4> = a
-                    .iter()
-                    .zip(&b)
-                    .map(|(x, y)| ((*x - *y).abs() / largest).as_vec3().extend(0.0))
-                    .collect();
+                let largest =
+                    a.iter().zip(&b).map(|(x, y)| (*x - *y).abs().max_element()).fold(0.0, f64::max).max(1e-300);
+                let pixels: Vec<Vec4> =
+                    a.iter().zip(&b).map(|(x, y)| ((*x - *y).abs() / largest).as_vec3().extend(0.0)).collect();
                 output::write_image(&path, &pixels, w, h, 1.0)?;
                 eprintln!("wrote {} (white = {largest:.4e})", path.display());
             }
@@ -353,16 +289,9 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn check_outputs_dir(path: &Path) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !dir.is_dir() {
-        return Err(anyhow!(
-            "{}: the folder {} does not exist",
-            path.display(),
-            dir.display()
-        ));
+        return Err(anyhow!("{}: the folder {} does not exist", path.display(), dir.display()));
     }
     Ok(())
 }
@@ -370,9 +299,7 @@ fn check_outputs_dir(path: &Path) -> Result<()> {
 /// Reads an image as linear rgb: EXR as stored, PNG with its sRGB transfer undone.
 fn read_linear(path: &Path) -> Result<(u32, u32, Vec<DVec3>)> {
     let format = output::format_of(path)?;
-    let img = image::open(path)
-        .with_context(|| format!("{}: cannot read the image", path.display()))?
-        .to_rgb32f();
+    let img = image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?.to_rgb32f();
     let decode = |v: f32| {
         if format == output::Format::Png {
             scene::srgb_to_linear(v)
@@ -380,9 +307,7 @@ fn read_linear(path: &Path) -> Result<(u32, u32, Vec<DVec3>)> {
             v
         }
     };
-    let pixels = img
-        .pixels()
-        .map(|p| DVec3::new(decode(p[0]) as f64, decode(p[1]) as f64, decode(p[2]) as f64))
-        .collect();
+    let pixels =
+        img.pixels().map(|p| DVec3::new(decode(p[0]) as f64, decode(p[1]) as f64, decode(p[2]) as f64)).collect();
     Ok((img.width(), img.height(), pixels))
 }

@@ -19,11 +19,7 @@ pub struct Difference {
 /// 8-bit measures taken after the PNG tone mapping at `exposure`.
 pub fn difference(image: &[DVec3], reference: &[DVec3], exposure: f32) -> Difference {
     assert_eq!(image.len(), reference.len(), "images of different sizes");
-    let scale = reference
-        .iter()
-        .map(|p| p.max_element())
-        .fold(0.0f64, f64::max)
-        .max(1e-300);
+    let scale = reference.iter().map(|p| p.max_element()).fold(0.0f64, f64::max).max(1e-300);
     let (mut sum2, mut max, mut sum2_8, mut max_8) = (0.0, 0.0f64, 0.0, 0.0f64);
     for (a, b) in image.iter().zip(reference) {
         for c in 0..3 {

@@ -16,12 +16,7 @@ pub enum Format {
 
 /// The format named by the extension of `path`, or an error saying which are known.
 pub fn format_of(path: &Path) -> Result<Format> {
-    match path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase())
-        .as_deref()
-    {
+    match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
         Some("png") => Ok(Format::Png),
         Some("exr") => Ok(Format::Exr),
         _ => bail!(
@@ -111,10 +106,7 @@ fn layered_exr(pixels: &[Vec4], layers: &[(&str, &[Vec4])], width: u32, height: 
         AnyChannels::sort(channels),
     );
     let mut bytes = std::io::Cursor::new(Vec::new());
-    Image::from_layer(layer)
-        .write()
-        .to_buffered(&mut bytes)
-        .map_err(|e| anyhow!("{e}"))?;
+    Image::from_layer(layer).write().to_buffered(&mut bytes).map_err(|e| anyhow!("{e}"))?;
     Ok(bytes.into_inner())
 }
 
@@ -127,15 +119,13 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     };
     let mut tmp = tempfile::NamedTempFile::new_in(dir)
         .with_context(|| format!("{}: cannot create a file in {}", path.display(), dir.display()))?;
-    tmp.write_all(bytes)
-        .with_context(|| format!("{}: write failed", path.display()))?;
+    tmp.write_all(bytes).with_context(|| format!("{}: write failed", path.display()))?;
     // The temporary file is private (0600); the result is an ordinary file.
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
     }
-    tmp.persist(path)
-        .map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
+    tmp.persist(path).map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
     Ok(())
 }

@@ -61,11 +61,7 @@ fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Opti
         for t in [tc - half, tc + half] {
             if t > t_min && t < limit {
                 limit = t;
-                best = Some(Surface {
-                    t,
-                    normal: (o + d * t - c).normalize(),
-                    albedo: albedo(s.material),
-                });
+                best = Some(Surface { t, normal: (o + d * t - c).normalize(), albedo: albedo(s.material) });
                 break;
             }
         }
@@ -100,11 +96,7 @@ fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Opti
                 && nrm.dot((a - c).cross(p - c)) >= 0.0;
             if inside {
                 limit = t;
-                best = Some(Surface {
-                    t,
-                    normal: nrm.normalize(),
-                    albedo: albedo(tri.material),
-                });
+                best = Some(Surface { t, normal: nrm.normalize(), albedo: albedo(tri.material) });
             }
         }
         n = node.skip as usize;
@@ -142,11 +134,7 @@ fn emitted(data: &SceneData, light: &GpuLight, local: DVec3) -> DVec3 {
         if angle > cut {
             return DVec3::ZERO;
         }
-        let profile = if beam >= cut {
-            1.0
-        } else {
-            ((cut - angle) / (cut - beam)).clamp(0.0, 1.0)
-        };
+        let profile = if beam >= cut { 1.0 } else { ((cut - angle) / (cut - beam)).clamp(0.0, 1.0) };
         let s = 0.5 / (local.z * cut.tan());
         return power * profile * light_map(data, light, 0.5 + local.x * s, 0.5 + local.y * s);
     };
@@ -188,11 +176,7 @@ fn camera_ray(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3, DVec3) {
 /// directional light's entry plane), metres.
 fn toward_light(light: &GpuLight, point: DVec3) -> (DVec3, DVec3, f64) {
     let rel = point - d3(light.position);
-    let local = DVec3::new(
-        rel.dot(d3(light.axis_x)),
-        rel.dot(d3(light.axis_y)),
-        rel.dot(d3(light.axis_z)),
-    );
+    let local = DVec3::new(rel.dot(d3(light.axis_x)), rel.dot(d3(light.axis_y)), rel.dot(d3(light.axis_z)));
     if light.kind == LIGHT_DIRECTIONAL {
         (local, -d3(light.axis_z), local.z)
     } else {
@@ -210,20 +194,12 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         return (DVec3::ZERO, f64::INFINITY);
     };
     let point = o + d * hit.t;
-    let normal = if hit.normal.dot(d) > 0.0 {
-        -hit.normal
-    } else {
-        hit.normal
-    };
+    let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
     let sigma_t = d3(p.sigma_t);
     let mut irradiance = DVec3::ZERO;
     for light in &data.lights {
         let (local, to_light, distance) = toward_light(light, point);
-        let falloff = if light.kind == LIGHT_DIRECTIONAL {
-            1.0
-        } else {
-            1.0 / (distance * distance)
-        };
+        let falloff = if light.kind == LIGHT_DIRECTIONAL { 1.0 } else { 1.0 / (distance * distance) };
         let cos = normal.dot(to_light);
         if cos <= 0.0 {
             continue;
@@ -332,16 +308,11 @@ pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> 
     let spp = data.samples_per_pixel();
     // Every (pixel, sub-pixel sample), each traced and shaded once.
     let rays: Vec<(u32, u32)> = pixels.iter().flat_map(|&i| (0..spp).map(move |s| (i, s))).collect();
-    let surfaces: Vec<(DVec3, f64)> = rays
-        .par_iter()
-        .map(|&(i, s)| surface_and_distance(data, i % w, i / w, s))
-        .collect();
+    let surfaces: Vec<(DVec3, f64)> =
+        rays.par_iter().map(|&(i, s)| surface_and_distance(data, i % w, i / w, s)).collect();
     // The box filter: the mean of each pixel's `spp` consecutive values.
     let filter = |values: Vec<DVec3>| -> Vec<DVec3> {
-        values
-            .chunks(spp as usize)
-            .map(|c| c.iter().sum::<DVec3>() / spp as f64)
-            .collect()
+        values.chunks(spp as usize).map(|c| c.iter().sum::<DVec3>() / spp as f64).collect()
     };
     let with_inscatter = |samples: u32| -> Vec<DVec3> {
         filter(
@@ -379,8 +350,5 @@ pub fn render_converged(data: &SceneData, tolerance: f64) -> (Vec<DVec3>, u32) {
 /// The reference image's surface term alone (no in-scattering), rgb in f64.
 pub fn render_surfaces(data: &SceneData) -> Vec<DVec3> {
     let w = data.width();
-    (0..data.pixel_count())
-        .into_par_iter()
-        .map(|i| surface_pixel(data, i % w, i / w))
-        .collect()
+    (0..data.pixel_count()).into_par_iter().map(|i| surface_pixel(data, i % w, i / w)).collect()
 }

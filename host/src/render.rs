@@ -117,10 +117,7 @@ pub struct Rendered {
 /// What every registered pass would do for the scene, decided before
 /// anything runs.
 pub fn plan(data: &SceneData) -> Vec<PassStats> {
-    plans(data)
-        .into_iter()
-        .map(|(pass, plan)| stats_of(pass, &plan, data))
-        .collect()
+    plans(data).into_iter().map(|(pass, plan)| stats_of(pass, &plan, data)).collect()
 }
 
 fn plans(data: &SceneData) -> Vec<(&'static dyn Pass, Plan)> {
@@ -165,11 +162,7 @@ fn add_into(sum: &mut [Vec4], layer: &[Vec4]) {
 /// accumulators): the frame's results for `Pass::report` and `counters`.
 /// Intermediates such as the shadow maps stay on the device.
 fn final_outputs(running: &[(usize, &'static dyn Pass, u64)]) -> Vec<&'static Resource> {
-    let read = |r: &Resource| {
-        running
-            .iter()
-            .any(|(_, p, _)| p.reads().iter().any(|x| x.binding == r.binding))
-    };
+    let read = |r: &Resource| running.iter().any(|(_, p, _)| p.reads().iter().any(|x| x.binding == r.binding));
     running
         .iter()
         .filter(|r| r.1.dispatch() == Dispatch::Whole)
@@ -195,17 +188,9 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         .map(|(k, (p, plan))| (k, *p, plan.invocations))
         .collect();
     let total: u64 = stats.iter().map(|p| p.invocations).sum();
-    let pb = if show_progress {
-        progress_bar(total)
-    } else {
-        ProgressBar::hidden()
-    };
+    let pb = if show_progress { progress_bar(total) } else { ProgressBar::hidden() };
     let start = Instant::now();
-    let layers: Vec<&'static dyn Pass> = running
-        .iter()
-        .map(|r| r.1)
-        .filter(|p| p.radiance_layer().is_some())
-        .collect();
+    let layers: Vec<&'static dyn Pass> = running.iter().map(|r| r.1).filter(|p| p.radiance_layer().is_some()).collect();
     let pixels = data.pixel_count() as usize;
     // The results: `Whole` passes' final outputs and the layers summed over samples.
     let mut result = Frame::default();
@@ -218,9 +203,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
             let mut frame = Frame::default();
             // Per-pixel resources no running pass writes hold their blank.
             for r in PASSES.iter().flat_map(|p| p.reads().iter().chain(p.writes())) {
-                let written = running
-                    .iter()
-                    .any(|(_, p, _)| p.writes().iter().any(|w| w.binding == r.binding));
+                let written = running.iter().any(|(_, p, _)| p.writes().iter().any(|w| w.binding == r.binding));
                 if !written && !frame.contains(r) {
                     if let Some(blank) = r.blank(pixels) {
                         frame.insert(r, blank);
@@ -276,11 +259,8 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
                     result.insert(w, frame.read(w, len(data))?);
                 }
             }
-            let per_pixel: Vec<(usize, &'static dyn Pass)> = running
-                .iter()
-                .filter(|r| r.1.dispatch() == Dispatch::PerPixel)
-                .map(|&(k, p, _)| (k, p))
-                .collect();
+            let per_pixel: Vec<(usize, &'static dyn Pass)> =
+                running.iter().filter(|r| r.1.dispatch() == Dispatch::PerPixel).map(|&(k, p, _)| (k, p)).collect();
             let band = ctx.band_pixels(data);
             let mut first = 0;
             while first < data.pixel_count() {
@@ -324,9 +304,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     let mut image = vec![Vec4::ZERO; pixels];
     let mut named = Vec::new();
     for pass in &layers {
-        let mut layer = result
-            .remove(pass.radiance_layer().expect("a layer"))
-            .expect("inserted above");
+        let mut layer = result.remove(pass.radiance_layer().expect("a layer")).expect("inserted above");
         for (px, s) in image.iter_mut().zip(layer.as_mut_slice::<Vec4>()) {
             *s = (*s * inv).truncate().extend(0.0);
             *px += *s;
@@ -344,11 +322,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         total_seconds: start.elapsed().as_secs_f64(),
         counters,
     };
-    Ok(Rendered {
-        image,
-        layers: named,
-        stats,
-    })
+    Ok(Rendered { image, layers: named, stats })
 }
 
 impl Rendered {

@@ -54,15 +54,7 @@ mod tests {
     fn one_sample_is_the_centre_and_squares_are_grids() {
         assert_eq!(sample_offset(0, 1), Vec2::splat(0.5));
         let four: [Vec2; 4] = core::array::from_fn(|i| sample_offset(i as u32, 4));
-        assert_eq!(
-            four,
-            [
-                Vec2::new(0.25, 0.25),
-                Vec2::new(0.75, 0.25),
-                Vec2::new(0.25, 0.75),
-                Vec2::new(0.75, 0.75)
-            ]
-        );
+        assert_eq!(four, [Vec2::new(0.25, 0.25), Vec2::new(0.75, 0.25), Vec2::new(0.25, 0.75), Vec2::new(0.75, 0.75)]);
     }
 
     #[test]

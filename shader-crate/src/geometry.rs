@@ -126,13 +126,7 @@ pub fn occluded(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geom
 /// The walk behind `trace_nearest` and `occluded`: with `any_hit`, it
 /// returns the first hit found rather than the nearest.
 fn trace(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, any_hit: bool) -> Hit {
-    let mut hit = Hit {
-        distance: NO_HIT,
-        normal: Vec3::ZERO,
-        object: NO_OBJECT,
-        material: NO_OBJECT,
-        visits: 0,
-    };
+    let mut hit = Hit { distance: NO_HIT, normal: Vec3::ZERO, object: NO_OBJECT, material: NO_OBJECT, visits: 0 };
     let mut best = t_max;
     let mut i = 0;
     while i < geometry.sphere_count as usize {
@@ -156,14 +150,7 @@ fn trace(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, a
     while n < geometry.node_count {
         let node = geometry.nodes[n as usize];
         hit.visits += 1;
-        if !ray_hits_box(
-            origin,
-            inv_dir,
-            node.bounds_min.xyz(),
-            node.bounds_max.xyz(),
-            t_min,
-            best,
-        ) {
+        if !ray_hits_box(origin, inv_dir, node.bounds_min.xyz(), node.bounds_max.xyz(), t_min, best) {
             n = node.skip;
             continue;
         }
@@ -225,43 +212,18 @@ mod tests {
         let (lo, hi) = (Vec3::new(-1.0, -1.0, 2.99999), Vec3::new(1.0, 1.0, 3.00001));
         let inv = |d: Vec3| Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
         assert!(ray_hits_box(Vec3::ZERO, inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
-        assert!(!ray_hits_box(
-            Vec3::new(2.0, 0.0, 0.0),
-            inv(Vec3::Z),
-            lo,
-            hi,
-            0.0,
-            NO_HIT
-        ));
+        assert!(!ray_hits_box(Vec3::new(2.0, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
         // Hit only beyond t_max: skipped.
         assert!(!ray_hits_box(Vec3::ZERO, inv(Vec3::Z), lo, hi, 0.0, 2.0));
         // A zero direction component (inverse infinite) with the origin
         // inside that slab, and outside it.
-        assert!(ray_hits_box(
-            Vec3::new(0.5, 0.0, 0.0),
-            inv(Vec3::Z),
-            lo,
-            hi,
-            0.0,
-            NO_HIT
-        ));
-        assert!(!ray_hits_box(
-            Vec3::new(1.5, 0.0, 0.0),
-            inv(Vec3::Z),
-            lo,
-            hi,
-            0.0,
-            NO_HIT
-        ));
+        assert!(ray_hits_box(Vec3::new(0.5, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
+        assert!(!ray_hits_box(Vec3::new(1.5, 0.0, 0.0), inv(Vec3::Z), lo, hi, 0.0, NO_HIT));
     }
 
     #[test]
     fn triangle_hit_edges_and_miss() {
-        let (a, b, c) = (
-            Vec3::new(-1.0, -1.0, 3.0),
-            Vec3::new(1.0, -1.0, 3.0),
-            Vec3::new(0.0, 1.0, 3.0),
-        );
+        let (a, b, c) = (Vec3::new(-1.0, -1.0, 3.0), Vec3::new(1.0, -1.0, 3.0), Vec3::new(0.0, 1.0, 3.0));
         assert!((ray_triangle(Vec3::ZERO, Vec3::Z, a, b, c, 0.0) - 3.0).abs() < 1e-6);
         assert_eq!(ray_triangle(Vec3::new(5.0, 0.0, 0.0), Vec3::Z, a, b, c, 0.0), NO_HIT);
         // Behind the origin: not hit.

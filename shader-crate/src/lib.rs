@@ -47,11 +47,5 @@ pub fn scene_geometry<'a>(
     triangles: &'a [GpuTriangle],
     nodes: &'a [GpuBvhNode],
 ) -> Geometry<'a> {
-    Geometry {
-        spheres,
-        sphere_count: params.sphere_count,
-        triangles,
-        nodes,
-        node_count: params.bvh_node_count,
-    }
+    Geometry { spheres, sphere_count: params.sphere_count, triangles, nodes, node_count: params.bvh_node_count }
 }

@@ -13,12 +13,7 @@ pub const SHADOW_FAR: f32 = f32::MAX;
 /// Beer-Lambert transmittance `exp(-sigma_t d)` per channel (the `exp(-rho kappa s)`
 /// factors of eq. 1 and eq. 3 of the 2002 paper); `sigma_t` in 1/m, `distance` in m.
 pub fn transmittance(sigma_t: Vec4, distance: f32) -> Vec4 {
-    Vec4::new(
-        (-sigma_t.x * distance).exp(),
-        (-sigma_t.y * distance).exp(),
-        (-sigma_t.z * distance).exp(),
-        1.0,
-    )
+    Vec4::new((-sigma_t.x * distance).exp(), (-sigma_t.y * distance).exp(), (-sigma_t.z * distance).exp(), 1.0)
 }
 
 /// `p` in the light's frame: `(x along axis_x, y along axis_y, z along axis_z)`,
@@ -26,11 +21,7 @@ pub fn transmittance(sigma_t: Vec4, distance: f32) -> Vec4 {
 /// (directional).
 pub fn light_local(light: &GpuLight, p: Vec3) -> Vec3 {
     let d = p - light.position.xyz();
-    Vec3::new(
-        d.dot(light.axis_x.xyz()),
-        d.dot(light.axis_y.xyz()),
-        d.dot(light.axis_z.xyz()),
-    )
+    Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()))
 }
 
 /// The spotlight cone's angular profile at `local` (a point in the light's
@@ -77,10 +68,7 @@ pub fn sample_light_map(texels: &[Vec4], offset: u32, width: u32, height: u32, u
 /// directional: `uv = 0.5 + 0.5 (x / half_extent_x, y / half_extent_y)`.
 pub fn light_uv(light: &GpuLight, local: Vec3) -> (f32, f32) {
     if light.kind == LIGHT_DIRECTIONAL {
-        (
-            0.5 + 0.5 * local.x / light.half_extent_x,
-            0.5 + 0.5 * local.y / light.half_extent_y,
-        )
+        (0.5 + 0.5 * local.x / light.half_extent_x, 0.5 + 0.5 * local.y / light.half_extent_y)
     } else {
         let s = 0.5 / (local.z * light.tan_cutoff);
         (0.5 + local.x * s, 0.5 + local.y * s)

@@ -89,11 +89,7 @@ pub const MODE_TABLES: u32 = 1;
 #[allow(clippy::manual_swap)]
 pub fn clip_to_cone(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
     let q = light_local(light, o);
-    let v = Vec3::new(
-        d.dot(light.axis_x.xyz()),
-        d.dot(light.axis_y.xyz()),
-        d.dot(light.axis_z.xyz()),
-    );
+    let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
     let (sin, cos) = light.cutoff.sin_cos();
     let (c2, s2) = (cos * cos, sin * sin);
     let a = c2 * (v.x * v.x + v.y * v.y) - s2 * v.z * v.z;
@@ -173,11 +169,7 @@ pub fn clip_to_cone(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) 
 /// `[t_min, t_max]`.
 pub fn clip_to_beam(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
     let q = light_local(light, o);
-    let v = Vec3::new(
-        d.dot(light.axis_x.xyz()),
-        d.dot(light.axis_y.xyz()),
-        d.dot(light.axis_z.xyz()),
-    );
+    let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
     let (mut lo, mut hi) = slab(q.z, v.z, 0.0, f32::MAX, t_min, t_max);
     if light.bounded != 0 {
         let (lx, hx) = slab(q.x, v.x, -light.half_extent_x, light.half_extent_x, lo, hi);
@@ -221,11 +213,7 @@ pub fn inverse_square_integral(a: f32, b: f32, t_c: f32, h: f32) -> f32 {
     let xa = (a - t_c) / h;
     let xb = (b - t_c) / h;
     let den = 1.0 + xa * xb;
-    let angle = if den > 0.0 {
-        ((xb - xa) / den).atan()
-    } else {
-        xb.atan() - xa.atan()
-    };
+    let angle = if den > 0.0 { ((xb - xa) / den).atan() } else { xb.atan() - xa.atan() };
     angle / h
 }
 
@@ -438,20 +426,14 @@ pub fn shafts_pixel(
         if lo < hi {
             // The ray in the light's frame: local(t) = q + v t.
             let q = light_local(&light, o);
-            let v = Vec3::new(
-                d.dot(light.axis_x.xyz()),
-                d.dot(light.axis_y.xyz()),
-                d.dot(light.axis_z.xyz()),
-            );
+            let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
             // Closest approach of the ray to a spotlight, for the exact 1/s^2.
             let to_light = light.position.xyz() - o;
             let t_c = to_light.dot(d);
             let h = (to_light - d * t_c).length();
             // Plane intervals [z_k, z_k + dz] in depth, shifted by the dither.
             let k0 = ((lo * cos_view - params.depth_near) / dz - offset).floor().max(-1.0) as i32;
-            let k1 = ((hi * cos_view - params.depth_near) / dz - offset)
-                .ceil()
-                .min(planes as f32 + 1.0) as i32;
+            let k1 = ((hi * cos_view - params.depth_near) / dz - offset).ceil().min(planes as f32 + 1.0) as i32;
             let mut k = k0;
             while k < k1 {
                 let z0 = params.depth_near + (k as f32 + offset) * dz;
@@ -523,16 +505,8 @@ pub fn shafts_kernel(
     let common = &common[0];
     if index < common.band_pixels {
         let distance = gbuffer[index as usize].normal_distance.w;
-        radiance[index as usize] = shafts_pixel(
-            common.band_start + index,
-            common,
-            &params[0],
-            lights,
-            light_map,
-            shadow,
-            tables,
-            distance,
-        );
+        radiance[index as usize] =
+            shafts_pixel(common.band_start + index, common, &params[0], lights, light_map, shadow, tables, distance);
     }
 }
 
@@ -544,10 +518,7 @@ mod tests {
     struct Lcg(u64);
     impl Lcg {
         fn next(&mut self) -> f32 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             ((self.0 >> 40) as f32) / (1u64 << 24) as f32
         }
         fn signed(&mut self) -> f32 {
@@ -599,10 +570,7 @@ mod tests {
                         assert!(inside(&light, p), "cutoff {cutoff}: t={t} in [{lo},{hi}] but outside");
                     }
                     if lo >= hi || t < lo - eps || t > hi + eps {
-                        assert!(
-                            !inside(&light, p),
-                            "cutoff {cutoff}: t={t} outside [{lo},{hi}] but inside"
-                        );
+                        assert!(!inside(&light, p), "cutoff {cutoff}: t={t} outside [{lo},{hi}] but inside");
                     }
                 }
             }
@@ -634,10 +602,7 @@ mod tests {
             // The antiderivative in f64 is exact; compare f32 to it.
             let exact = (((b - tc) as f64 / hh).atan() - ((a - tc) as f64 / hh).atan()) / hh;
             let got = inverse_square_integral(a, b, tc, h) as f64;
-            assert!(
-                (got - exact).abs() <= 1e-5 * exact.abs() + 1e-12,
-                "{a} {b} {tc} {h}: {got} vs {exact}"
-            );
+            assert!((got - exact).abs() <= 1e-5 * exact.abs() + 1e-12, "{a} {b} {tc} {h}: {got} vs {exact}");
         }
     }
 

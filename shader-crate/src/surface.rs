@@ -114,11 +114,7 @@ pub fn surface_pixel(
         return (Vec4::ZERO, no_surface());
     }
     let p = origin + dir * hit.distance;
-    let normal = if hit.normal.dot(dir) > 0.0 {
-        -hit.normal
-    } else {
-        hit.normal
-    };
+    let normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
     let albedo = materials[hit.material as usize].albedo;
     let radiance = direct_radiance(params, lights, geometry, light_map, shadow, p, normal, albedo)
         * transmittance(params.sigma_t, hit.distance);
@@ -151,15 +147,8 @@ pub fn surface_kernel(
     let params = &common[0];
     if index < params.band_pixels {
         let geometry = crate::scene_geometry(params, spheres, triangles, nodes);
-        let (color, texel) = surface_pixel(
-            params.band_start + index,
-            params,
-            lights,
-            &geometry,
-            materials,
-            light_map,
-            shadow,
-        );
+        let (color, texel) =
+            surface_pixel(params.band_start + index, params, lights, &geometry, materials, light_map, shadow);
         radiance[index as usize] = color;
         gbuffer[index as usize] = texel;
     }

@@ -34,12 +34,8 @@ pub mod shafts;
 pub mod surface;
 
 /// Every pass, in the order the renderer runs them.
-pub static PASSES: &[&dyn Pass] = &[
-    &shadow_maps::ShadowMaps,
-    &surface::Surface,
-    &shafts::Shafts,
-    &scatter_check::ScatterCheck,
-];
+pub static PASSES: &[&dyn Pass] =
+    &[&shadow_maps::ShadowMaps, &surface::Surface, &shafts::Shafts, &scatter_check::ScatterCheck];
 
 /// The registered pass named `name`.
 pub fn by_name(name: &str) -> Option<&'static dyn Pass> {
@@ -91,52 +87,26 @@ pub fn no_radiance() -> Vec<u8> {
 
 // The resources several passes share. A pass's own live in its module.
 
-pub static COMMON: Resource = Resource {
-    binding: 0,
-    name: "common parameters",
-    kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.common)),
-};
-pub static LIGHTS: Resource = Resource {
-    binding: 1,
-    name: "lights",
-    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.lights)),
-};
-pub static SPHERES: Resource = Resource {
-    binding: 2,
-    name: "spheres",
-    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.spheres)),
-};
-pub static TRIANGLES: Resource = Resource {
-    binding: 3,
-    name: "triangles",
-    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.triangles)),
-};
-pub static BVH_NODES: Resource = Resource {
-    binding: 4,
-    name: "BVH nodes",
-    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.bvh_nodes)),
-};
-pub static MATERIALS: Resource = Resource {
-    binding: 5,
-    name: "materials",
-    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.materials)),
-};
-pub static LIGHT_MAPS: Resource = Resource {
-    binding: 6,
-    name: "light maps",
-    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.light_map)),
-};
-pub static SHADOW_MAPS: Resource = Resource {
-    binding: 7,
-    name: "shadow maps",
-    kind: ResourceKind::Frame(|s| s.common.shadow_texel_count as u64 * 4),
-};
+pub static COMMON: Resource =
+    Resource { binding: 0, name: "common parameters", kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.common)) };
+pub static LIGHTS: Resource =
+    Resource { binding: 1, name: "lights", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.lights)) };
+pub static SPHERES: Resource =
+    Resource { binding: 2, name: "spheres", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.spheres)) };
+pub static TRIANGLES: Resource =
+    Resource { binding: 3, name: "triangles", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.triangles)) };
+pub static BVH_NODES: Resource =
+    Resource { binding: 4, name: "BVH nodes", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.bvh_nodes)) };
+pub static MATERIALS: Resource =
+    Resource { binding: 5, name: "materials", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.materials)) };
+pub static LIGHT_MAPS: Resource =
+    Resource { binding: 6, name: "light maps", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.light_map)) };
+pub static SHADOW_MAPS: Resource =
+    Resource { binding: 7, name: "shadow maps", kind: ResourceKind::Frame(|s| s.common.shadow_texel_count as u64 * 4) };
 pub static GBUFFER: Resource = Resource {
     binding: 8,
     name: "G-buffer",
-    kind: ResourceKind::PerPixel {
-        blank: || bytemuck::bytes_of(&slicelight_shaders::surface::no_surface()).to_vec(),
-    },
+    kind: ResourceKind::PerPixel { blank: || bytemuck::bytes_of(&slicelight_shaders::surface::no_surface()).to_vec() },
 };
 
 /// How a pass's kernel is dispatched.
@@ -159,18 +129,10 @@ pub struct Plan {
 
 impl Plan {
     pub fn skip(reason: impl Into<String>) -> Plan {
-        Plan {
-            runs: false,
-            reason: reason.into(),
-            invocations: 0,
-        }
+        Plan { runs: false, reason: reason.into(), invocations: 0 }
     }
     pub fn run(reason: impl Into<String>, invocations: u64) -> Plan {
-        Plan {
-            runs: true,
-            reason: reason.into(),
-            invocations,
-        }
+        Plan { runs: true, reason: reason.into(), invocations }
     }
 }
 
@@ -234,17 +196,11 @@ impl Buffer {
     /// `len` zeroed `T`s.
     pub fn zeroed<T: Pod>(len: usize) -> Buffer {
         let bytes = len * std::mem::size_of::<T>();
-        Buffer {
-            blocks: vec![Block::default(); bytes.div_ceil(16)],
-            bytes,
-        }
+        Buffer { blocks: vec![Block::default(); bytes.div_ceil(16)], bytes }
     }
 
     pub fn from_bytes(bytes: &[u8]) -> Buffer {
-        let mut b = Buffer {
-            blocks: vec![Block::default(); bytes.len().div_ceil(16)],
-            bytes: bytes.len(),
-        };
+        let mut b = Buffer { blocks: vec![Block::default(); bytes.len().div_ceil(16)], bytes: bytes.len() };
         bytemuck::cast_slice_mut::<Block, u8>(&mut b.blocks)[..bytes.len()].copy_from_slice(bytes);
         b
     }

@@ -44,19 +44,12 @@ impl ScatterCheck {
     /// `invocations / bins`, every overflow bin is saturated, none rejected.
     fn verdict(words: &[u32]) -> Result<String> {
         let p = PARAMS;
-        ensure!(
-            words.len() == words_for(2 * p.bins) as usize,
-            "{} accumulator words",
-            words.len()
-        );
+        ensure!(words.len() == words_for(2 * p.bins) as usize, "{} accumulator words", words.len());
         ensure!(words[0] == 0, "{} contributions rejected", words[0]);
         let expected = (p.invocations / p.bins) as f64;
         for b in 0..p.bins as usize {
             let (v, saturated) = decode(words[1 + 2 * b], words[2 + 2 * b], p.scale);
-            ensure!(
-                !saturated && v == expected,
-                "bin {b}: {v} (saturated: {saturated}), expected exactly {expected}"
-            );
+            ensure!(!saturated && v == expected, "bin {b}: {v} (saturated: {saturated}), expected exactly {expected}");
         }
         for b in p.bins as usize..2 * p.bins as usize {
             let (_, saturated) = decode(words[1 + 2 * b], words[2 + 2 * b], p.overflow_scale);
@@ -88,10 +81,7 @@ impl Pass for ScatterCheck {
 
     fn plan(&self, scene: &SceneData) -> Plan {
         if scene.requested_passes.iter().any(|p| p == self.name()) {
-            Plan::run(
-                "requested: fixed-point scatter accumulation against its closed form",
-                PARAMS.invocations as u64,
-            )
+            Plan::run("requested: fixed-point scatter accumulation against its closed form", PARAMS.invocations as u64)
         } else {
             Plan::skip("a self-check; run it with --pass scatter_check")
         }

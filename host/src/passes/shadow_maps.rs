@@ -50,9 +50,7 @@ impl Pass for ShadowMaps {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let geometry = scene.geometry();
         frame.write::<f32>(&SHADOW_MAPS, common.shadow_texel_count as usize, |_, out| {
-            for_each_invocation(out, 0, progress, |i, v| {
-                *v = shadow_map_texel(i, common, &scene.lights, &geometry)
-            });
+            for_each_invocation(out, 0, progress, |i, v| *v = shadow_map_texel(i, common, &scene.lights, &geometry));
         });
     }
 
@@ -65,14 +63,7 @@ impl Pass for ShadowMaps {
         // the other: such flips are allowed on at most 1e-4 of the texels.
         let (outliers, worst) = count_differences(g, c, |c| 1e-5 * c.abs().max(1.0));
         let allowed = c.len() / 10_000 + 1;
-        ensure!(
-            outliers <= allowed,
-            "{outliers} of {} shadow texels differ (allowed {allowed})",
-            c.len()
-        );
-        Ok(format!(
-            "{} texels, {outliers} silhouette flips, worst other difference {worst:e} m",
-            c.len()
-        ))
+        ensure!(outliers <= allowed, "{outliers} of {} shadow texels differ (allowed {allowed})", c.len());
+        Ok(format!("{} texels, {outliers} silhouette flips, worst other difference {worst:e} m", c.len()))
     }
 }

@@ -25,11 +25,8 @@ pub static SHAFT_TABLES: Resource = Resource {
     kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.shafts.tables)),
 };
 /// In-scattered radiance per pixel (rgb); w = the `H I_l` samples evaluated.
-pub static SHAFTS_RADIANCE: Resource = Resource {
-    binding: 12,
-    name: "shafts radiance",
-    kind: ResourceKind::PerPixel { blank: no_radiance },
-};
+pub static SHAFTS_RADIANCE: Resource =
+    Resource { binding: 12, name: "shafts radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
 
 /// Settings of the shafts-of-light pass (the scene's `[shafts]` table).
 #[derive(Debug, Clone, Copy, Deserialize)]
@@ -96,11 +93,7 @@ pub fn configure(scene: &mut SceneData, s: Settings) -> Result<()> {
         bail!(invalid("subplanes", "a sub-plane count in 1..=1024", s.subplanes));
     }
     if !(2..=65536).contains(&s.phase_table_size) {
-        bail!(invalid(
-            "phase_table_size",
-            "a table size in 2..=65536",
-            s.phase_table_size
-        ));
+        bail!(invalid("phase_table_size", "a table size in 2..=65536", s.phase_table_size));
     }
     if !s.h_table_size.iter().all(|n| (2..=4096).contains(n)) {
         bail!(invalid("h_table_size", "two table sizes in 2..=4096", s.h_table_size));
@@ -121,13 +114,7 @@ pub fn configure(scene: &mut SceneData, s: Settings) -> Result<()> {
         hi = hi.max(l.position.truncate());
     }
     let corners: Vec<Vec3> = (0..8)
-        .map(|i| {
-            Vec3::new(
-                [lo.x, hi.x][i & 1],
-                [lo.y, hi.y][(i >> 1) & 1],
-                [lo.z, hi.z][(i >> 2) & 1],
-            )
-        })
+        .map(|i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][(i >> 2) & 1]))
         .collect();
     let depths = corners.iter().map(|c| (*c - camera).dot(forward));
     let near = depths.clone().fold(f32::INFINITY, f32::min).max(0.0);
@@ -135,11 +122,8 @@ pub fn configure(scene: &mut SceneData, s: Settings) -> Result<()> {
     // The h table spans every light-to-point and eye-to-point distance in
     // the bounds; the widest view ray (through an image corner) is the
     // longest for a given depth.
-    let corner_cos = forward.dot(
-        (common.camera_forward + common.camera_right + common.camera_up)
-            .truncate()
-            .normalize(),
-    );
+    let corner_cos =
+        forward.dot((common.camera_forward + common.camera_right + common.camera_up).truncate().normalize());
     let h_s_max = scene
         .lights
         .iter()
@@ -181,11 +165,7 @@ pub fn configure(scene: &mut SceneData, s: Settings) -> Result<()> {
     } else {
         Vec::new()
     };
-    scene.shafts = Setup {
-        settings: s,
-        params,
-        tables,
-    };
+    scene.shafts = Setup { settings: s, params, tables };
     Ok(())
 }
 
@@ -207,20 +187,13 @@ fn light_in_view(p: &CommonParams, shafts: &ShaftsParams, l: &GpuLight) -> bool 
         return true;
     }
     let camera = p.camera_position.truncate();
-    let (f, r, u) = (
-        p.camera_forward.truncate(),
-        p.camera_right.truncate(),
-        p.camera_up.truncate(),
-    );
+    let (f, r, u) = (p.camera_forward.truncate(), p.camera_right.truncate(), p.camera_up.truncate());
     let apex = l.position.truncate();
     let axis = l.axis_z.truncate();
     // Every point the planes sample lies in the frustum up to depth_far, the
     // convex hull of the camera and the four far corners.
     let far_corners = [f + r + u, f + r - u, f - r + u, f - r - u].map(|c| camera + c * shafts.depth_far);
-    let reach = far_corners
-        .iter()
-        .map(|c| (*c - apex).length())
-        .fold((camera - apex).length(), f32::max);
+    let reach = far_corners.iter().map(|c| (*c - apex).length()).fold((camera - apex).length(), f32::max);
     // A ball around the spherical sector {angle <= cutoff, |x - apex| <= reach}.
     let k = 0.5 * reach;
     let (sin, cos) = l.cutoff.sin_cos();
@@ -250,15 +223,7 @@ impl Pass for Shafts {
         "shafts::shafts_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![
-            COMMON,
-            LIGHTS,
-            LIGHT_MAPS,
-            SHADOW_MAPS,
-            GBUFFER,
-            SHAFTS_PARAMS,
-            SHAFT_TABLES
-        ]
+        resources![COMMON, LIGHTS, LIGHT_MAPS, SHADOW_MAPS, GBUFFER, SHAFTS_PARAMS, SHAFT_TABLES]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SHAFTS_RADIANCE]
@@ -301,10 +266,7 @@ impl Pass for Shafts {
             * s.planes as u64
             * s.subplanes as u64
             * scene.lights.len() as u64;
-        vec![
-            ("shaft_samples", evaluated.round() as u64),
-            ("shaft_samples_naive", naive),
-        ]
+        vec![("shaft_samples", evaluated.round() as u64), ("shaft_samples_naive", naive)]
     }
 
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
@@ -314,16 +276,7 @@ impl Pass for Shafts {
             let shadow = frame.get::<f32>(&SHADOW_MAPS);
             for_each_invocation(out, common.band_start, progress, |i, px| {
                 let distance = gbuffer[(i - common.band_start) as usize].normal_distance.w;
-                *px = shafts_pixel(
-                    i,
-                    common,
-                    &s.params,
-                    &scene.lights,
-                    &scene.light_map,
-                    shadow,
-                    &s.tables,
-                    distance,
-                );
+                *px = shafts_pixel(i, common, &s.params, &scene.lights, &scene.light_map, shadow, &s.tables, distance);
             });
         });
     }
@@ -343,11 +296,7 @@ impl Pass for Shafts {
         // Bounds, with a 3x margin: 3e-4 exact, 5e-4 tables. A sub-plane sample can flip where
         // its shadow test or cone test sits on a threshold (a plane boundary
         // rounded differently moves it): at most 1e-3 of the values may.
-        let bound = if scene.shafts.settings.mode == ShaftMode::Tables {
-            5e-4
-        } else {
-            3e-4
-        };
+        let bound = if scene.shafts.settings.mode == ShaftMode::Tables { 5e-4 } else { 3e-4 };
         let (outliers, worst) = count_differences(&gr, &cr, |v| bound * peak.max(v.abs()));
         let allowed = cr.len() / 1000 + 1;
         ensure!(
@@ -358,10 +307,7 @@ impl Pass for Shafts {
         // The sample counts (w) are integers; a flipped clip bound may move one
         // interval's sub-planes in or out of a pixel's count.
         let counts_differ = g.iter().zip(c).filter(|(a, b)| a.w != b.w).count();
-        ensure!(
-            counts_differ <= allowed,
-            "{counts_differ} sample counts differ (allowed {allowed})"
-        );
+        ensure!(counts_differ <= allowed, "{counts_differ} sample counts differ (allowed {allowed})");
         Ok(format!(
             "{:?} mode: {} pixels, {outliers} flipped values, worst other difference {:.2e} of the peak {peak:e}, {counts_differ} sample counts differ",
             scene.shafts.settings.mode,

@@ -12,11 +12,8 @@ use crate::cpu::for_each_invocation2;
 use crate::scene::SceneData;
 
 /// Attenuated surface radiance per pixel (rgb; w = 0).
-pub static SURFACE_RADIANCE: Resource = Resource {
-    binding: 9,
-    name: "surface radiance",
-    kind: ResourceKind::PerPixel { blank: no_radiance },
-};
+pub static SURFACE_RADIANCE: Resource =
+    Resource { binding: 9, name: "surface radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
 
 /// Settings of the surface pass (the scene's `[surface]` table).
 #[derive(Debug, Clone, Copy, Default, serde::Deserialize)]
@@ -55,16 +52,7 @@ impl Pass for Surface {
         "surface::surface_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![
-            COMMON,
-            LIGHTS,
-            SPHERES,
-            TRIANGLES,
-            BVH_NODES,
-            MATERIALS,
-            LIGHT_MAPS,
-            SHADOW_MAPS
-        ]
+        resources![COMMON, LIGHTS, SPHERES, TRIANGLES, BVH_NODES, MATERIALS, LIGHT_MAPS, SHADOW_MAPS]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![GBUFFER, SURFACE_RADIANCE]
@@ -83,10 +71,7 @@ impl Pass for Surface {
             } else {
                 "shadow rays"
             };
-            Plan::run(
-                format!("surfaces seen through the medium (eq. 1, first term), {shadows}, G-buffer"),
-                0,
-            )
+            Plan::run(format!("surfaces seen through the medium (eq. 1, first term), {shadows}, G-buffer"), 0)
         } else {
             Plan::skip("no geometry")
         }
@@ -104,15 +89,8 @@ impl Pass for Surface {
             common.band_start,
             progress,
             |i, color, texel| {
-                (*color, *texel) = surface_pixel(
-                    i,
-                    common,
-                    &scene.lights,
-                    &geometry,
-                    &scene.materials,
-                    &scene.light_map,
-                    shadow,
-                );
+                (*color, *texel) =
+                    surface_pixel(i, common, &scene.lights, &geometry, &scene.materials, &scene.light_map, shadow);
             },
         );
         frame.insert(&SURFACE_RADIANCE, radiance);
@@ -120,12 +98,7 @@ impl Pass for Surface {
     }
 
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
-        let rgb = |f: &Frame| {
-            f.get::<Vec4>(&SURFACE_RADIANCE)
-                .iter()
-                .flat_map(|p| p.to_array())
-                .collect::<Vec<f32>>()
-        };
+        let rgb = |f: &Frame| f.get::<Vec4>(&SURFACE_RADIANCE).iter().flat_map(|p| p.to_array()).collect::<Vec<f32>>();
         let (g, c) = (rgb(gpu), rgb(cpu));
         let peak = c.iter().fold(0.0f32, |m, v| m.max(*v));
         // Radiance is a product of about 20 f32 factors (exp, sqrt, dot
@@ -134,20 +107,11 @@ impl Pass for Surface {
         // shadow test sits on the bias threshold: at most 1e-3 of the values may.
         let (outliers, worst) = count_differences(&g, &c, |v| 1e-5 * peak.max(v.abs()));
         let allowed = c.len() / 1000 + 1;
-        ensure!(
-            outliers <= allowed,
-            "radiance: {outliers} of {} values differ (allowed {allowed})",
-            c.len()
-        );
+        ensure!(outliers <= allowed, "radiance: {outliers} of {} values differ (allowed {allowed})", c.len());
         // The G-buffer: distances like the shadow depths (1e-5 relative),
         // normals to 1e-5, ids exactly, except at silhouette flips.
         let (gg, cg) = (gpu.get::<GBufferTexel>(&GBUFFER), cpu.get::<GBufferTexel>(&GBUFFER));
-        ensure!(
-            gg.len() == cg.len(),
-            "G-buffers of {} and {} texels",
-            gg.len(),
-            cg.len()
-        );
+        ensure!(gg.len() == cg.len(), "G-buffers of {} and {} texels", gg.len(), cg.len());
         let flips = gg
             .iter()
             .zip(cg)
@@ -160,11 +124,7 @@ impl Pass for Surface {
             })
             .count();
         let allowed_texels = cg.len() / 1000 + 1;
-        ensure!(
-            flips <= allowed_texels,
-            "G-buffer: {flips} of {} texels differ (allowed {allowed_texels})",
-            cg.len()
-        );
+        ensure!(flips <= allowed_texels, "G-buffer: {flips} of {} texels differ (allowed {allowed_texels})", cg.len());
         Ok(format!(
             "{} pixels, {outliers} flipped radiance values, worst other difference {worst:e} (peak {peak:e}); {flips} G-buffer texels differ",
             cg.len()

@@ -24,21 +24,13 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
         let field = format!("object[{i}]");
         let id = i as u32;
         let material = |a: [f32; 3]| -> Result<GpuMaterial> {
-            Ok(GpuMaterial {
-                albedo: albedo(&format!("{field}.albedo"), a)?,
-                kind: MATERIAL_DIFFUSE,
-                _pad: [0; 3],
-            })
+            Ok(GpuMaterial { albedo: albedo(&format!("{field}.albedo"), a)?, kind: MATERIAL_DIFFUSE, _pad: [0; 3] })
         };
         match obj {
             Object::Sphere(s) => {
                 let c = finite3(&format!("{field}.center"), s.center)?;
                 if !(s.radius.is_finite() && s.radius > 0.0) {
-                    bail!(invalid(
-                        &format!("{field}.radius"),
-                        "a positive number of metres",
-                        s.radius
-                    ));
+                    bail!(invalid(&format!("{field}.radius"), "a positive number of metres", s.radius));
                 }
                 out.materials.push(material(s.albedo)?);
                 out.spheres.push(GpuSphere {
@@ -62,19 +54,11 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
                 let u = finite3(&format!("{field}.u"), q.u)?;
                 let v = finite3(&format!("{field}.v"), q.v)?;
                 if u.cross(v).length() < 1e-12 {
-                    bail!(invalid(
-                        &format!("{field}.v"),
-                        "an edge not parallel to u and both non-zero",
-                        q.v
-                    ));
+                    bail!(invalid(&format!("{field}.v"), "an edge not parallel to u and both non-zero", q.v));
                 }
                 out.materials.push(material(q.albedo)?);
                 let (hu, hv) = (u * 0.5, v * 0.5);
-                push_quad(
-                    &mut out.triangles,
-                    [c - hu - hv, c + hu - hv, c + hu + hv, c - hu + hv],
-                    id,
-                );
+                push_quad(&mut out.triangles, [c - hu - hv, c + hu - hv, c + hu + hv, c - hu + hv], id);
             }
             Object::Mesh(mesh) => {
                 out.materials.push(material(mesh.albedo)?);
@@ -107,11 +91,7 @@ fn push_quad(tris: &mut Vec<GpuTriangle>, [a, b, c, d]: [Vec3; 4], object: u32) 
 
 fn push_box(tris: &mut Vec<GpuTriangle>, lo: Vec3, hi: Vec3, object: u32) {
     let c = |x: bool, y: bool, z: bool| {
-        Vec3::new(
-            if x { hi.x } else { lo.x },
-            if y { hi.y } else { lo.y },
-            if z { hi.z } else { lo.z },
-        )
+        Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
     };
     let (f, t) = (false, true);
     push_quad(tris, [c(f, f, f), c(t, f, f), c(t, t, f), c(f, t, f)], object);
@@ -129,11 +109,7 @@ fn push_torus(field: &str, t: &TorusObject, object: u32, tris: &mut Vec<GpuTrian
     let c = finite3(&format!("{field}.center"), t.center)?;
     let axis = unit3(&format!("{field}.axis"), t.axis)?;
     if !(t.major_radius.is_finite() && t.major_radius > 0.0) {
-        bail!(invalid(
-            &format!("{field}.major_radius"),
-            "a positive number of metres",
-            t.major_radius
-        ));
+        bail!(invalid(&format!("{field}.major_radius"), "a positive number of metres", t.major_radius));
     }
     if !(t.minor_radius.is_finite() && t.minor_radius > 0.0 && t.minor_radius < t.major_radius) {
         bail!(invalid(
@@ -161,11 +137,7 @@ fn push_torus(field: &str, t: &TorusObject, object: u32, tris: &mut Vec<GpuTrian
     };
     for i in 0..nu {
         for j in 0..nv {
-            push_quad(
-                tris,
-                [point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1)],
-                object,
-            );
+            push_quad(tris, [point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1)], object);
         }
     }
     Ok(())
@@ -173,11 +145,7 @@ fn push_torus(field: &str, t: &TorusObject, object: u32, tris: &mut Vec<GpuTrian
 
 fn load_mesh(field: &str, base: &Path, m: &MeshObject, object: u32, tris: &mut Vec<GpuTriangle>) -> Result<()> {
     let path = base.join(&m.file);
-    let options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: true,
-        ..Default::default()
-    };
+    let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (models, _) = tobj::load_obj(&path, &options)
         .map_err(|e| anyhow!("{field}.file: cannot read mesh '{}': {e}", path.display()))?;
     let translate = finite3(&format!("{field}.translate"), m.translate)?;
@@ -196,14 +164,8 @@ fn load_mesh(field: &str, base: &Path, m: &MeshObject, object: u32, tris: &mut V
     if tris.len() == before {
         return Err(anyhow!("{field}.file: mesh '{}' has no triangles", path.display()));
     }
-    if let Some(t) = tris[before..]
-        .iter()
-        .find(|t| !(t.v0.is_finite() && t.v1.is_finite() && t.v2.is_finite()))
-    {
-        return Err(anyhow!(
-            "{field}.file: mesh '{}' has a vertex that is not finite: {t:?}",
-            path.display()
-        ));
+    if let Some(t) = tris[before..].iter().find(|t| !(t.v0.is_finite() && t.v1.is_finite() && t.v2.is_finite())) {
+        return Err(anyhow!("{field}.file: mesh '{}' has a vertex that is not finite: {t:?}", path.display()));
     }
     Ok(())
 }

@@ -23,13 +23,10 @@ impl Lights {
     fn push(&mut self, field: &str, mut light: GpuLight, map: Option<(u32, u32, Vec<Vec4>)>) -> Result<()> {
         let res = light.shadow_resolution;
         light.shadow_offset = self.shadow_texels;
-        self.shadow_texels = self.shadow_texels.checked_add(res * res).ok_or_else(|| {
-            invalid(
-                &format!("{field}.shadow_map_resolution"),
-                "fewer shadow-map texels in all",
-                res,
-            )
-        })?;
+        self.shadow_texels = self
+            .shadow_texels
+            .checked_add(res * res)
+            .ok_or_else(|| invalid(&format!("{field}.shadow_map_resolution"), "fewer shadow-map texels in all", res))?;
         if let Some((w, h, texels)) = map {
             light.light_map_offset = self.light_map.len() as u32;
             light.light_map_width = w;
@@ -70,19 +67,11 @@ fn spotlight(field: &str, s: &Spotlight, base: &Path) -> Result<(GpuLight, Light
     let z = unit3(&format!("{field}.direction"), s.direction)?;
     let (x, y) = light_frame(field, z, s.up)?;
     if !(s.cutoff_deg > 0.0 && s.cutoff_deg < 90.0) {
-        bail!(invalid(
-            &format!("{field}.cutoff_deg"),
-            "an angle in (0, 90) degrees",
-            s.cutoff_deg
-        ));
+        bail!(invalid(&format!("{field}.cutoff_deg"), "an angle in (0, 90) degrees", s.cutoff_deg));
     }
     let beam = s.beam_deg.unwrap_or(s.cutoff_deg);
     if !(beam > 0.0 && beam <= s.cutoff_deg) {
-        bail!(invalid(
-            &format!("{field}.beam_deg"),
-            "an angle in (0, cutoff_deg] degrees",
-            beam
-        ));
+        bail!(invalid(&format!("{field}.beam_deg"), "an angle in (0, cutoff_deg] degrees", beam));
     }
     let light = GpuLight {
         position: pos.extend(1.0),
@@ -168,11 +157,7 @@ fn light_frame(field: &str, z: Vec3, up: Option<[f32; 3]>) -> Result<(Vec3, Vec3
     };
     let x = z.cross(up);
     if x.length() < 1e-4 {
-        return Err(invalid(
-            &format!("{field}.up"),
-            "an up vector not parallel to the direction",
-            up,
-        ));
+        return Err(invalid(&format!("{field}.up"), "an up vector not parallel to the direction", up));
     }
     let x = x.normalize();
     Ok((x, z.cross(x)))

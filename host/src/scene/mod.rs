@@ -83,11 +83,7 @@ impl SceneData {
     /// Sets the sub-pixel samples per pixel (`[camera] samples_per_pixel`, `--spp`).
     pub fn set_samples_per_pixel(&mut self, spp: u32) -> Result<()> {
         if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&spp) {
-            bail!(invalid(
-                "samples_per_pixel",
-                &format!("a sample count in 1..={MAX_SAMPLES_PER_PIXEL}"),
-                spp
-            ));
+            bail!(invalid("samples_per_pixel", &format!("a sample count in 1..={MAX_SAMPLES_PER_PIXEL}"), spp));
         }
         self.common.samples_per_pixel = spp;
         Ok(())
@@ -118,11 +114,7 @@ pub fn load(path: &Path) -> Result<SceneData> {
 fn camera(cam: &Camera) -> Result<CommonParams> {
     let [w, h] = cam.resolution;
     if w == 0 || h == 0 {
-        bail!(invalid(
-            "camera.resolution",
-            "two positive pixel counts",
-            cam.resolution
-        ));
+        bail!(invalid("camera.resolution", "two positive pixel counts", cam.resolution));
     }
     if (w as u64) * (h as u64) > u32::MAX as u64 / 4 {
         bail!(invalid("camera.resolution", "at most 2^30 pixels", cam.resolution));
@@ -147,11 +139,7 @@ fn camera(cam: &Camera) -> Result<CommonParams> {
     let up = unit3("camera.up", cam.up)?;
     let right = forward.cross(up);
     if right.length() < 1e-4 {
-        bail!(invalid(
-            "camera.up",
-            "an up vector not parallel to the view direction",
-            cam.up
-        ));
+        bail!(invalid("camera.up", "an up vector not parallel to the view direction", cam.up));
     }
     let right = right.normalize();
     let true_up = right.cross(forward);

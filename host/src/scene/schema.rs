@@ -51,11 +51,7 @@ pub struct Medium {
 
 impl Default for Medium {
     fn default() -> Self {
-        Medium {
-            sigma_s: [0.0; 3],
-            sigma_t: [0.0; 3],
-            phase: Phase::Isotropic,
-        }
+        Medium { sigma_s: [0.0; 3], sigma_t: [0.0; 3], phase: Phase::Isotropic }
     }
 }
 

@@ -86,7 +86,27 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
     fog.requested_passes.push("scatter_check".into());
     let mut mapped = window_scene();
     mapped.common.surface_shadows = slicelight::shaders::types::SHADOWS_MAP;
-    vec![("fog_spot", fog), ("fog_spot, tables", tables), ("window", window_scene()), ("window, sample 3 of 4", aa)]
+    let mut direct = sky("sky_sunset", 180, 120);
+    direct.sky.params.use_sky_view = 0;
+    vec![
+        ("fog_spot", fog),
+        ("fog_spot, tables", tables),
+        ("window", window_scene()),
+        ("window, sample 3 of 4", aa),
+        ("sky_noon", sky("sky_noon", 128, 128)),
+        ("sky_twilight", sky("sky_twilight", 128, 128)),
+        ("sky_sunset, per-pixel sky", direct),
+        ("sun_garden", sky("sun_garden", 180, 120)),
+    ]
+}
+
+/// A shipped scene at a smaller resolution of the same aspect.
+fn sky(name: &str, width: u32, height: u32) -> SceneData {
+    let mut data = slicelight::scene::load(&common::root().join(format!("scenes/{name}.toml"))).unwrap();
+    data.common.width = width;
+    data.common.height = height;
+    data.common.band_pixels = width * height;
+    data
 }
 
 /// Every registered pass, on every scene that runs it: the CPU runs all

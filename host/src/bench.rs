@@ -255,7 +255,7 @@ pub fn pareto(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
 
 /// Fonts for the plots: DejaVu Sans from the system (Debian's
 /// fonts-dejavu-core, which scripts/setup.sh installs).
-fn register_font() -> Result<()> {
+pub(crate) fn register_font() -> Result<()> {
     const CANDIDATES: &[&str] = &[
         "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
         "/usr/share/fonts/TTF/DejaVuSans.ttf",
@@ -270,7 +270,7 @@ fn register_font() -> Result<()> {
     Ok(())
 }
 
-const COLORS: [RGBColor; 6] = [
+pub(crate) const COLORS: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -282,7 +282,7 @@ const COLORS: [RGBColor; 6] = [
 type Series = (String, Vec<(f64, f64)>);
 
 /// The legend box, the same on every plot.
-fn draw_legend<'a, CT: plotters::coord::CoordTranslate>(
+pub(crate) fn draw_legend<'a, CT: plotters::coord::CoordTranslate>(
     chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>,
 ) -> Result<()> {
     chart
@@ -298,7 +298,7 @@ fn draw_legend<'a, CT: plotters::coord::CoordTranslate>(
 const PLOT_SIZE: (u32, u32) = (900, 600);
 
 /// Draws into an RGB buffer with `draw` and writes it as a PNG, whole or not at all.
-fn save_plot(
+pub(crate) fn save_plot(
     path: &Path,
     draw: impl FnOnce(DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>,
 ) -> Result<()> {

@@ -3,6 +3,7 @@
 //! top-level `tests/` folder use it.
 
 pub mod bench;
+pub mod bench_sky;
 pub mod bvh;
 pub mod cpu;
 pub mod gpu;
@@ -12,5 +13,6 @@ pub mod passes;
 pub mod reference;
 pub mod render;
 pub mod scene;
+pub mod sky_reference;
 
 pub use slicelight_shaders as shaders;

@@ -59,10 +59,15 @@ enum Command {
         #[arg(long)]
         spp: Option<u32>,
     },
-    /// Time against error of the shafts pass over its settings: CSV and PNG plots.
+    /// Time against error over the settings: of the shafts pass (scenes in
+    /// a medium) and of the sky passes (scenes of sky only): CSVs and PNG plots.
     Bench {
-        /// Scene files (default: the paper's Fig. 6 and Fig. 7 scenes and the stained-glass window).
+        /// Scene files (default: the paper's Fig. 6 and Fig. 7 scenes and the
+        /// stained-glass window; with --sky the noon, sunset and twilight skies).
         scenes: Vec<PathBuf>,
+        /// Benchmark the sky scenes (scenes/sky_noon, sky_sunset, sky_twilight) by default.
+        #[arg(long)]
+        sky: bool,
         /// Backends to time (give it more than once).
         #[arg(long, value_enum, default_values = ["cpu"])]
         backend: Vec<BackendChoice>,
@@ -247,21 +252,49 @@ fn run(cli: Cli) -> Result<()> {
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
             write_outputs(&output, &pixels, &[], &data)
         }
-        Command::Bench { scenes, backend, repeats, stride, quick, out_dir } => {
-            let scenes = if scenes.is_empty() {
-                ["fig6_sphere", "fig7_stage", "stained_glass"]
-                    .iter()
-                    .map(|s| PathBuf::from(format!("scenes/{s}.toml")))
-                    .collect()
+        Command::Bench { scenes, sky, backend, repeats, stride, quick, out_dir } => {
+            let scenes: Vec<PathBuf> = if scenes.is_empty() {
+                let names: &[&str] = if sky {
+                    &["sky_noon", "sky_sunset", "sky_twilight"]
+                } else {
+                    &["fig6_sphere", "fig7_stage", "stained_glass"]
+                };
+                names.iter().map(|s| PathBuf::from(format!("scenes/{s}.toml"))).collect()
             } else {
                 scenes
             };
-            let opts = bench::Options { scenes, backends: backend, repeats, stride, quick, out_dir: out_dir.clone() };
-            bench::run(&opts)?;
-            eprintln!(
-                "wrote {0}/bench.csv, {0}/error_vs_planes.png, {0}/error_vs_subplanes.png, {0}/time_vs_error.png",
-                out_dir.display()
-            );
+            // Scenes of sky alone go to the sky sweep, the rest to the shafts sweep.
+            let mut sky_scenes = Vec::new();
+            let mut shaft_scenes = Vec::new();
+            for s in scenes {
+                let data = scene::load(&s)?;
+                if data.sky.enabled && !data.scatters() {
+                    sky_scenes.push(s);
+                } else {
+                    shaft_scenes.push(s);
+                }
+            }
+            if !shaft_scenes.is_empty() {
+                let opts = bench::Options {
+                    scenes: shaft_scenes,
+                    backends: backend.clone(),
+                    repeats,
+                    stride,
+                    quick,
+                    out_dir: out_dir.clone(),
+                };
+                bench::run(&opts)?;
+                eprintln!(
+                    "wrote {0}/bench.csv, {0}/error_vs_planes.png, {0}/error_vs_subplanes.png, {0}/time_vs_error.png",
+                    out_dir.display()
+                );
+            }
+            if !sky_scenes.is_empty() {
+                let backends: Vec<render::Backend> =
+                    backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
+                slicelight::bench_sky::run(&sky_scenes, &backends, repeats, stride, quick, &out_dir)?;
+                eprintln!("wrote {0}/sky_bench.csv, {0}/sky_time_vs_error.png", out_dir.display());
+            }
             Ok(())
         }
         Command::Compare { image, reference, exposure, diff } => {

@@ -16,7 +16,12 @@
 use glam::{DVec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use slicelight_shaders::camera::sample_offset;
-use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL};
+use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, PROJECTION_FISHEYE};
+
+use crate::sky_reference::SkyReference;
+
+/// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`).
+pub const SKY_TOLERANCE: f64 = 1e-7;
 
 use crate::scene::SceneData;
 
@@ -160,15 +165,31 @@ fn light_map(data: &SceneData, light: &GpuLight, u: f64, v: f64) -> DVec3 {
 }
 
 /// The view ray through sub-pixel sample `sample` of pixel `(x, y)`, in
-/// f64, at the kernels' sample position (`camera::sample_offset`).
-fn camera_ray(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3, DVec3) {
+/// f64, at the kernels' sample position (`camera::sample_offset`); `None`
+/// outside a fisheye's image circle.
+fn camera_ray(data: &SceneData, x: u32, y: u32, sample: u32) -> Option<(DVec3, DVec3)> {
     let p = &data.common;
     let offset = sample_offset(sample, p.samples_per_pixel).as_dvec2();
+    if p.projection == PROJECTION_FISHEYE {
+        // Equidistant: the angle from the view direction is 90 degrees times
+        // the distance from the image centre over the inscribed circle's radius.
+        let size = p.width.min(p.height) as f64;
+        let cx = (2.0 * (x as f64 + offset.x) - p.width as f64) / size;
+        let cy = (p.height as f64 - 2.0 * (y as f64 + offset.y)) / size;
+        let radius = cx.hypot(cy);
+        if radius > 1.0 {
+            return None;
+        }
+        let theta = radius * std::f64::consts::FRAC_PI_2;
+        let side = if radius > 0.0 { (d3(p.camera_right) * cx + d3(p.camera_up) * cy) / radius } else { DVec3::ZERO };
+        let d = (d3(p.camera_forward) * theta.cos() + side * theta.sin()).normalize();
+        return Some((d3(p.camera_position), d));
+    }
     let ndc_x = 2.0 * (x as f64 + offset.x) / p.width as f64 - 1.0;
     let ndc_y = 1.0 - 2.0 * (y as f64 + offset.y) / p.height as f64;
     let o = d3(p.camera_position);
     let d = (d3(p.camera_forward) + d3(p.camera_right) * ndc_x + d3(p.camera_up) * ndc_y).normalize();
-    (o, d)
+    Some((o, d))
 }
 
 /// A point in a light's frame, the unit direction from it toward the light,
@@ -189,9 +210,13 @@ fn toward_light(light: &GpuLight, point: DVec3) -> (DVec3, DVec3, f64) {
 /// the surface (infinite where the ray meets none), f64.
 fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3, f64) {
     let p = &data.common;
-    let (o, d) = camera_ray(data, x, y, sample);
-    let Some(hit) = nearest(data, o, d, 0.0, f64::INFINITY) else {
+    let Some((o, d)) = camera_ray(data, x, y, sample) else {
         return (DVec3::ZERO, f64::INFINITY);
+    };
+    let Some(hit) = nearest(data, o, d, 0.0, f64::INFINITY) else {
+        // The sky (if any) where the ray meets no surface.
+        let sky = data.sky.enabled.then(|| SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(d));
+        return (sky.unwrap_or(DVec3::ZERO), f64::INFINITY);
     };
     let point = o + d * hit.t;
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
@@ -261,7 +286,9 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f6
         return DVec3::ZERO;
     }
     let sigma_t = d3(p.sigma_t);
-    let (o, d) = camera_ray(data, x, y, sub);
+    let Some((o, d)) = camera_ray(data, x, y, sub) else {
+        return DVec3::ZERO;
+    };
     let cos_view = d.dot(d3(p.camera_forward));
     let range = &data.shafts.params;
     let t0 = range.depth_near as f64 / cos_view;

@@ -1,10 +1,12 @@
-//! The pinhole camera: view rays through sub-pixel sample positions.
+//! The cameras (pinhole and equidistant fisheye): view rays through
+//! sub-pixel sample positions.
 
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
 use crate::glam::{Vec2, Vec3, Vec4Swizzles};
-use crate::types::CommonParams;
+use crate::types::{CommonParams, PROJECTION_FISHEYE};
+use core::f32::consts::FRAC_PI_2;
 
 /// Position of sub-pixel sample `index` of `count` inside the pixel, each
 /// coordinate in [0, 1) from the pixel's top-left corner: stratified, so
@@ -37,18 +39,80 @@ pub fn pixel_ndc(params: &CommonParams, x: u32, y: u32, offset: Vec2) -> Vec2 {
     )
 }
 
+/// A fisheye's image coordinates of the point at `offset` inside pixel
+/// `(x, y)`: the inscribed circle of the image is the unit circle (y up).
+pub fn fisheye_coords(params: &CommonParams, x: u32, y: u32, offset: Vec2) -> Vec2 {
+    let size = params.width.min(params.height) as f32;
+    Vec2::new(
+        (2.0 * (x as f32 + offset.x) - params.width as f32) / size,
+        (params.height as f32 - 2.0 * (y as f32 + offset.y)) / size,
+    )
+}
+
+/// Whether the current sub-pixel sample of pixel `(x, y)` sees the scene:
+/// always for a pinhole, inside the image circle for a fisheye.
+pub fn in_image(params: &CommonParams, x: u32, y: u32) -> bool {
+    if params.projection != PROJECTION_FISHEYE {
+        return true;
+    }
+    let offset = sample_offset(params.sample_index, params.samples_per_pixel);
+    fisheye_coords(params, x, y, offset).length_squared() <= 1.0
+}
+
 /// Unit view ray through the current sub-pixel sample (`params.sample_index`)
-/// of pixel `(x, y)`: origin and direction.
+/// of pixel `(x, y)`: origin and direction. A fisheye's ray is at the angle
+/// `90 deg * |c|` from the view direction, `c` the sample's `fisheye_coords`
+/// (clamped to the circle; outside it see `in_image`).
 pub fn camera_ray(params: &CommonParams, x: u32, y: u32) -> (Vec3, Vec3) {
     let offset = sample_offset(params.sample_index, params.samples_per_pixel);
+    let forward = params.camera_forward.xyz();
+    if params.projection == PROJECTION_FISHEYE {
+        let c = fisheye_coords(params, x, y, offset);
+        let radius = c.length();
+        let theta = radius.min(1.0) * FRAC_PI_2;
+        let side = if radius > 0.0 {
+            (params.camera_right.xyz() * c.x + params.camera_up.xyz() * c.y) / radius
+        } else {
+            Vec3::ZERO
+        };
+        return (params.camera_position.xyz(), (forward * theta.cos() + side * theta.sin()).normalize());
+    }
     let ndc = pixel_ndc(params, x, y, offset);
-    let dir = params.camera_forward.xyz() + params.camera_right.xyz() * ndc.x + params.camera_up.xyz() * ndc.y;
+    let dir = forward + params.camera_right.xyz() * ndc.x + params.camera_up.xyz() * ndc.y;
     (params.camera_position.xyz(), dir.normalize())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fisheye_is_equidistant_with_the_zenith_at_the_centre() {
+        let params = CommonParams {
+            camera_forward: crate::glam::Vec4::new(0.0, 1.0, 0.0, 0.0),
+            camera_right: crate::glam::Vec4::new(1.0, 0.0, 0.0, 0.0),
+            camera_up: crate::glam::Vec4::new(0.0, 0.0, -1.0, 0.0),
+            width: 101,
+            height: 101,
+            samples_per_pixel: 1,
+            projection: PROJECTION_FISHEYE,
+            ..Default::default()
+        };
+        // The centre pixel looks along the view direction (the zenith).
+        let (_, d) = camera_ray(&params, 50, 50);
+        assert!((d - Vec3::Y).length() < 1e-6, "{d}");
+        // Angle from the view direction grows linearly with the radius:
+        // pixel column 50 + k is at radius (2k)/101 of the circle.
+        for k in [5u32, 20, 40, 50] {
+            let (_, d) = camera_ray(&params, 50 + k, 50);
+            let expected = 2.0 * k as f32 / 101.0 * FRAC_PI_2;
+            assert!((d.y.clamp(-1.0, 1.0).acos() - expected).abs() < 1e-5, "{k}: {d}");
+            assert!(d.x > 0.0 && d.z.abs() < 1e-6);
+            assert!(in_image(&params, 50 + k, 50));
+        }
+        // The corners are outside the image circle.
+        assert!(!in_image(&params, 0, 0) && !in_image(&params, 100, 100));
+    }
 
     #[test]
     fn one_sample_is_the_centre_and_squares_are_grids() {

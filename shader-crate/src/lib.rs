@@ -22,6 +22,7 @@ pub mod scatter;
 pub mod scatter_check;
 pub mod shadow_map;
 pub mod shafts;
+pub mod sky;
 pub mod surface;
 pub mod types;
 

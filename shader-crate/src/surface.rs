@@ -3,7 +3,7 @@
 //! 2002 shafts-of-light paper, `I_o exp(-rho kappa T)`, with `rho kappa = sigma_t`.
 //! It also writes the G-buffer that later passes read.
 
-use crate::camera::camera_ray;
+use crate::camera::{camera_ray, in_image};
 use crate::geometry::{occluded, trace_nearest, Geometry, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::light::{emitted, light_local, shadow_visibility, transmittance};
@@ -108,6 +108,9 @@ pub fn surface_pixel(
 ) -> (Vec4, GBufferTexel) {
     let x = index % params.width;
     let y = index / params.width;
+    if !in_image(params, x, y) {
+        return (Vec4::ZERO, no_surface());
+    }
     let (origin, dir) = camera_ray(params, x, y);
     let hit = trace_nearest(origin, dir, 0.0, NO_HIT, geometry);
     if hit.distance == NO_HIT {

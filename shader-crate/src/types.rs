@@ -50,8 +50,19 @@ pub struct CommonParams {
     /// `SHADOWS_RAYS` or `SHADOWS_MAP`: how directly seen surfaces test
     /// their visibility of each light.
     pub surface_shadows: u32,
-    pub _pad: [u32; 2],
+    /// `PROJECTION_PINHOLE` or `PROJECTION_FISHEYE` (see `camera::camera_ray`).
+    pub projection: u32,
+    pub _pad: u32,
 }
+
+/// A pinhole camera: `camera_right` and `camera_up` are scaled by the
+/// half-extents of the image plane at distance 1.
+pub const PROJECTION_PINHOLE: u32 = 0;
+/// An equidistant fisheye over the hemisphere around `camera_forward`:
+/// the distance from the image centre is proportional to the angle from the
+/// view direction, 90 degrees at the inscribed circle (`camera_right`,
+/// `camera_up` unit axes).
+pub const PROJECTION_FISHEYE: u32 = 1;
 
 pub const PHASE_ISOTROPIC: u32 = 0;
 pub const PHASE_HENYEY_GREENSTEIN: u32 = 1;

@@ -31,11 +31,19 @@ macro_rules! resources {
 pub mod scatter_check;
 pub mod shadow_maps;
 pub mod shafts;
+pub mod sky;
 pub mod surface;
 
 /// Every pass, in the order the renderer runs them.
-pub static PASSES: &[&dyn Pass] =
-    &[&shadow_maps::ShadowMaps, &surface::Surface, &shafts::Shafts, &scatter_check::ScatterCheck];
+pub static PASSES: &[&dyn Pass] = &[
+    &shadow_maps::ShadowMaps,
+    &sky::SkyTransmittance,
+    &sky::SkyView,
+    &surface::Surface,
+    &shafts::Shafts,
+    &sky::Sky,
+    &scatter_check::ScatterCheck,
+];
 
 /// The registered pass named `name`.
 pub fn by_name(name: &str) -> Option<&'static dyn Pass> {

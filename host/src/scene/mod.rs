@@ -9,7 +9,7 @@ use glam::{Vec3, Vec4};
 use slicelight_shaders::geometry::Geometry;
 use slicelight_shaders::types::{
     CommonParams, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle, PHASE_DOBASHI, PHASE_HENYEY_GREENSTEIN,
-    PHASE_ISOTROPIC, PHASE_RAYLEIGH,
+    PHASE_ISOTROPIC, PHASE_RAYLEIGH, PROJECTION_FISHEYE, PROJECTION_PINHOLE,
 };
 use std::path::Path;
 
@@ -45,6 +45,8 @@ pub struct SceneData {
     pub exposure: f32,
     /// The shafts pass's settings, parameter block and tables.
     pub shafts: crate::passes::shafts::Setup,
+    /// The sky passes' parameter block (`enabled` false without `[sky]`).
+    pub sky: crate::passes::sky::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
 }
@@ -119,9 +121,20 @@ fn camera(cam: &Camera) -> Result<CommonParams> {
     if (w as u64) * (h as u64) > u32::MAX as u64 / 4 {
         bail!(invalid("camera.resolution", "at most 2^30 pixels", cam.resolution));
     }
-    if !(cam.vfov_deg > 0.0 && cam.vfov_deg < 180.0) {
-        bail!(invalid("camera.vfov_deg", "an angle in (0, 180) degrees", cam.vfov_deg));
-    }
+    let fisheye = cam.projection == Projection::Fisheye;
+    let vfov = match (cam.vfov_deg, fisheye) {
+        (Some(v), false) if v > 0.0 && v < 180.0 => v,
+        (Some(v), false) => bail!(invalid("camera.vfov_deg", "an angle in (0, 180) degrees", v)),
+        (None, false) => {
+            bail!("camera.vfov_deg: missing; a pinhole camera needs its vertical field of view in degrees")
+        }
+        (Some(v), true) => bail!(invalid(
+            "camera.vfov_deg",
+            "no field of view for a fisheye (it sees the 180-degree hemisphere around look_at)",
+            v
+        )),
+        (None, true) => 180.0,
+    };
     if !(cam.exposure.is_finite() && cam.exposure > 0.0) {
         bail!(invalid("camera.exposure", "a positive number", cam.exposure));
     }
@@ -143,13 +156,19 @@ fn camera(cam: &Camera) -> Result<CommonParams> {
     }
     let right = right.normalize();
     let true_up = right.cross(forward);
-    let tan_half = (cam.vfov_deg.to_radians() * 0.5).tan();
-    let aspect = w as f32 / h as f32;
+    // A fisheye's axes are unit vectors (see `camera::camera_ray`).
+    let (scale_x, scale_y) = if fisheye {
+        (1.0, 1.0)
+    } else {
+        let tan_half = (vfov.to_radians() * 0.5).tan();
+        (tan_half * w as f32 / h as f32, tan_half)
+    };
     Ok(CommonParams {
         camera_position: position.extend(1.0),
         camera_forward: forward.extend(0.0),
-        camera_right: (right * tan_half * aspect).extend(0.0),
-        camera_up: (true_up * tan_half).extend(0.0),
+        camera_right: (right * scale_x).extend(0.0),
+        camera_up: (true_up * scale_y).extend(0.0),
+        projection: if fisheye { PROJECTION_FISHEYE } else { PROJECTION_PINHOLE },
         width: w,
         height: h,
         band_start: 0,
@@ -191,9 +210,35 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     let mut common = camera(&file.camera)?;
     common.surface_shadows = file.surface.shadows.code();
     medium(&file.medium, &mut common)?;
+    if common.projection == PROJECTION_FISHEYE && common.sigma_s.truncate().max_element() > 0.0 {
+        bail!(invalid(
+            "camera.projection",
+            "a pinhole camera in a scattering medium (the shafts pass's sample planes are parallel to a pinhole's image plane)",
+            "fisheye"
+        ));
+    }
     let objects = geometry::build(&file.object, base)?;
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
-    let lights = lights::build(&file.spotlight, &file.directional_light, base, bounds)?;
+    let sky = match &file.sky {
+        Some(s) => crate::passes::sky::configure(s)?,
+        None => Default::default(),
+    };
+    // The sun lights the scene's surfaces as a directional light of its
+    // colour after the air it crosses to the observer.
+    let mut directionals: Vec<DirectionalLight> = Vec::new();
+    let sun_lights = file.sky.as_ref().is_some_and(|s| s.light_scene) && bounds.is_some();
+    if let Some((irradiance, toward)) = sky.sun_at_observer().filter(|_| sun_lights) {
+        directionals.push(DirectionalLight {
+            direction: (-toward).into(),
+            up: None,
+            irradiance: irradiance.into(),
+            origin: None,
+            light_map: None,
+            size: None,
+            shadow_map_resolution: None,
+        });
+    }
+    let lights = lights::build(&file.spotlight, &[&file.directional_light[..], &directionals].concat(), base, bounds)?;
     let bvh = crate::bvh::Bvh::build(objects.triangles);
     common.light_count = lights.lights.len() as u32;
     common.sphere_count = objects.spheres.len() as u32;
@@ -211,6 +256,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         bounds,
         exposure: file.camera.exposure,
         shafts: Default::default(),
+        sky,
         requested_passes: Vec::new(),
     };
     if !data.has_geometry() {

@@ -20,6 +20,7 @@ pub struct SceneFile {
     pub shafts: crate::passes::shafts::Settings,
     #[serde(default)]
     pub surface: crate::passes::surface::Settings,
+    pub sky: Option<crate::passes::sky::Settings>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -29,13 +30,25 @@ pub struct Camera {
     pub look_at: [f32; 3],
     #[serde(default = "default_up")]
     pub up: [f32; 3],
-    pub vfov_deg: f32,
+    /// Vertical field of view of a pinhole camera (a fisheye sees 180 degrees).
+    pub vfov_deg: Option<f32>,
+    #[serde(default)]
+    pub projection: Projection,
     pub resolution: [u32; 2],
     #[serde(default = "one")]
     pub exposure: f32,
     /// Sub-pixel samples per pixel, box-filtered (1: the pixel centre).
     #[serde(default = "one_u32")]
     pub samples_per_pixel: u32,
+}
+
+#[derive(Debug, Default, Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Projection {
+    #[default]
+    Pinhole,
+    /// Equidistant over the hemisphere around the view direction.
+    Fisheye,
 }
 
 #[derive(Debug, Deserialize)]
@@ -82,7 +95,7 @@ pub struct Spotlight {
     pub shadow_map_resolution: Option<u32>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DirectionalLight {
     pub direction: [f32; 3],

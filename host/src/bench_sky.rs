@@ -1,0 +1,273 @@
+//! `slicelight bench` on sky scenes: run time against error of the sky
+//! passes over their settings (samples per view ray, the sky-view table's
+//! size, the transmittance table's size), on each scene and backend; a CSV
+//! and a PNG plot.
+//!
+//! Error is the RMS difference from the f64 reference (`sky_reference`) at
+//! a lattice of pixel centres, relative to the sky's peak there, with the
+//! sun's disk (and a degree around it) left out: the measure.
+//! Times are medians over repeats: the whole render, the tables (the
+//! transmittance and sky-view passes) and the per-pixel sky pass apart.
+
+use anyhow::{Context, Result};
+use glam::{DVec3, Vec4Swizzles};
+use plotters::prelude::*;
+use std::io::Write;
+use std::path::Path;
+
+use crate::reference;
+use crate::render::{self, Backend};
+use crate::scene::{self, SceneData};
+
+/// One configuration of the sweep.
+#[derive(Debug, Clone, Copy)]
+pub struct Config {
+    /// `direct` (per-pixel integral over view samples), `sky-view` (table
+    /// size), `transmittance` (table size).
+    pub series: &'static str,
+    pub sky_view: bool,
+    pub view_samples: u32,
+    pub sky_view_table: [u32; 2],
+    pub transmittance_table: [u32; 2],
+}
+
+pub fn sweep(quick: bool) -> Vec<Config> {
+    let base = Config {
+        series: "",
+        sky_view: true,
+        view_samples: 32,
+        sky_view_table: [192, 128],
+        transmittance_table: [256, 64],
+    };
+    let samples: &[u32] = if quick { &[8, 32, 128] } else { &[8, 16, 32, 64, 128] };
+    let views: &[[u32; 2]] =
+        if quick { &[[48, 32], [192, 128]] } else { &[[48, 32], [96, 64], [192, 128], [384, 256]] };
+    let trans: &[[u32; 2]] =
+        if quick { &[[32, 8], [256, 64]] } else { &[[32, 8], [64, 16], [128, 32], [256, 64], [512, 128]] };
+    let mut v = Vec::new();
+    for &n in samples {
+        v.push(Config { series: "direct", sky_view: false, view_samples: n, ..base });
+    }
+    for &n in samples {
+        v.push(Config { series: "sky-view-samples", view_samples: n, ..base });
+    }
+    for &t in views {
+        v.push(Config { series: "sky-view", sky_view_table: t, ..base });
+    }
+    for &t in trans {
+        v.push(Config { series: "transmittance", transmittance_table: t, ..base });
+    }
+    v
+}
+
+fn configure(data: &SceneData, c: &Config) -> SceneData {
+    let mut d = data.clone();
+    let p = &mut d.sky.params;
+    p.use_sky_view = c.sky_view as u32;
+    p.view_samples = c.view_samples;
+    [p.sky_view_width, p.sky_view_height] = c.sky_view_table;
+    [p.transmittance_width, p.transmittance_height] = c.transmittance_table;
+    d
+}
+
+/// Pixels whose centre ray is more than a degree outside the sun's disk
+/// (and inside a fisheye's circle): where the sky is measured.
+pub fn sky_pixels(data: &SceneData, stride: u32) -> Vec<u32> {
+    let common = data.common;
+    let sun = data.sky.params.sun_direction;
+    let margin = (sun.w.clamp(-1.0, 1.0).acos() + 1f32.to_radians()).cos();
+    let w = data.width();
+    (0..data.height())
+        .step_by(stride as usize)
+        .flat_map(|y| (0..w).step_by(stride as usize).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let centre = slicelight_shaders::types::CommonParams { samples_per_pixel: 1, sample_index: 0, ..common };
+            let (_, d) = slicelight_shaders::camera::camera_ray(&centre, x, y);
+            slicelight_shaders::camera::in_image(&centre, x, y) && d.dot(sun.xyz()) < margin
+        })
+        .map(|(x, y)| y * w + x)
+        .collect()
+}
+
+/// RMS and largest difference over the pixels and channels, relative to
+/// the reference's peak.
+pub fn sky_error(image: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
+    let peak = reference.iter().map(|p| p.max_element()).fold(1e-300, f64::max);
+    let (mut sum2, mut max) = (0.0, 0.0f64);
+    for (a, b) in image.iter().zip(reference) {
+        let d = (*a - *b).abs();
+        sum2 += d.length_squared();
+        max = max.max(d.max_element());
+    }
+    ((sum2 / (3 * image.len().max(1)) as f64).sqrt() / peak, max / peak)
+}
+
+pub struct Row {
+    pub scene: String,
+    pub backend: &'static str,
+    pub width: u32,
+    pub height: u32,
+    pub config: Config,
+    pub median_seconds: f64,
+    pub tables_median_seconds: f64,
+    pub sky_median_seconds: f64,
+    pub rms_relative: f64,
+    pub max_relative: f64,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Runs the sky sweep over `scenes` and writes `sky_bench.csv` and
+/// `sky_time_vs_error.png` into `out_dir`.
+pub fn run(
+    scenes: &[std::path::PathBuf],
+    backends: &[Backend],
+    repeats: usize,
+    stride: u32,
+    quick: bool,
+    out_dir: &Path,
+) -> Result<Vec<Row>> {
+    std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
+    let mut rows = Vec::new();
+    for path in scenes {
+        let data = scene::load(path)?;
+        anyhow::ensure!(data.sky.enabled, "{}: no [sky] to benchmark", path.display());
+        let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+        let pixels = sky_pixels(&data, stride.max(1));
+        let t = std::time::Instant::now();
+        let (refvals, _) = reference::render_converged_at(&data, &pixels, 2e-4);
+        eprintln!("{name}: reference at {} pixels, {:.1} s", pixels.len(), t.elapsed().as_secs_f64());
+        for backend in backends {
+            for c in sweep(quick) {
+                let d = configure(&data, &c);
+                let (mut totals, mut tables, mut sky) = (Vec::new(), Vec::new(), Vec::new());
+                let mut last = None;
+                for _ in 0..repeats.max(1) {
+                    let (img, st) = render::render(&d, backend, false)?;
+                    totals.push(st.total_seconds);
+                    let pass = |names: &[&str]| -> f64 {
+                        st.passes.iter().filter(|p| names.contains(&p.name)).map(|p| p.seconds).sum()
+                    };
+                    tables.push(pass(&["sky_transmittance", "sky_view"]));
+                    sky.push(pass(&["sky"]));
+                    last = Some(img);
+                }
+                let img = last.expect("at least one repeat");
+                let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
+                let (rms, max) = sky_error(&at, &refvals);
+                let row = Row {
+                    scene: name.clone(),
+                    backend: backend.name(),
+                    width: data.width(),
+                    height: data.height(),
+                    config: c,
+                    median_seconds: median(totals),
+                    tables_median_seconds: median(tables),
+                    sky_median_seconds: median(sky),
+                    rms_relative: rms,
+                    max_relative: max,
+                };
+                eprintln!(
+                    "{name:>14} {:>4} {:<17} samples={:<4} sky-view={:?} transmittance={:?} {:>8.4} s (tables {:.4} s, sky {:.4} s)  rms {:.3}%  max {:.2}%",
+                    row.backend,
+                    c.series,
+                    c.view_samples,
+                    if c.sky_view { Some(c.sky_view_table) } else { None },
+                    c.transmittance_table,
+                    row.median_seconds,
+                    row.tables_median_seconds,
+                    row.sky_median_seconds,
+                    100.0 * rms,
+                    100.0 * max
+                );
+                rows.push(row);
+            }
+        }
+    }
+    write_csv(&out_dir.join("sky_bench.csv"), &rows)?;
+    plot(&out_dir.join("sky_time_vs_error.png"), &rows)?;
+    Ok(rows)
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
+    let mut out = Vec::new();
+    writeln!(
+        out,
+        "scene,width,height,backend,series,sky_view,view_samples,sky_view_width,sky_view_height,transmittance_width,transmittance_height,median_seconds,tables_median_seconds,sky_median_seconds,rms_relative_percent,max_relative_percent"
+    )?;
+    for r in rows {
+        let c = &r.config;
+        writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5}",
+            r.scene,
+            r.width,
+            r.height,
+            r.backend,
+            c.series,
+            c.sky_view,
+            c.view_samples,
+            c.sky_view_table[0],
+            c.sky_view_table[1],
+            c.transmittance_table[0],
+            c.transmittance_table[1],
+            r.median_seconds,
+            r.tables_median_seconds,
+            r.sky_median_seconds,
+            100.0 * r.rms_relative,
+            100.0 * r.max_relative
+        )?;
+    }
+    crate::output::write_atomically(path, &out)
+}
+
+/// Error against the median render time, one colour per series, one
+/// marker shape per scene and backend.
+fn plot(path: &Path, rows: &[Row]) -> Result<()> {
+    crate::bench::register_font()?;
+    crate::bench::save_plot(path, |root| {
+        let (t0, t1) =
+            rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r.median_seconds), b.max(r.median_seconds)));
+        let errors = rows.iter().map(|r| 100.0 * r.rms_relative.max(1e-6));
+        let (e0, e1) = errors.fold((f64::INFINITY, 0.0f64), |(a, b), e| (a.min(e), b.max(e)));
+        let mut chart = ChartBuilder::on(&root)
+            .caption("Sky: run time against error (RMS % of the sky's peak)", ("sans-serif", 24))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((t0 * 0.8..t1 * 1.25).log_scale(), (e0 * 0.8..e1 * 1.25).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("median render time, s")
+            .x_label_formatter(&|x| format!("{}", (x * 1e4).round() / 1e4))
+            .y_label_formatter(&|y| format!("{}", (y * 1e4).round() / 1e4))
+            .y_desc("RMS error, % of the sky's peak")
+            .label_style(("sans-serif", 15))
+            .draw()?;
+        let mut groups: Vec<(String, &'static str, &'static str)> =
+            rows.iter().map(|r| (r.scene.clone(), r.backend, r.config.series)).collect();
+        groups.dedup();
+        for (i, (scene, backend, series)) in groups.iter().enumerate() {
+            let color = crate::bench::COLORS[i % crate::bench::COLORS.len()];
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *series)
+                .map(|r| (r.median_seconds, 100.0 * r.rms_relative.max(1e-6)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
+                .label(format!("{scene} ({backend}, {series})"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+        }
+        crate::bench::draw_legend(&mut chart)
+    })
+}

@@ -1,0 +1,505 @@
+//! The sky passes (kernels: `shader-crate/src/sky.rs`): the transmittance
+//! table, the optional sky-view table, and the per-pixel sky; their settings
+//! (the scene's `[sky]` table) and the sun as a light on the scene.
+
+use anyhow::{bail, ensure, Result};
+use glam::{Vec3, Vec4};
+use indicatif::ProgressBar;
+use serde::Deserialize;
+use slicelight_shaders::sky::{
+    hits_ground, optical_depth_to_top, sky_pixel, sky_view_texel, transmittance_texel, SkyParams, MIE_CORNETTE_SHANKS,
+    MIE_HENYEY_GREENSTEIN,
+};
+use slicelight_shaders::types::{CommonParams, GBufferTexel};
+
+use super::*;
+use crate::cpu::for_each_invocation;
+use crate::scene::{invalid, SceneData};
+
+pub static SKY_PARAMS: Resource =
+    Resource { binding: 15, name: "sky parameters", kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.sky.params)) };
+/// Optical depth (rgb) to the top of the atmosphere over heights and directions.
+pub static SKY_TRANSMITTANCE: Resource = Resource {
+    binding: 16,
+    name: "sky transmittance table",
+    kind: ResourceKind::Frame(|s| s.sky.transmittance_texels() * 16),
+};
+/// Sky radiance (rgb) over view directions.
+pub static SKY_VIEW: Resource =
+    Resource { binding: 17, name: "sky-view table", kind: ResourceKind::Frame(|s| s.sky.sky_view_texels() * 16) };
+/// Sky radiance per pixel (rgb) where no surface is seen.
+pub static SKY_RADIANCE: Resource =
+    Resource { binding: 18, name: "sky radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
+
+/// The scene's `[sky]` table.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Angle of the sun from the zenith, degrees (above 90: below the horizon).
+    pub sun_zenith_deg: f32,
+    /// Azimuth of the sun, degrees from +z toward +x (y is up).
+    #[serde(default)]
+    pub sun_azimuth_deg: f32,
+    /// Solar irradiance normal to the sun's rays at the top of the
+    /// atmosphere, W/m^2 per channel.
+    #[serde(default = "unit3")]
+    pub sun_irradiance: [f32; 3],
+    /// Angular radius of the sun's disk, degrees.
+    #[serde(default = "sun_radius")]
+    pub sun_angular_radius_deg: f32,
+    /// Altitude of the observer (the camera) above the ground, m.
+    #[serde(default)]
+    pub observer_altitude_m: f32,
+    /// Lambertian albedo of the ground below the horizon.
+    #[serde(default = "ground_albedo")]
+    pub ground_albedo: [f32; 3],
+    /// Whether the sun lights the scene's surfaces (a directional light of
+    /// the sun's colour after the air it crosses to the observer).
+    #[serde(default = "yes")]
+    pub light_scene: bool,
+    /// Quadrature samples per view ray.
+    #[serde(default = "view_samples")]
+    pub view_samples: u32,
+    /// Quadrature samples per ray of the transmittance table.
+    #[serde(default = "table_samples")]
+    pub table_samples: u32,
+    /// Transmittance table size: directions x heights.
+    #[serde(default = "transmittance_table")]
+    pub transmittance_table: [u32; 2],
+    /// Look the sky up in a table over view directions (else integrate it per pixel).
+    #[serde(default = "yes")]
+    pub sky_view: bool,
+    /// Sky-view table size: azimuths x elevations (even; half below the horizon).
+    #[serde(default = "sky_view_table")]
+    pub sky_view_table: [u32; 2],
+    #[serde(default)]
+    pub atmosphere: Atmosphere,
+}
+
+fn unit3() -> [f32; 3] {
+    [1.0; 3]
+}
+fn sun_radius() -> f32 {
+    0.2666
+}
+fn ground_albedo() -> [f32; 3] {
+    [0.1; 3]
+}
+fn yes() -> bool {
+    true
+}
+fn view_samples() -> u32 {
+    32
+}
+fn table_samples() -> u32 {
+    64
+}
+fn transmittance_table() -> [u32; 2] {
+    [256, 64]
+}
+fn sky_view_table() -> [u32; 2] {
+    [192, 128]
+}
+
+/// `[sky.atmosphere]`: Earth's by default.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Atmosphere {
+    pub ground_radius_m: f32,
+    pub top_radius_m: f32,
+    /// Rayleigh scattering at the ground, 1/m per channel.
+    pub rayleigh_scattering: [f32; 3],
+    pub rayleigh_scale_height_m: f32,
+    /// Aerosols; none unless given.
+    pub mie: Option<Mie>,
+    /// Ozone; none unless given.
+    pub ozone: Option<Ozone>,
+}
+
+impl Default for Atmosphere {
+    fn default() -> Self {
+        Atmosphere {
+            ground_radius_m: 6_360_000.0,
+            top_radius_m: 6_420_000.0,
+            rayleigh_scattering: [5.802e-6, 13.558e-6, 33.1e-6],
+            rayleigh_scale_height_m: 8000.0,
+            mie: None,
+            ozone: None,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Mie {
+    /// At the ground, 1/m.
+    pub scattering: f32,
+    /// At the ground, 1/m (scattering plus absorption).
+    pub extinction: f32,
+    pub scale_height_m: f32,
+    pub phase: MiePhase,
+    pub g: f32,
+}
+
+impl Default for Mie {
+    fn default() -> Self {
+        Mie {
+            scattering: 3.996e-6,
+            extinction: 1.11 * 3.996e-6,
+            scale_height_m: 1200.0,
+            phase: MiePhase::CornetteShanks,
+            g: 0.8,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MiePhase {
+    HenyeyGreenstein,
+    #[default]
+    CornetteShanks,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Ozone {
+    /// Absorption at the layer's peak, 1/m per channel.
+    pub absorption: [f32; 3],
+    pub center_m: f32,
+    pub half_width_m: f32,
+}
+
+impl Default for Ozone {
+    fn default() -> Self {
+        Ozone { absorption: [0.650e-6, 1.881e-6, 0.085e-6], center_m: 25_000.0, half_width_m: 15_000.0 }
+    }
+}
+
+/// The sky's state for one scene.
+#[derive(Debug, Clone, Default)]
+pub struct Setup {
+    /// Whether the scene has a `[sky]`.
+    pub enabled: bool,
+    pub params: SkyParams,
+}
+
+impl Setup {
+    pub fn transmittance_texels(&self) -> u64 {
+        if self.enabled {
+            self.params.transmittance_width as u64 * self.params.transmittance_height as u64
+        } else {
+            0
+        }
+    }
+    pub fn sky_view_texels(&self) -> u64 {
+        if self.enabled && self.params.use_sky_view != 0 {
+            self.params.sky_view_width as u64 * self.params.sky_view_height as u64
+        } else {
+            0
+        }
+    }
+
+    /// The sun's irradiance (W/m^2 per channel, normal to its rays) at the
+    /// observer, after the air it crosses, and the unit direction toward
+    /// it; `None` when the sun is below the horizon or dimmed to nothing.
+    /// The optical depth is the transmittance table kernel's quadrature.
+    pub fn sun_at_observer(&self) -> Option<(Vec3, Vec3)> {
+        let p = &self.params;
+        let sun = p.sun_direction.truncate();
+        let h = p.observer_altitude.min(p.atmosphere_height);
+        if hits_ground(p, h, sun.y).0 {
+            return None;
+        }
+        let tau = optical_depth_to_top(p, h, sun.y, p.table_samples.max(256));
+        let e = p.sun_irradiance.truncate() * (-tau).exp();
+        (e.max_element() > 0.0).then_some((e, sun))
+    }
+}
+
+fn positive(field: &str, v: f32) -> Result<f32> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!(invalid(field, "a positive number", v));
+    }
+    Ok(v)
+}
+
+fn non_negative(field: &str, v: [f32; 3]) -> Result<Vec3> {
+    if !v.iter().all(|x| x.is_finite() && *x >= 0.0) {
+        bail!(invalid(field, "three non-negative numbers", v));
+    }
+    Ok(Vec3::from(v))
+}
+
+fn table_size(field: &str, size: [u32; 2], even_rows: bool) -> Result<()> {
+    if !size.iter().all(|n| (2..=8192).contains(n)) || (even_rows && (size[1] < 4 || !size[1].is_multiple_of(2))) {
+        let what =
+            if even_rows { "two sizes in 2..=8192, the second even and at least 4" } else { "two sizes in 2..=8192" };
+        bail!(invalid(field, what, size));
+    }
+    Ok(())
+}
+
+/// Validates `[sky]` and returns the sky's setup; the error names the
+/// field under `sky.`.
+pub fn configure(s: &Settings) -> Result<Setup> {
+    if !(s.sun_zenith_deg.is_finite() && (0.0..=180.0).contains(&s.sun_zenith_deg)) {
+        bail!(invalid("sky.sun_zenith_deg", "an angle in [0, 180] degrees", s.sun_zenith_deg));
+    }
+    if !s.sun_azimuth_deg.is_finite() {
+        bail!(invalid("sky.sun_azimuth_deg", "a finite angle in degrees", s.sun_azimuth_deg));
+    }
+    let irradiance = non_negative("sky.sun_irradiance", s.sun_irradiance)?;
+    if !(s.sun_angular_radius_deg > 0.0 && s.sun_angular_radius_deg <= 10.0) {
+        bail!(invalid("sky.sun_angular_radius_deg", "an angle in (0, 10] degrees", s.sun_angular_radius_deg));
+    }
+    if !(s.observer_altitude_m.is_finite() && s.observer_altitude_m >= 0.0 && s.observer_altitude_m <= 1e7) {
+        bail!(invalid("sky.observer_altitude_m", "an altitude in [0, 1e7] m", s.observer_altitude_m));
+    }
+    let albedo = non_negative("sky.ground_albedo", s.ground_albedo)?;
+    if albedo.max_element() > 1.0 {
+        bail!(invalid("sky.ground_albedo", "three albedos in [0, 1]", s.ground_albedo));
+    }
+    if !(1..=65536).contains(&s.view_samples) {
+        bail!(invalid("sky.view_samples", "a sample count in 1..=65536", s.view_samples));
+    }
+    if !(1..=65536).contains(&s.table_samples) {
+        bail!(invalid("sky.table_samples", "a sample count in 1..=65536", s.table_samples));
+    }
+    table_size("sky.transmittance_table", s.transmittance_table, false)?;
+    table_size("sky.sky_view_table", s.sky_view_table, true)?;
+    let a = &s.atmosphere;
+    let ground = positive("sky.atmosphere.ground_radius_m", a.ground_radius_m)?;
+    let top = positive("sky.atmosphere.top_radius_m", a.top_radius_m)?;
+    if top <= ground {
+        bail!(invalid("sky.atmosphere.top_radius_m", "a radius above ground_radius_m", top));
+    }
+    let rayleigh = non_negative("sky.atmosphere.rayleigh_scattering", a.rayleigh_scattering)?;
+    let rayleigh_h = positive("sky.atmosphere.rayleigh_scale_height_m", a.rayleigh_scale_height_m)?;
+    let (mie, mie_phase) = match &a.mie {
+        None => (Vec4::new(0.0, 0.0, 1200.0, 0.0), MIE_HENYEY_GREENSTEIN),
+        Some(m) => {
+            let sc = non_negative("sky.atmosphere.mie.scattering", [m.scattering; 3])?.x;
+            let ext = non_negative("sky.atmosphere.mie.extinction", [m.extinction; 3])?.x;
+            if ext < sc {
+                bail!(invalid("sky.atmosphere.mie.extinction", "at least mie.scattering", m.extinction));
+            }
+            let height = positive("sky.atmosphere.mie.scale_height_m", m.scale_height_m)?;
+            if !(m.g > -1.0 && m.g < 1.0) {
+                bail!(invalid("sky.atmosphere.mie.g", "a number in (-1, 1)", m.g));
+            }
+            let kind = match m.phase {
+                MiePhase::HenyeyGreenstein => MIE_HENYEY_GREENSTEIN,
+                MiePhase::CornetteShanks => MIE_CORNETTE_SHANKS,
+            };
+            (Vec4::new(sc, ext, height, m.g), kind)
+        }
+    };
+    let (ozone, ozone_center, ozone_half) = match &a.ozone {
+        None => (Vec3::ZERO, 0.0, 0.0),
+        Some(o) => {
+            let abs = non_negative("sky.atmosphere.ozone.absorption", o.absorption)?;
+            if !o.center_m.is_finite() {
+                bail!(invalid("sky.atmosphere.ozone.center_m", "a finite height in m", o.center_m));
+            }
+            (abs, o.center_m, positive("sky.atmosphere.ozone.half_width_m", o.half_width_m)?)
+        }
+    };
+    let (zenith, azimuth) = (s.sun_zenith_deg.to_radians(), s.sun_azimuth_deg.to_radians());
+    let sun = Vec3::new(zenith.sin() * azimuth.sin(), zenith.cos(), zenith.sin() * azimuth.cos());
+    let radius = s.sun_angular_radius_deg.to_radians();
+    // 2 pi (1 - cos r), written without the cancellation that costs f32 0.5 % at the sun's size.
+    let solid_angle = (4.0 * std::f64::consts::PI * (0.5 * radius as f64).sin().powi(2)) as f32;
+    let params = SkyParams {
+        sun_direction: sun.extend(radius.cos()),
+        sun_irradiance: irradiance.extend(solid_angle),
+        rayleigh: rayleigh.extend(rayleigh_h),
+        mie,
+        ozone: ozone.extend(0.0),
+        ground_albedo: albedo.extend(0.0),
+        ground_radius: ground,
+        atmosphere_height: top - ground,
+        observer_altitude: s.observer_altitude_m,
+        ozone_center,
+        ozone_half_width: ozone_half,
+        mie_phase,
+        view_samples: s.view_samples,
+        table_samples: s.table_samples,
+        transmittance_width: s.transmittance_table[0],
+        transmittance_height: s.transmittance_table[1],
+        sky_view_width: s.sky_view_table[0],
+        sky_view_height: s.sky_view_table[1],
+        use_sky_view: s.sky_view as u32,
+        _pad: [0; 3],
+    };
+    Ok(Setup { enabled: true, params })
+}
+
+fn skip_without_sky(scene: &SceneData) -> Option<Plan> {
+    (!scene.sky.enabled).then(|| Plan::skip("no [sky]"))
+}
+
+/// Compares two tables or layers of `Vec4`s (rgb) within `rel` of the
+/// CPU's peak per value: they are sums of f32 products and `exp`s, which
+/// the GPU may round or fuse differently.
+fn compare_rgb(what: &str, gpu: &[Vec4], cpu: &[Vec4], rel: f32, allowed: usize) -> Result<String> {
+    ensure!(gpu.len() == cpu.len(), "{what}: {} and {} values", gpu.len(), cpu.len());
+    let flat = |v: &[Vec4]| v.iter().flat_map(|p| p.truncate().to_array()).collect::<Vec<f32>>();
+    let (g, c) = (flat(gpu), flat(cpu));
+    let peak = c.iter().fold(0.0f32, |m, v| m.max(*v));
+    let (outliers, worst) = count_differences(&g, &c, |v| rel * peak.max(v.abs()));
+    ensure!(outliers <= allowed, "{what}: {outliers} of {} values differ by more than {rel:e} of the peak", c.len());
+    Ok(format!("{what}: {} values, {outliers} outliers, worst difference {worst:e} (peak {peak:e})", c.len()))
+}
+
+pub struct SkyTransmittance;
+
+impl Pass for SkyTransmittance {
+    fn name(&self) -> &'static str {
+        "sky_transmittance"
+    }
+    fn kernel(&self) -> &'static str {
+        "sky::transmittance_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SKY_PARAMS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SKY_TRANSMITTANCE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sky(scene) {
+            return skip;
+        }
+        let p = &scene.sky.params;
+        Plan::run(
+            format!(
+                "optical depth to the top of the atmosphere (eq. 2), {}x{} table, {} samples per ray",
+                p.transmittance_width, p.transmittance_height, p.table_samples
+            ),
+            scene.sky.transmittance_texels(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sky.params;
+        frame.write::<Vec4>(&SKY_TRANSMITTANCE, scene.sky.transmittance_texels() as usize, |_, out| {
+            for_each_invocation(out, 0, progress, |i, v| *v = transmittance_texel(i, p));
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // A sum of 128 products of f32 exps: 1e-5 of the largest depth
+        // (about 40 ulps of a value near it).
+        compare_rgb("optical depths", gpu.get(&SKY_TRANSMITTANCE), cpu.get(&SKY_TRANSMITTANCE), 1e-5, 0)
+    }
+}
+
+pub struct SkyView;
+
+impl Pass for SkyView {
+    fn name(&self) -> &'static str {
+        "sky_view"
+    }
+    fn kernel(&self) -> &'static str {
+        "sky::sky_view_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SKY_PARAMS, SKY_TRANSMITTANCE]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SKY_VIEW]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sky(scene) {
+            return skip;
+        }
+        let p = &scene.sky.params;
+        if p.use_sky_view == 0 {
+            return Plan::skip("the sky is integrated per pixel (sky_view = false)");
+        }
+        Plan::run(
+            format!(
+                "sky radiance over {}x{} view directions, {} samples per ray",
+                p.sky_view_width, p.sky_view_height, p.view_samples
+            ),
+            scene.sky.sky_view_texels(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sky.params;
+        frame.write::<Vec4>(&SKY_VIEW, scene.sky.sky_view_texels() as usize, |frame, out| {
+            let table = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
+            for_each_invocation(out, 0, progress, |i, v| *v = sky_view_texel(i, p, table));
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // The radiance sums ~32 samples of products of about ten f32 factors
+        // and exps, each ~1e-6 relative: 1e-4 of the peak is a wide margin.
+        compare_rgb("sky-view radiance", gpu.get(&SKY_VIEW), cpu.get(&SKY_VIEW), 1e-4, 0)
+    }
+}
+
+pub struct Sky;
+
+impl Pass for Sky {
+    fn name(&self) -> &'static str {
+        "sky"
+    }
+    fn kernel(&self) -> &'static str {
+        "sky::sky_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SKY_RADIANCE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&SKY_RADIANCE)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sky(scene) {
+            return skip;
+        }
+        let how = if scene.sky.params.use_sky_view != 0 {
+            "looked up in the sky-view table".to_string()
+        } else {
+            format!("integrated per pixel, {} samples per ray", scene.sky.params.view_samples)
+        };
+        Plan::run(format!("sky where no surface is seen, {how}, and the sun's disk"), 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let n = common.band_pixels as usize;
+        let p = &scene.sky.params;
+        let blank = slicelight_shaders::surface::no_surface();
+        frame.write::<Vec4>(&SKY_RADIANCE, n, |frame, out| {
+            let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
+            let sky_view = frame.get::<Vec4>(&SKY_VIEW);
+            let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            for_each_invocation(out, common.band_start, progress, |i, v| {
+                let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
+                *v = sky_pixel(i, common, p, transmittance, sky_view, texel);
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // The pixel's direction and its table coordinates go through sin,
+        // cos, asin and acos, which Vulkan lets a device compute to an
+        // absolute 2^-11 (sin, cos) or 4096 ulps (the inverses): directions
+        // may differ by ~5e-4 rad between the backends, and the sky's
+        // steepest slopes (the sun's aureole, the horizon) are a few times
+        // its peak per radian, so 2e-3 of the peak (lavapipe: 5e-4 seen). A
+        // pixel on the disk's rim or on the horizon may flip between sky
+        // and sun or ground: at most 1e-3 of the values.
+        let cpu_values = cpu.get::<Vec4>(&SKY_RADIANCE);
+        compare_rgb("sky radiance", gpu.get(&SKY_RADIANCE), cpu_values, 2e-3, cpu_values.len() * 3 / 1000 + 1)
+    }
+}

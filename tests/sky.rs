@@ -1,0 +1,242 @@
+//! The sky passes against the f64 reference, the reference against closed
+//! forms, and the sky at the edges of its parameters.
+
+mod common;
+
+use glam::{DVec3, Vec4};
+use slicelight::bench_sky::{sky_error, sky_pixels};
+use slicelight::reference;
+use slicelight::render::{self, Backend};
+use slicelight::scene::SceneData;
+use slicelight::sky_reference::SkyReference;
+use std::f64::consts::PI;
+
+/// A fisheye sky scene (Rayleigh, Mie and ozone as in scenes/sky_noon.toml)
+/// with the sun `zenith_deg` from the zenith, and extra `[sky]` lines.
+fn fisheye(size: u32, zenith_deg: f32, extra: &str) -> SceneData {
+    common::scene_from_str(&format!(
+        r#"
+        [camera]
+        projection = "fisheye"
+        position = [0.0, 0.0, 0.0]
+        look_at = [0.0, 1.0, 0.0]
+        up = [0.0, 0.0, -1.0]
+        resolution = [{size}, {size}]
+        [sky]
+        sun_zenith_deg = {zenith_deg}
+        sun_azimuth_deg = 40.0
+        {extra}
+        [sky.atmosphere]
+        mie = {{ scattering = 3.996e-6, extinction = 4.4356e-6, scale_height_m = 1200.0, g = 0.8 }}
+        ozone = {{}}
+        "#
+    ))
+}
+
+fn rgb(image: &[Vec4], pixels: &[u32]) -> Vec<DVec3> {
+    pixels.iter().map(|&i| image[i as usize].truncate().as_dvec3()).collect()
+}
+
+#[test]
+fn reference_matches_closed_forms() {
+    // Rayleigh only, sun at the zenith: the zenith optical depth is
+    // beta H (1 - exp(-60/8)); looking straight up, every sample sees the
+    // sun straight above it, so the sky there is E P(1) tau exp(-tau).
+    let data = common::scene_from_str(
+        r#"
+        [camera]
+        position = [0.0, 0.0, 0.0]
+        look_at = [0.0, 1.0, 0.0]
+        up = [0.0, 0.0, -1.0]
+        vfov_deg = 10.0
+        resolution = [8, 8]
+        [sky]
+        sun_zenith_deg = 0.0
+        "#,
+    );
+    let sky = SkyReference::new(&data.sky.params, 1e-9);
+    let beta = DVec3::new(5.802e-6, 13.558e-6, 33.1e-6);
+    let beta = beta.as_vec3().as_dvec3(); // the f32 the scene holds
+    let tau = beta * 8000.0 * (1.0 - (-60.0f64 / 8.0).exp());
+    let depth = sky.zenith_depth(0.0);
+    let rel = ((depth - tau) / tau).abs().max_element();
+    println!("zenith optical depth {depth} vs {tau}: {rel:e}");
+    assert!(rel < 1e-8, "{rel:e}");
+    let sun = sky.sun_at_observer();
+    assert!(((sun - (-tau).exp()) / (-tau).exp()).abs().max_element() < 1e-8, "{sun}");
+    // The radiance straight up, less the sun's disk (radiance E / Omega times
+    // the same transmittance), against the closed form.
+    let radius = 0.2666f64.to_radians();
+    let solid_angle = 4.0 * PI * (0.5 * radius).sin().powi(2);
+    assert!((data.sky.params.sun_irradiance.w as f64 / solid_angle - 1.0).abs() < 1e-6);
+    let disk = (-tau).exp() / data.sky.params.sun_irradiance.w as f64;
+    let sky_up = sky.radiance(DVec3::Y) - disk;
+    let exact = 3.0 * 2.0 / (16.0 * PI) * tau * (-tau).exp();
+    let rel = ((sky_up - exact) / exact).abs().max_element();
+    println!("zenith sky {sky_up} vs {exact}: {rel:e}");
+    assert!(rel < 1e-6, "{rel:e}");
+}
+
+#[test]
+fn reference_converges() {
+    // Halving the tolerance changes the reference by far less than the 0.5 %
+    // the pass is judged against, at the sunset's grazing rays too.
+    for zenith in [30.0f32, 89.5, 96.0] {
+        let data = fisheye(8, zenith, "");
+        let a = SkyReference::new(&data.sky.params, 1e-6);
+        let b = SkyReference::new(&data.sky.params, 1e-8);
+        let mut worst = 0.0f64;
+        let mut peak = 0.0f64;
+        for el in [-3.0f64, -0.2, 0.0, 0.3, 2.0, 10.0, 45.0, 89.0] {
+            for az in [0.0f64, 45.0, 140.0, 220.0, 300.0] {
+                let (e, z) = (el.to_radians(), az.to_radians());
+                let d = DVec3::new(e.cos() * z.sin(), e.sin(), e.cos() * z.cos());
+                let (ra, rb) = (a.radiance(d), b.radiance(d));
+                worst = worst.max((ra - rb).abs().max_element());
+                peak = peak.max(rb.max_element());
+            }
+        }
+        println!("sun {zenith}: tolerance 1e-6 vs 1e-8: {:.2e} of the peak", worst / peak);
+        assert!(worst / peak < 1e-4, "sun {zenith}: {:e}", worst / peak);
+    }
+}
+
+/// The issue's target: within 0.5 % RMS of the sky's peak (sun's disk
+/// excluded), every sun angle from the zenith to 6 degrees below the
+/// horizon, with the default settings (sky-view table) and integrated per pixel.
+#[test]
+fn sky_matches_reference_for_every_sun_angle() {
+    for zenith in [0.0f32, 30.0, 60.0, 80.0, 88.0, 90.0, 92.0, 94.0, 96.0] {
+        let data = fisheye(48, zenith, "");
+        let pixels = sky_pixels(&data, 1);
+        let (refvals, _) = reference::render_converged_at(&data, &pixels, 2e-4);
+        for (mode, per_pixel) in [("sky-view table", false), ("per pixel", true)] {
+            let mut data = data.clone();
+            if per_pixel {
+                data.sky.params.use_sky_view = 0;
+            }
+            let (image, _) = render::render(&data, &Backend::Cpu, false).unwrap();
+            let values = rgb(&image, &pixels);
+            assert!(values.iter().all(|v| v.is_finite() && v.min_element() >= 0.0));
+            let (rms, max) = sky_error(&values, &refvals);
+            println!(
+                "sun zenith {zenith:>4}, {mode:<14}: rms {:.3}% max {:.2}% of the sky's peak",
+                rms * 100.0,
+                max * 100.0
+            );
+            assert!(rms < 0.005, "sun {zenith}, {mode}: rms {:.3}%", rms * 100.0);
+        }
+    }
+}
+
+/// The sun lights surfaces with its irradiance after the air it crosses:
+/// the rendered surfaces of sun_garden match the reference.
+#[test]
+fn sunlit_scene_matches_reference() {
+    let mut data = slicelight::scene::load(&common::root().join("scenes/sun_garden.toml")).unwrap();
+    data.common.width = 180;
+    data.common.height = 120;
+    data.common.band_pixels = 180 * 120;
+    assert!(data.lights.len() == 1, "the sun is the scene's one light");
+    let (image, _) = render::render(&data, &Backend::Cpu, false).unwrap();
+    let all: Vec<u32> = (0..data.pixel_count()).collect();
+    let (refvals, _) = reference::render_converged_at(&data, &all, 2e-4);
+    let d = slicelight::metrics::difference(&rgb(&image, &all), &refvals, data.exposure);
+    println!("sun_garden 180x120 vs reference: {d:?}");
+    // Surfaces with exact shadow rays and the sky's table: the same
+    // 0.5 % of the peak as the sky alone, in 8-bit terms about one level.
+    assert!(d.rms_8bit_percent < 0.5, "{d:?}");
+}
+
+/// Stress: observer at 0 m, 10 km and 100 km (looking at the limb), the sun
+/// from the zenith to 10 degrees below the horizon, Rayleigh scattering
+/// times 0 and times 100: no NaN or Inf, nothing negative; and the 100 km
+/// view of the limb still agrees with the reference.
+#[test]
+fn sky_is_finite_at_the_edges() {
+    for altitude in [0.0f32, 10_000.0, 100_000.0] {
+        for scale in [0.0f32, 1.0, 100.0] {
+            for zenith in [0.0f32, 90.0, 90.01, 100.0] {
+                let beta = [5.802e-6 * scale, 13.558e-6 * scale, 33.1e-6 * scale];
+                let data = common::scene_from_str(&format!(
+                    r#"
+                    [camera]
+                    position = [0.0, 0.0, 0.0]
+                    look_at = [1.0, -0.15, 0.0]
+                    vfov_deg = 40.0
+                    resolution = [48, 32]
+                    [sky]
+                    sun_zenith_deg = {zenith}
+                    sun_azimuth_deg = 90.0
+                    observer_altitude_m = {altitude}
+                    [sky.atmosphere]
+                    rayleigh_scattering = [{}, {}, {}]
+                    mie = {{}}
+                    "#,
+                    beta[0], beta[1], beta[2]
+                ));
+                let (image, _) = render::render(&data, &Backend::Cpu, false).unwrap();
+                assert!(
+                    image.iter().all(|p| p.is_finite() && p.min_element() >= 0.0),
+                    "altitude {altitude}, x{scale}, sun {zenith}"
+                );
+                if scale == 1.0 && zenith == 0.0 {
+                    let pixels = sky_pixels(&data, 1);
+                    let (refvals, _) = reference::render_converged_at(&data, &pixels, 2e-4);
+                    let (rms, _) = sky_error(&rgb(&image, &pixels), &refvals);
+                    println!("altitude {altitude}: rms {:.3}% of the peak", rms * 100.0);
+                    assert!(rms < 0.01, "altitude {altitude}: {rms}");
+                }
+            }
+        }
+    }
+}
+
+/// A 1x1 image and an 8192x4096 fisheye: the kernels at the smallest and a
+/// very large pixel count stay finite and non-negative.
+#[test]
+fn sky_at_tiny_and_huge_image_sizes() {
+    for (w, h) in [(1u32, 1u32), (8192, 4096)] {
+        let mut data = fisheye(8, 45.0, "");
+        data.common.width = w;
+        data.common.height = h;
+        data.common.band_pixels = w * h;
+        let (image, _) = render::render(&data, &Backend::Cpu, false).unwrap();
+        assert_eq!(image.len(), (w * h) as usize);
+        assert!(image.iter().all(|p| p.is_finite() && p.min_element() >= 0.0), "{w}x{h}");
+        let lit = image.iter().filter(|p| p.max_element() > 0.0).count();
+        // The image circle covers pi/4 of a square, pi/8 of a 2:1 image.
+        println!("{w}x{h}: {lit} pixels of sky");
+        assert!(lit >= 1);
+    }
+}
+
+#[test]
+fn bad_sky_fields_are_named() {
+    let cases = [
+        ("sun_zenith_deg = 200.0", "sky.sun_zenith_deg"),
+        ("sun_zenith_deg = 10.0\nsky_view_table = [64, 63]", "sky.sky_view_table"),
+        ("sun_zenith_deg = 10.0\nground_albedo = [0.1, 2.0, 0.1]", "sky.ground_albedo"),
+        ("sun_zenith_deg = 10.0\n[sky.atmosphere]\ntop_radius_m = 6000.0", "sky.atmosphere.top_radius_m"),
+        ("sun_zenith_deg = 10.0\n[sky.atmosphere]\nmie = { g = 1.5 }", "sky.atmosphere.mie.g"),
+    ];
+    for (sky, field) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.toml");
+        let toml = format!(
+            "[camera]\nposition = [0.0, 0.0, 0.0]\nlook_at = [1.0, 0.0, 0.0]\nvfov_deg = 40.0\nresolution = [8, 8]\n[sky]\n{sky}\n"
+        );
+        std::fs::write(&path, toml).unwrap();
+        let err = format!("{:#}", slicelight::scene::load(&path).unwrap_err());
+        println!("{err}");
+        assert!(err.contains("bad.toml") && err.contains(field), "{field}: {err}");
+    }
+    // A fisheye has no field of view, and cannot look through a scattering medium.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("fish.toml");
+    let fish = "[camera]\nprojection = \"fisheye\"\nposition = [0.0, 0.0, 0.0]\nlook_at = [0.0, 1.0, 0.0]\nup = [0.0, 0.0, 1.0]\nresolution = [8, 8]\n";
+    std::fs::write(&path, format!("{fish}vfov_deg = 30.0\n")).unwrap();
+    assert!(format!("{:#}", slicelight::scene::load(&path).unwrap_err()).contains("camera.vfov_deg"));
+    std::fs::write(&path, format!("{fish}[medium]\nsigma_s = [0.1, 0.1, 0.1]\nsigma_t = [0.1, 0.1, 0.1]\n")).unwrap();
+    assert!(format!("{:#}", slicelight::scene::load(&path).unwrap_err()).contains("camera.projection"));
+}

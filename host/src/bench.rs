@@ -112,7 +112,7 @@ fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
     Ok(d)
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
     if n % 2 == 1 {

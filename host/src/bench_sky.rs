@@ -15,6 +15,7 @@ use plotters::prelude::*;
 use std::io::Write;
 use std::path::Path;
 
+use crate::bench::median;
 use crate::reference;
 use crate::render::{self, Backend};
 use crate::scene::{self, SceneData};
@@ -113,16 +114,6 @@ pub struct Row {
     pub sky_median_seconds: f64,
     pub rms_relative: f64,
     pub max_relative: f64,
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// Runs the sky sweep over `scenes` and writes `sky_bench.csv` and

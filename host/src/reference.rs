@@ -20,8 +20,9 @@ use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, PROJECTION_FISHEYE}
 
 use crate::sky_reference::SkyReference;
 
-/// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`).
-pub const SKY_TOLERANCE: f64 = 1e-7;
+/// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`;
+/// the `reference_converges` test measures its error: below 1e-4 of the sky's peak).
+pub const SKY_TOLERANCE: f64 = 1e-6;
 
 use crate::scene::SceneData;
 

@@ -89,7 +89,10 @@ pub struct SkyParams {
     pub sky_view_height: u32,
     /// 1 to look the sky up in the sky-view table, 0 to integrate per pixel.
     pub use_sky_view: u32,
-    pub _pad: [u32; 3],
+    /// `horizon_elevation` of these parameters, radians (set by the host
+    /// with that function, so that the per-pixel kernel need not recompute it).
+    pub horizon: f32,
+    pub _pad: [u32; 2],
 }
 
 #[cfg(not(target_arch = "spirv"))]
@@ -492,7 +495,7 @@ pub fn sky_view_direction(p: &SkyParams, index: u32) -> (f32, f32) {
     let half = p.sky_view_height / 2;
     let (col, row) = (index % w, index / w);
     let azimuth = PI * col as f32 / (w - 1) as f32;
-    let horizon = horizon_elevation(p);
+    let horizon = p.horizon;
     let elevation = if row >= half {
         let x = (row - half) as f32 / (half - 1) as f32;
         horizon + HORIZON_GAP + (FRAC_PI_2 - horizon - HORIZON_GAP) * x * x
@@ -517,14 +520,13 @@ pub fn sky_view_texel(index: u32, p: &SkyParams, table: &[Vec4]) -> Vec4 {
 /// interpolating only within the half (sky or ground) that the ray is in.
 pub fn sky_view_lookup(p: &SkyParams, sky_view: &[Vec4], dir: Vec3) -> Vec3 {
     let sun = p.sun_direction.xyz();
-    let horizontal = Vec3::new(dir.x, 0.0, dir.z);
-    let sun_horizontal = Vec3::new(sun.x, 0.0, sun.z);
-    let lengths = horizontal.length() * sun_horizontal.length();
-    let cos_azimuth = if lengths > 1e-12 { (horizontal.dot(sun_horizontal) / lengths).clamp(-1.0, 1.0) } else { 1.0 };
+    let lengths_sq = (dir.x * dir.x + dir.z * dir.z) * (sun.x * sun.x + sun.z * sun.z);
+    let cos_azimuth =
+        if lengths_sq > 1e-24 { ((dir.x * sun.x + dir.z * sun.z) / lengths_sq.sqrt()).clamp(-1.0, 1.0) } else { 1.0 };
     let x = cos_azimuth.acos() / PI;
     let mu = dir.y.clamp(-1.0, 1.0);
     let elevation = mu.asin();
-    let horizon = horizon_elevation(p);
+    let horizon = p.horizon;
     let half = p.sky_view_height / 2;
     let w = p.sky_view_width;
     let value = if hits_ground(p, p.observer_altitude, mu).0 {
@@ -619,7 +621,7 @@ mod tests {
 
     /// Earth's atmosphere with Rayleigh scattering only (the defaults).
     fn rayleigh_only() -> SkyParams {
-        SkyParams {
+        with_horizon(SkyParams {
             sun_direction: Vec4::new(0.0, 1.0, 0.0, 0.2666f32.to_radians().cos()),
             sun_irradiance: Vec4::new(1.0, 1.0, 1.0, 2.0 * PI * (1.0 - 0.2666f32.to_radians().cos())),
             rayleigh: Vec4::new(5.802e-6, 13.558e-6, 33.1e-6, 8000.0),
@@ -633,7 +635,11 @@ mod tests {
             sky_view_width: 64,
             sky_view_height: 64,
             ..Default::default()
-        }
+        })
+    }
+
+    fn with_horizon(p: SkyParams) -> SkyParams {
+        SkyParams { horizon: horizon_elevation(&p), ..p }
     }
 
     fn with_aerosols_and_ozone() -> SkyParams {
@@ -784,12 +790,12 @@ mod tests {
         for scale in [0.0f32, 1.0, 100.0] {
             for h in [0.0f32, 10_000.0, 100_000.0] {
                 let base = with_aerosols_and_ozone();
-                let p = SkyParams {
+                let p = with_horizon(SkyParams {
                     rayleigh: (base.rayleigh.xyz() * scale).extend(8000.0),
                     observer_altitude: h,
                     ground_albedo: Vec4::splat(0.3),
                     ..base
-                };
+                });
                 let t = table(&p);
                 assert!(t.iter().all(|v| v.is_finite() && v.cmpge(Vec4::ZERO).all()));
                 let horizon = horizon_elevation(&p);

@@ -330,8 +330,10 @@ pub fn configure(s: &Settings) -> Result<Setup> {
         sky_view_width: s.sky_view_table[0],
         sky_view_height: s.sky_view_table[1],
         use_sky_view: s.sky_view as u32,
-        _pad: [0; 3],
+        horizon: 0.0,
+        _pad: [0; 2],
     };
+    let params = SkyParams { horizon: slicelight_shaders::sky::horizon_elevation(&params), ..params };
     Ok(Setup { enabled: true, params })
 }
 

@@ -14,7 +14,7 @@ use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
 use super::*;
 use crate::cpu::for_each_invocation;
-use crate::scene::{invalid, SceneData};
+use crate::scene::{invalid, validate, SceneData};
 
 pub static SKY_PARAMS: Resource =
     Resource { binding: 15, name: "sky parameters", kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.sky.params)) };
@@ -224,11 +224,12 @@ fn positive(field: &str, v: f32) -> Result<f32> {
     Ok(v)
 }
 
-fn non_negative(field: &str, v: [f32; 3]) -> Result<Vec3> {
-    if !v.iter().all(|x| x.is_finite() && *x >= 0.0) {
-        bail!(invalid(field, "three non-negative numbers", v));
+/// A non-negative finite scalar (the aerosols' coefficients).
+fn non_negative(field: &str, v: f32) -> Result<f32> {
+    if !(v.is_finite() && v >= 0.0) {
+        bail!(invalid(field, "a non-negative number", v));
     }
-    Ok(Vec3::from(v))
+    Ok(v)
 }
 
 fn table_size(field: &str, size: [u32; 2], even_rows: bool) -> Result<()> {
@@ -249,17 +250,14 @@ pub fn configure(s: &Settings) -> Result<Setup> {
     if !s.sun_azimuth_deg.is_finite() {
         bail!(invalid("sky.sun_azimuth_deg", "a finite angle in degrees", s.sun_azimuth_deg));
     }
-    let irradiance = non_negative("sky.sun_irradiance", s.sun_irradiance)?;
+    let irradiance = validate::non_negative3("sky.sun_irradiance", s.sun_irradiance)?;
     if !(s.sun_angular_radius_deg > 0.0 && s.sun_angular_radius_deg <= 10.0) {
         bail!(invalid("sky.sun_angular_radius_deg", "an angle in (0, 10] degrees", s.sun_angular_radius_deg));
     }
     if !(s.observer_altitude_m.is_finite() && s.observer_altitude_m >= 0.0 && s.observer_altitude_m <= 1e7) {
         bail!(invalid("sky.observer_altitude_m", "an altitude in [0, 1e7] m", s.observer_altitude_m));
     }
-    let albedo = non_negative("sky.ground_albedo", s.ground_albedo)?;
-    if albedo.max_element() > 1.0 {
-        bail!(invalid("sky.ground_albedo", "three albedos in [0, 1]", s.ground_albedo));
-    }
+    let albedo = validate::albedo("sky.ground_albedo", s.ground_albedo)?;
     if !(1..=65536).contains(&s.view_samples) {
         bail!(invalid("sky.view_samples", "a sample count in 1..=65536", s.view_samples));
     }
@@ -274,13 +272,13 @@ pub fn configure(s: &Settings) -> Result<Setup> {
     if top <= ground {
         bail!(invalid("sky.atmosphere.top_radius_m", "a radius above ground_radius_m", top));
     }
-    let rayleigh = non_negative("sky.atmosphere.rayleigh_scattering", a.rayleigh_scattering)?;
+    let rayleigh = validate::non_negative3("sky.atmosphere.rayleigh_scattering", a.rayleigh_scattering)?;
     let rayleigh_h = positive("sky.atmosphere.rayleigh_scale_height_m", a.rayleigh_scale_height_m)?;
     let (mie, mie_phase) = match &a.mie {
         None => (Vec4::new(0.0, 0.0, 1200.0, 0.0), MIE_HENYEY_GREENSTEIN),
         Some(m) => {
-            let sc = non_negative("sky.atmosphere.mie.scattering", [m.scattering; 3])?.x;
-            let ext = non_negative("sky.atmosphere.mie.extinction", [m.extinction; 3])?.x;
+            let sc = non_negative("sky.atmosphere.mie.scattering", m.scattering)?;
+            let ext = non_negative("sky.atmosphere.mie.extinction", m.extinction)?;
             if ext < sc {
                 bail!(invalid("sky.atmosphere.mie.extinction", "at least mie.scattering", m.extinction));
             }
@@ -298,7 +296,7 @@ pub fn configure(s: &Settings) -> Result<Setup> {
     let (ozone, ozone_center, ozone_half) = match &a.ozone {
         None => (Vec3::ZERO, 0.0, 0.0),
         Some(o) => {
-            let abs = non_negative("sky.atmosphere.ozone.absorption", o.absorption)?;
+            let abs = validate::non_negative3("sky.atmosphere.ozone.absorption", o.absorption)?;
             if !o.center_m.is_finite() {
                 bail!(invalid("sky.atmosphere.ozone.center_m", "a finite height in m", o.center_m));
             }
@@ -316,7 +314,7 @@ pub fn configure(s: &Settings) -> Result<Setup> {
         rayleigh: rayleigh.extend(rayleigh_h),
         mie,
         ozone: ozone.extend(0.0),
-        ground_albedo: albedo.extend(0.0),
+        ground_albedo: albedo,
         ground_radius: ground,
         atmosphere_height: top - ground,
         observer_altitude: s.observer_altitude_m,

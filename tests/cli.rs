@@ -78,10 +78,40 @@ fn good_scene_writes_png_exr_and_stats() {
     assert_eq!(stats["backend"], "cpu");
     let passes = stats["passes"].as_array().unwrap();
     let names: Vec<_> = passes.iter().map(|p| p["name"].as_str().unwrap()).collect();
-    assert_eq!(names, ["shadow_maps", "sky_transmittance", "sky_view", "surface", "shafts", "sky", "scatter_check"]);
+    assert_eq!(
+        names,
+        [
+            "shadow_maps",
+            "sky_transmittance",
+            "sky_view",
+            "sea.radiance_map",
+            "sea.scattering_maps",
+            "sea.accumulated_map",
+            "surface",
+            "shafts",
+            "sky",
+            "sea.reflection",
+            "sea.order1",
+            "sea.order2",
+            "sea.bottom",
+            "scatter_check"
+        ]
+    );
     // Every pass the scene needs ran; the self-check waits to be asked for,
-    // and a scene without a [sky] pays nothing for the sky passes.
-    let idle = ["scatter_check", "sky_transmittance", "sky_view", "sky"];
+    // and a scene without a [sky] or a [sea] pays nothing for their passes.
+    let idle = [
+        "scatter_check",
+        "sky_transmittance",
+        "sky_view",
+        "sky",
+        "sea.radiance_map",
+        "sea.scattering_maps",
+        "sea.accumulated_map",
+        "sea.reflection",
+        "sea.order1",
+        "sea.order2",
+        "sea.bottom",
+    ];
     assert!(passes
         .iter()
         .all(|p| (p["ran"] == true) == !idle.contains(&p["name"].as_str().unwrap())

@@ -14,5 +14,6 @@ pub mod reference;
 pub mod render;
 pub mod scene;
 pub mod sky_reference;
+pub mod waves;
 
 pub use slicelight_shaders as shaders;

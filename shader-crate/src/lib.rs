@@ -20,6 +20,7 @@ pub mod light;
 pub mod phase;
 pub mod scatter;
 pub mod scatter_check;
+pub mod sea;
 pub mod shadow_map;
 pub mod shafts;
 pub mod sky;

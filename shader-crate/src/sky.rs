@@ -92,7 +92,9 @@ pub struct SkyParams {
     /// `horizon_elevation` of these parameters, radians (set by the host
     /// with that function, so that the per-pixel kernel need not recompute it).
     pub horizon: f32,
-    pub _pad: [u32; 2],
+    /// 1 when a sea covers every downward view (the sea passes draw it).
+    pub sea: u32,
+    pub _pad: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
@@ -558,12 +560,20 @@ pub fn sky_pixel(
         return Vec4::ZERO;
     }
     let (_, dir) = camera_ray(common, x, y);
-    let sky = if p.use_sky_view != 0 {
+    if p.sea != 0 && dir.y < 0.0 {
+        return Vec4::ZERO;
+    }
+    (sky_radiance(p, transmittance, sky_view, dir) + sun_disk(p, transmittance, dir)).extend(0.0)
+}
+
+/// The sky's radiance along unit `dir` without the sun's disk: from the
+/// sky-view table, or integrated (`use_sky_view` 0).
+pub fn sky_radiance(p: &SkyParams, transmittance: &[Vec4], sky_view: &[Vec4], dir: Vec3) -> Vec3 {
+    if p.use_sky_view != 0 {
         sky_view_lookup(p, sky_view, dir)
     } else {
         inscatter(p, transmittance, dir.y, p.sun_direction.y, dir.dot(p.sun_direction.xyz())).0
-    };
-    (sky + sun_disk(p, transmittance, dir)).extend(0.0)
+    }
 }
 
 #[spirv(compute(threads(64)))]

@@ -13,6 +13,7 @@
 //! module); the `bindings` test checks them against the compiled SPIR-V.
 
 use bytemuck::Pod;
+use glam::Vec4;
 use indicatif::ProgressBar;
 use slicelight_shaders::types::CommonParams;
 use std::collections::HashMap;
@@ -29,6 +30,7 @@ macro_rules! resources {
 }
 
 pub mod scatter_check;
+pub mod sea;
 pub mod shadow_maps;
 pub mod shafts;
 pub mod sky;
@@ -39,9 +41,16 @@ pub static PASSES: &[&dyn Pass] = &[
     &shadow_maps::ShadowMaps,
     &sky::SkyTransmittance,
     &sky::SkyView,
+    &sea::SeaRadianceMap,
+    &sea::SeaScatteringMaps,
+    &sea::SeaAccumulatedMap,
     &surface::Surface,
     &shafts::Shafts,
     &sky::Sky,
+    &sea::SeaReflection,
+    &sea::SeaOrder1,
+    &sea::SeaOrder2,
+    &sea::SeaBottom,
     &scatter_check::ScatterCheck,
 ];
 
@@ -288,4 +297,21 @@ pub fn count_differences(gpu: &[f32], cpu: &[f32], tol: impl Fn(f32) -> f32) -> 
         }
     }
     (outliers, worst)
+}
+
+/// Compares two tables or layers of `Vec4`s (rgb) within `rel` of the
+/// CPU's peak per value, `allowed` values free to differ (pixels that
+/// flip across an edge); the callers say why their `rel` is what it is.
+pub fn compare_rgb(what: &str, gpu: &[Vec4], cpu: &[Vec4], rel: f32, allowed: usize) -> anyhow::Result<String> {
+    anyhow::ensure!(gpu.len() == cpu.len(), "{what}: {} and {} values", gpu.len(), cpu.len());
+    let flat = |v: &[Vec4]| v.iter().flat_map(|p| p.truncate().to_array()).collect::<Vec<f32>>();
+    let (g, c) = (flat(gpu), flat(cpu));
+    let peak = c.iter().fold(0.0f32, |m, v| m.max(*v));
+    let (outliers, worst) = count_differences(&g, &c, |v| rel * peak.max(v.abs()));
+    anyhow::ensure!(
+        outliers <= allowed,
+        "{what}: {outliers} of {} values differ by more than {rel:e} of the peak",
+        c.len()
+    );
+    Ok(format!("{what}: {} values, {outliers} outliers, worst difference {worst:e} (peak {peak:e})", c.len()))
 }

@@ -2,7 +2,7 @@
 //! table, the optional sky-view table, and the per-pixel sky; their settings
 //! (the scene's `[sky]` table) and the sun as a light on the scene.
 
-use anyhow::{bail, ensure, Result};
+use anyhow::{bail, Result};
 use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use serde::Deserialize;
@@ -217,7 +217,7 @@ impl Setup {
     }
 }
 
-fn positive(field: &str, v: f32) -> Result<f32> {
+pub(crate) fn positive(field: &str, v: f32) -> Result<f32> {
     if !(v.is_finite() && v > 0.0) {
         bail!(invalid(field, "a positive number", v));
     }
@@ -329,7 +329,8 @@ pub fn configure(s: &Settings) -> Result<Setup> {
         sky_view_height: s.sky_view_table[1],
         use_sky_view: s.sky_view as u32,
         horizon: 0.0,
-        _pad: [0; 2],
+        sea: 0,
+        _pad: 0,
     };
     let params = SkyParams { horizon: slicelight_shaders::sky::horizon_elevation(&params), ..params };
     Ok(Setup { enabled: true, params })
@@ -337,19 +338,6 @@ pub fn configure(s: &Settings) -> Result<Setup> {
 
 fn skip_without_sky(scene: &SceneData) -> Option<Plan> {
     (!scene.sky.enabled).then(|| Plan::skip("no [sky]"))
-}
-
-/// Compares two tables or layers of `Vec4`s (rgb) within `rel` of the
-/// CPU's peak per value: they are sums of f32 products and `exp`s, which
-/// the GPU may round or fuse differently.
-fn compare_rgb(what: &str, gpu: &[Vec4], cpu: &[Vec4], rel: f32, allowed: usize) -> Result<String> {
-    ensure!(gpu.len() == cpu.len(), "{what}: {} and {} values", gpu.len(), cpu.len());
-    let flat = |v: &[Vec4]| v.iter().flat_map(|p| p.truncate().to_array()).collect::<Vec<f32>>();
-    let (g, c) = (flat(gpu), flat(cpu));
-    let peak = c.iter().fold(0.0f32, |m, v| m.max(*v));
-    let (outliers, worst) = count_differences(&g, &c, |v| rel * peak.max(v.abs()));
-    ensure!(outliers <= allowed, "{what}: {outliers} of {} values differ by more than {rel:e} of the peak", c.len());
-    Ok(format!("{what}: {} values, {outliers} outliers, worst difference {worst:e} (peak {peak:e})", c.len()))
 }
 
 pub struct SkyTransmittance;

@@ -47,6 +47,8 @@ pub struct SceneData {
     pub shafts: crate::passes::shafts::Setup,
     /// The sky passes' parameter block (`enabled` false without `[sky]`).
     pub sky: crate::passes::sky::Setup,
+    /// The sea passes' parameter block and wave normals (`enabled` false without `[sea]`).
+    pub sea: crate::passes::sea::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
 }
@@ -219,10 +221,21 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     }
     let objects = geometry::build(&file.object, base)?;
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
-    let sky = match &file.sky {
+    let mut sky = match &file.sky {
         Some(s) => crate::passes::sky::configure(s)?,
         None => Default::default(),
     };
+    let sea = match &file.sea {
+        Some(s) => {
+            if common.projection == PROJECTION_FISHEYE {
+                bail!(invalid("camera.projection", "a pinhole camera over a sea", "fisheye"));
+            }
+            crate::passes::sea::configure(s, &sky, common.camera_position.y)?
+        }
+        None => Default::default(),
+    };
+    // The sea covers every downward view; the sky pass leaves it to the sea passes.
+    sky.params.sea = sea.enabled as u32;
     // The sun lights the scene's surfaces as a directional light of its
     // colour after the air it crosses to the observer.
     let mut directionals: Vec<DirectionalLight> = Vec::new();
@@ -257,6 +270,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         exposure: file.camera.exposure,
         shafts: Default::default(),
         sky,
+        sea,
         requested_passes: Vec::new(),
     };
     if !data.has_geometry() {

@@ -21,6 +21,7 @@ pub struct SceneFile {
     #[serde(default)]
     pub surface: crate::passes::surface::Settings,
     pub sky: Option<crate::passes::sky::Settings>,
+    pub sea: Option<crate::passes::sea::Settings>,
 }
 
 #[derive(Debug, Deserialize)]

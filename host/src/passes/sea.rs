@@ -1,0 +1,718 @@
+//! The sea passes (kernels: `shader-crate/src/sea.rs`): the radiance map
+//! and the scattering maps (order 2, once per frame), and the four
+//! per-pixel terms, each its own layer: `sea.reflection`, `sea.order1`,
+//! `sea.order2`, `sea.bottom`; their settings (the scene's `[sea]`), and the
+//! automatic choice of `n_z` and `n_d` by the paper's 1/255 rule (6.1).
+
+use anyhow::{bail, Result};
+use glam::{Vec3, Vec4};
+use indicatif::ProgressBar;
+use serde::Deserialize;
+use slicelight_shaders::sea::{
+    accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, fresnel, order1_pixel, order2_pixel,
+    radiance_map_texel, reflection_pixel, scattering_map_texel, scattering_source, set_size, SeaParams, DEEP,
+    DEEP_OPTICAL_DEPTH, WAVES_FLAT, WAVES_NORMAL_MAP,
+};
+use slicelight_shaders::types::{CommonParams, GBufferTexel};
+
+use super::sky::{positive, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW};
+use super::*;
+use crate::cpu::for_each_invocation;
+use crate::scene::{invalid, validate, SceneData};
+
+pub static SEA_PARAMS: Resource =
+    Resource { binding: 19, name: "sea parameters", kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.sea.params)) };
+/// Surface normals of the waves (a single up normal for a flat sea).
+pub static SEA_WAVES: Resource =
+    Resource { binding: 20, name: "wave normals", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.sea.waves)) };
+/// Order-1 radiance (rgb) per plane and direction of the sun's set (eq. 7).
+pub static SEA_RADIANCE_MAP: Resource =
+    Resource { binding: 21, name: "sea radiance map", kind: ResourceKind::Frame(|s| s.sea.radiance_map_texels() * 16) };
+/// Order-2 source (rgb) per plane and direction toward the eye (eq. 8).
+pub static SEA_SCATTERING_MAPS: Resource = Resource {
+    binding: 22,
+    name: "sea scattering maps",
+    kind: ResourceKind::Frame(|s| s.sea.scattering_map_texels() * 16),
+};
+/// Order-2 radiance below the surface (rgb) per direction toward the eye:
+/// the scattering maps accumulated over the planes.
+pub static SEA_ACCUMULATED_MAP: Resource = Resource {
+    binding: 27,
+    name: "sea accumulated map",
+    kind: ResourceKind::Frame(|s| s.sea.accumulated_map_texels() * 16),
+};
+pub static SEA_REFLECTION: Resource =
+    Resource { binding: 23, name: "sea reflection", kind: ResourceKind::PerPixel { blank: no_radiance } };
+pub static SEA_ORDER1: Resource =
+    Resource { binding: 24, name: "sea order 1", kind: ResourceKind::PerPixel { blank: no_radiance } };
+pub static SEA_ORDER2: Resource =
+    Resource { binding: 25, name: "sea order 2", kind: ResourceKind::PerPixel { blank: no_radiance } };
+pub static SEA_BOTTOM: Resource =
+    Resource { binding: 26, name: "sea bottom", kind: ResourceKind::PerPixel { blank: no_radiance } };
+
+/// The scene's `[sea]` table.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Height of the surface (scene y), m.
+    #[serde(default)]
+    pub level_m: f32,
+    /// Depth of a flat bottom below the surface, m; none: no bottom.
+    pub depth_m: Option<f32>,
+    /// Lambertian albedo of the bottom.
+    #[serde(default = "sand")]
+    pub bottom_albedo: [f32; 3],
+    /// Absorption coefficient `a`, 1/m per channel.
+    pub absorption: [f32; 3],
+    /// Scattering coefficient `b`, 1/m per channel.
+    pub scattering: [f32; 3],
+    /// Henyey-Greenstein `g` of the water's volume scattering function.
+    #[serde(default = "petzold_g")]
+    pub g: f32,
+    /// Index of refraction of the water.
+    #[serde(default = "water_ior")]
+    pub ior: f32,
+    /// Single scattering: the exact order-1 integral or eq. 5 as printed.
+    #[serde(default)]
+    pub single: Single,
+    /// Whether to compute second-order scattering (the scattering maps).
+    #[serde(default = "yes")]
+    pub second_order: bool,
+    /// Sampling planes `n_z`; none: chosen by the 1/255 rule.
+    pub planes: Option<u32>,
+    /// Sampling directions `n_d` (twice a square: 2 k^2); none: the 1/255 rule.
+    pub directions: Option<u32>,
+    /// Scattering map size: azimuths x zenith angles of the direction toward the eye.
+    #[serde(default = "map_size")]
+    pub scattering_map: [u32; 2],
+    #[serde(default)]
+    pub waves: Waves,
+}
+
+fn sand() -> [f32; 3] {
+    [0.6, 0.55, 0.4]
+}
+fn petzold_g() -> f32 {
+    0.924
+}
+fn water_ior() -> f32 {
+    1.333
+}
+fn yes() -> bool {
+    true
+}
+fn map_size() -> [u32; 2] {
+    [32, 32]
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Single {
+    /// The order-1 integral with the extinction `c`.
+    #[default]
+    Exact,
+    /// Eq. 5 as printed: `c (1 - omega_0 c_f)` in place of `c`.
+    PaperEq5,
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Waves {
+    #[default]
+    Flat,
+    /// A statistical wave spectrum on an FFT grid (Tessendorf).
+    Spectrum(crate::waves::Spectrum),
+}
+
+/// The sea's state for one scene.
+#[derive(Debug, Clone, Default)]
+pub struct Setup {
+    pub enabled: bool,
+    pub params: SeaParams,
+    /// The wave normal map (one up normal for a flat sea).
+    pub waves: Vec<Vec4>,
+    pub second_order: bool,
+    pub single: Single,
+    /// How `n_z` and `n_d` were chosen, for the plan.
+    pub sampling: String,
+}
+
+impl Setup {
+    pub fn radiance_map_texels(&self) -> u64 {
+        if self.enabled && self.second_order {
+            self.params.planes as u64 * set_size(&self.params) as u64
+        } else {
+            0
+        }
+    }
+    pub fn accumulated_map_texels(&self) -> u64 {
+        if self.enabled && self.second_order {
+            self.params.map_width as u64 * self.params.map_height as u64
+        } else {
+            0
+        }
+    }
+    pub fn scattering_map_texels(&self) -> u64 {
+        if self.enabled && self.second_order {
+            self.params.planes as u64 * self.params.map_width as u64 * self.params.map_height as u64
+        } else {
+            0
+        }
+    }
+}
+
+/// The threshold of the 1/255 rule (section 6.1): successive counts whose
+/// order-2 radiance differs by less than this fraction of its peak.
+pub const EPSILON: f32 = 1.0 / 255.0;
+
+/// Upward directions in the water (toward the eye) that the 1/255 rule
+/// checks: the nadir view, and 20 and 45 degrees toward and away from the
+/// sun (the refracted view cone reaches 48.6 degrees).
+fn rule_views(p: &SeaParams) -> Vec<Vec3> {
+    let s = p.sun_in_water.truncate();
+    let h = Vec3::new(s.x, 0.0, s.z);
+    let t = if h.length_squared() > 1e-12 { h.normalize() } else { Vec3::X };
+    let mut views = vec![Vec3::Y];
+    for zenith in [20f32, 45.0] {
+        let z = zenith.to_radians();
+        views.push((t * z.sin() + Vec3::Y * z.cos()).normalize());
+        views.push((-t * z.sin() + Vec3::Y * z.cos()).normalize());
+    }
+    views
+}
+
+/// The order-2 radiance below the surface toward `views`, with the radiance
+/// map and the sources computed directly (no scattering-map interpolation):
+/// what the 1/255 rule compares.
+pub fn order2_at(p: &SeaParams, views: &[Vec3]) -> Vec<Vec3> {
+    let n = set_size(p);
+    let map: Vec<Vec4> = (0..p.planes * n).map(|i| radiance_map_texel(i, p)).collect();
+    views.iter().map(|&v| accumulate_planes(p, v, |k| scattering_source(p, k, v, &map))).collect()
+}
+
+/// The largest difference between two sets of radiances, over the larger set's peak.
+fn max_difference(a: &[Vec3], b: &[Vec3]) -> f32 {
+    let peak = b.iter().chain(a).fold(0.0f32, |m, v| m.max(v.max_element()));
+    if peak <= 0.0 {
+        return 0.0;
+    }
+    a.iter().zip(b).fold(0.0f32, |m, (x, y)| m.max((*x - *y).abs().max_element())) / peak
+}
+
+/// The 1/255 rule for `n_z`: the first count whose order-2 radiance differs
+/// from the next count's by less than `EPSILON` of the peak, with each
+/// difference on the way (the paper's Fig. 7).
+pub fn choose_planes(p: &SeaParams) -> (u32, Vec<(u32, f32)>) {
+    let views = rule_views(p);
+    let mut curve = Vec::new();
+    let mut previous = order2_at(&SeaParams { planes: 2, ..*p }, &views);
+    for n in 2..64 {
+        let next = order2_at(&SeaParams { planes: n + 1, ..*p }, &views);
+        let d = max_difference(&previous, &next);
+        curve.push((n, d));
+        if d < EPSILON {
+            return (n, curve);
+        }
+        previous = next;
+    }
+    (64, curve)
+}
+
+/// The 1/255 rule for `n_d = 2 k^2` (the paper's Fig. 8), with `p.planes` planes.
+pub fn choose_directions(p: &SeaParams) -> (u32, Vec<(u32, f32)>) {
+    let views = rule_views(p);
+    let at = |k: u32| order2_at(&SeaParams { polar: k, azimuths: k, ..*p }, &views);
+    let mut curve = Vec::new();
+    let mut previous = at(2);
+    for k in 2..32 {
+        let next = at(k + 1);
+        let d = max_difference(&previous, &next);
+        curve.push((2 * k * k, d));
+        if d < EPSILON {
+            return (k, curve);
+        }
+        previous = next;
+    }
+    (32, curve)
+}
+
+/// Validates `[sea]` against the sky's sun and the camera's height, and
+/// returns the sea's setup; the error names the field under `sea.`.
+pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32) -> Result<Setup> {
+    if !sky.enabled {
+        bail!(invalid("sea", "a scene with a [sky] (the sea's sun and the sky it reflects)", "no [sky]"));
+    }
+    if !s.level_m.is_finite() {
+        bail!(invalid("sea.level_m", "a finite height in m", s.level_m));
+    }
+    if camera_y <= s.level_m {
+        bail!(invalid(
+            "sea.level_m",
+            "a level below the camera (views from under the water are not rendered)",
+            s.level_m
+        ));
+    }
+    let depth = match s.depth_m {
+        None => DEEP,
+        Some(d) => {
+            if !(d.is_finite() && d > 0.0 && d <= 1e6) {
+                bail!(invalid("sea.depth_m", "a depth in (0, 1e6] m (leave it out for no bottom)", d));
+            }
+            d
+        }
+    };
+    let albedo = validate::albedo("sea.bottom_albedo", s.bottom_albedo)?;
+    let a = validate::non_negative3("sea.absorption", s.absorption)?;
+    let b = validate::non_negative3("sea.scattering", s.scattering)?;
+    if !(s.g > -1.0 && s.g < 1.0) {
+        bail!(invalid("sea.g", "a number in (-1, 1)", s.g));
+    }
+    let n = positive("sea.ior", s.ior)?;
+    if !(1.0..=3.0).contains(&n) {
+        bail!(invalid("sea.ior", "an index of refraction in [1, 3]", s.ior));
+    }
+    let size = s.scattering_map;
+    if !size.iter().all(|v| (2..=1024).contains(v)) {
+        bail!(invalid("sea.scattering_map", "two sizes in 2..=1024", size));
+    }
+    if let Some(planes) = s.planes {
+        if !(2..=256).contains(&planes) {
+            bail!(invalid("sea.planes", "a plane count in 2..=256", planes));
+        }
+    }
+    let polar = match s.directions {
+        None => None,
+        Some(d) => {
+            let k = ((d / 2) as f32).sqrt().round() as u32;
+            if !(8..=8192).contains(&d) || 2 * k * k != d {
+                bail!(invalid("sea.directions", "twice a square in 8..=8192 (8, 18, 32, 50, 72, 98, 128, ...)", d));
+            }
+            Some(k)
+        }
+    };
+    let (waves_kind, waves, wave_resolution, wave_size) = match &s.waves {
+        Waves::Flat => (WAVES_FLAT, vec![Vec4::new(0.0, 1.0, 0.0, 0.0)], 1, 1.0),
+        Waves::Spectrum(spectrum) => {
+            let normals = spectrum.normal_map()?;
+            (WAVES_NORMAL_MAP, normals, spectrum.resolution, spectrum.size_m)
+        }
+    };
+
+    // The sun, refracted at the mean (flat) surface.
+    let sun = sky.params.sun_direction.truncate();
+    let (irradiance, cos_ii) = match sky.sun_at_observer() {
+        Some((e, _)) => (e, sun.y.max(0.0)),
+        None => (Vec3::ZERO, sun.y.max(1e-3)),
+    };
+    let t_i = 1.0 - fresnel(cos_ii, 1.0, n);
+    let sin_io = (1.0 - cos_ii * cos_ii).max(0.0).sqrt() / n;
+    let cos_io = (1.0 - sin_io * sin_io).sqrt();
+    let horizontal = Vec3::new(sun.x, 0.0, sun.z);
+    let horizontal = if horizontal.length_squared() > 1e-12 { horizontal.normalize() } else { Vec3::X };
+    let in_water = (-horizontal * sin_io - Vec3::Y * cos_io).normalize();
+    let beam = irradiance * (t_i * cos_ii / cos_io);
+    let c = a + b;
+    let albedo0 = Vec3::select(c.cmpgt(Vec3::ZERO), b / c.max(Vec3::splat(1e-30)), Vec3::ZERO);
+    let order1_c = match s.single {
+        Single::Exact => c,
+        Single::PaperEq5 => c * (Vec3::ONE - albedo0 * forward_fraction(s.g)),
+    };
+    let plane_depth = Vec3::new(
+        (DEEP_OPTICAL_DEPTH / c.x).min(depth),
+        (DEEP_OPTICAL_DEPTH / c.y).min(depth),
+        (DEEP_OPTICAL_DEPTH / c.z).min(depth),
+    );
+    let mut params = SeaParams {
+        sun_direction: sun.extend(cos_ii),
+        sun_in_water: in_water.extend(cos_io),
+        beam_irradiance: beam.extend(t_i),
+        scattering: b.extend(s.g),
+        extinction: c.extend(n),
+        order1_extinction: order1_c.extend(0.0),
+        bottom_albedo: albedo,
+        plane_depth: plane_depth.extend(0.0),
+        level: s.level_m,
+        depth,
+        planes: s.planes.unwrap_or(16),
+        polar: polar.unwrap_or(8),
+        azimuths: polar.unwrap_or(8),
+        map_width: size[0],
+        map_height: size[1],
+        waves: waves_kind,
+        wave_resolution,
+        wave_size,
+        _pad: [0; 2],
+    };
+    let mut sampling = Vec::new();
+    if s.second_order {
+        if polar.is_none() {
+            let (k, curve) = choose_directions(&params);
+            params.polar = k;
+            params.azimuths = k;
+            sampling.push(format!("n_d = {} by the 1/255 rule ({} counts tried)", 2 * k * k, curve.len()));
+        }
+        if s.planes.is_none() {
+            let (planes, curve) = choose_planes(&params);
+            params.planes = planes;
+            sampling.push(format!("n_z = {planes} by the 1/255 rule ({} counts tried)", curve.len()));
+        }
+    }
+    Ok(Setup {
+        enabled: true,
+        params,
+        waves,
+        second_order: s.second_order,
+        single: s.single,
+        sampling: sampling.join(", "),
+    })
+}
+
+fn skip_without_sea(scene: &SceneData) -> Option<Plan> {
+    (!scene.sea.enabled).then(|| Plan::skip("no [sea]"))
+}
+
+fn skip_without_order2(scene: &SceneData) -> Option<Plan> {
+    skip_without_sea(scene).or_else(|| (!scene.sea.second_order).then(|| Plan::skip("second_order = false")))
+}
+
+pub struct SeaRadianceMap;
+
+impl Pass for SeaRadianceMap {
+    fn name(&self) -> &'static str {
+        "sea.radiance_map"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::radiance_map_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SEA_PARAMS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_RADIANCE_MAP]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_order2(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        Plan::run(
+            format!(
+                "order-1 radiance (eq. 7) on {} planes from {} directions around the refracted sun",
+                p.planes,
+                set_size(p)
+            ),
+            scene.sea.radiance_map_texels(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        frame.write::<Vec4>(&SEA_RADIANCE_MAP, scene.sea.radiance_map_texels() as usize, |_, out| {
+            for_each_invocation(out, 0, progress, |i, v| *v = radiance_map_texel(i, p));
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // A product of a phase function, three exps and a division: 1e-5 of
+        // the peak is ~100 ulps of the largest value.
+        compare_rgb("radiance map", gpu.get(&SEA_RADIANCE_MAP), cpu.get(&SEA_RADIANCE_MAP), 1e-5, 0)
+    }
+}
+
+pub struct SeaScatteringMaps;
+
+impl Pass for SeaScatteringMaps {
+    fn name(&self) -> &'static str {
+        "sea.scattering_maps"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::scattering_maps_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SEA_PARAMS, SEA_RADIANCE_MAP]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_SCATTERING_MAPS]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_order2(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        let how = if scene.sea.sampling.is_empty() { String::new() } else { format!(" ({})", scene.sea.sampling) };
+        Plan::run(
+            format!(
+                "second-order scattering maps (eq. 6, 8), {} planes of {}x{}, {} directions{how}",
+                p.planes,
+                p.map_width,
+                p.map_height,
+                2 * set_size(p)
+            ),
+            scene.sea.scattering_map_texels(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        frame.write::<Vec4>(&SEA_SCATTERING_MAPS, scene.sea.scattering_map_texels() as usize, |frame, out| {
+            let map = frame.get::<Vec4>(&SEA_RADIANCE_MAP);
+            for_each_invocation(out, 0, progress, |i, v| *v = scattering_map_texel(i, p, map));
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Sums of 2 n_d products of f32 phase functions and exps (each ~1e-6
+        // relative); the directions go through sin and cos, which Vulkan
+        // allows to 2^-11 absolute, moving a direction by up to ~5e-4 rad
+        // where the phase function (g ~ 0.9) changes by a few per cent per
+        // 0.01 rad: 1e-3 of the peak.
+        compare_rgb("scattering maps", gpu.get(&SEA_SCATTERING_MAPS), cpu.get(&SEA_SCATTERING_MAPS), 1e-3, 0)
+    }
+}
+
+/// The per-pixel sea passes' comparison: the view ray's refraction and
+/// the map lookup go through sqrt, acos and atan2 (Vulkan: 4096 ulps for
+/// the inverses), and a pixel on the horizon or a wave facet's edge may
+/// flip; 1e-3 of the peak, 1e-3 of the values.
+fn compare_layer(what: &str, r: &Resource, gpu: &Frame, cpu: &Frame) -> Result<String> {
+    let c = cpu.get::<Vec4>(r);
+    compare_rgb(what, gpu.get(r), c, 1e-3, c.len() * 3 / 1000 + 1)
+}
+
+pub struct SeaAccumulatedMap;
+
+impl Pass for SeaAccumulatedMap {
+    fn name(&self) -> &'static str {
+        "sea.accumulated_map"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::accumulated_map_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SEA_PARAMS, SEA_SCATTERING_MAPS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_ACCUMULATED_MAP]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_order2(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        Plan::run(
+            format!("the scattering maps accumulated over {} planes with the attenuation map (eq. 8)", p.planes),
+            scene.sea.accumulated_map_texels(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        frame.write::<Vec4>(&SEA_ACCUMULATED_MAP, scene.sea.accumulated_map_texels() as usize, |frame, out| {
+            let maps = frame.get::<Vec4>(&SEA_SCATTERING_MAPS);
+            for_each_invocation(out, 0, progress, |i, v| *v = accumulated_map_texel(i, p, maps));
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Sums over the planes of the maps (compared at 1e-3) times exps
+        // and logs: the maps' tolerance.
+        compare_rgb("accumulated map", gpu.get(&SEA_ACCUMULATED_MAP), cpu.get(&SEA_ACCUMULATED_MAP), 1e-3, 0)
+    }
+}
+
+pub struct SeaReflection;
+
+impl Pass for SeaReflection {
+    fn name(&self) -> &'static str {
+        "sea.reflection"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::reflection_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW, SEA_PARAMS, SEA_WAVES]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_REFLECTION]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&SEA_REFLECTION)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sea(scene) {
+            return skip;
+        }
+        Plan::run("the sky and the sun reflected at the surface (Fresnel)", 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let (p, sky) = (&scene.sea.params, &scene.sky.params);
+        let blank = slicelight_shaders::surface::no_surface();
+        frame.write::<Vec4>(&SEA_REFLECTION, common.band_pixels as usize, |frame, out| {
+            let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
+            let sky_view = frame.get::<Vec4>(&SKY_VIEW);
+            let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            for_each_invocation(out, common.band_start, progress, |i, v| {
+                let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
+                *v = reflection_pixel(i, common, p, &scene.sea.waves, sky, transmittance, sky_view, texel);
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // The reflected sky also carries the sky pass's 2e-3 (see its compare).
+        let c = cpu.get::<Vec4>(&SEA_REFLECTION);
+        compare_rgb("sea reflection", gpu.get(&SEA_REFLECTION), c, 2e-3, c.len() * 3 / 1000 + 1)
+    }
+}
+
+/// A per-pixel sea term whose kernel reads the G-buffer, the sea's
+/// parameters and waves, and optionally the scattering maps.
+fn run_term(
+    common: &CommonParams,
+    frame: &mut Frame,
+    progress: &ProgressBar,
+    out: &Resource,
+    term: impl Fn(u32, &GBufferTexel, &[Vec4]) -> Vec4 + Sync,
+) {
+    let blank = slicelight_shaders::surface::no_surface();
+    frame.write::<Vec4>(out, common.band_pixels as usize, |frame, values| {
+        let maps = frame.get::<Vec4>(&SEA_ACCUMULATED_MAP);
+        let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+        for_each_invocation(values, common.band_start, progress, |i, v| {
+            let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
+            *v = term(i, texel, maps);
+        });
+    });
+}
+
+pub struct SeaOrder1;
+
+impl Pass for SeaOrder1 {
+    fn name(&self) -> &'static str {
+        "sea.order1"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::order1_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_ORDER1]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&SEA_ORDER1)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sea(scene) {
+            return skip;
+        }
+        if scene.sea.params.scattering.truncate().max_element() <= 0.0 {
+            return Plan::skip("the water does not scatter (scattering = 0)");
+        }
+        let how = match scene.sea.single {
+            Single::Exact => "the exact order-1 integral (eq. 5 with c)",
+            Single::PaperEq5 => "eq. 5 as printed, c (1 - omega_0 c_f)",
+        };
+        Plan::run(format!("single scattering, {how}"), 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let (p, waves) = (&scene.sea.params, &scene.sea.waves[..]);
+        run_term(common, frame, progress, &SEA_ORDER1, |i, t, _| order1_pixel(i, common, p, waves, t));
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        compare_layer("sea order 1", &SEA_ORDER1, gpu, cpu)
+    }
+}
+
+pub struct SeaOrder2;
+
+impl Pass for SeaOrder2 {
+    fn name(&self) -> &'static str {
+        "sea.order2"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::order2_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_ACCUMULATED_MAP]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_ORDER2]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&SEA_ORDER2)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_order2(scene) {
+            return skip;
+        }
+        if scene.sea.params.scattering.truncate().max_element() <= 0.0 {
+            return Plan::skip("the water does not scatter (scattering = 0)");
+        }
+        Plan::run("second-order scattering, looked up in the accumulated map", 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let (p, waves) = (&scene.sea.params, &scene.sea.waves[..]);
+        run_term(common, frame, progress, &SEA_ORDER2, |i, t, maps| order2_pixel(i, common, p, waves, maps, t));
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        compare_layer("sea order 2", &SEA_ORDER2, gpu, cpu)
+    }
+}
+
+pub struct SeaBottom;
+
+impl Pass for SeaBottom {
+    fn name(&self) -> &'static str {
+        "sea.bottom"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::bottom_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_BOTTOM]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&SEA_BOTTOM)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sea(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        if p.depth >= DEEP {
+            return Plan::skip("no bottom (depth_m not given)");
+        }
+        // The brightest the bottom can be seen: straight down, sun overhead.
+        let brightest = (-p.extinction.truncate() * 2.0 * p.depth).exp() * p.bottom_albedo.truncate();
+        if brightest.max_element() <= 0.0 {
+            return Plan::skip("the bottom is black or lies below all light (e^(-2 c d) = 0 in f32)");
+        }
+        Plan::run(format!("the bottom at {} m (eq. 9 with 1/pi)", p.depth), 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let (p, waves) = (&scene.sea.params, &scene.sea.waves[..]);
+        run_term(common, frame, progress, &SEA_BOTTOM, |i, t, _| bottom_pixel(i, common, p, waves, t));
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        compare_layer("sea bottom", &SEA_BOTTOM, gpu, cpu)
+    }
+}

@@ -13,6 +13,7 @@ pub mod passes;
 pub mod reference;
 pub mod render;
 pub mod scene;
+pub mod sea_reference;
 pub mod sky_reference;
 pub mod waves;
 

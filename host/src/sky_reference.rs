@@ -59,7 +59,7 @@ fn gk_nodes(a: f64, b: f64) -> [(f64, f64, f64); 15] {
 
 /// `int_a^b f` by adaptive Gauss-Kronrod until the estimated error of each
 /// piece is below `rel` of its value (or `floor`).
-fn integrate(f: &dyn Fn(f64) -> DVec3, a: f64, b: f64, rel: f64, floor: f64, depth: u32) -> DVec3 {
+pub(crate) fn integrate(f: &dyn Fn(f64) -> DVec3, a: f64, b: f64, rel: f64, floor: f64, depth: u32) -> DVec3 {
     let (mut k, mut g) = (DVec3::ZERO, DVec3::ZERO);
     for (t, wk, wg) in gk_nodes(a, b) {
         let v = f(t);

@@ -314,3 +314,71 @@ fn a_headless_gpu_render_prints_no_runtime_dir_warning() {
     assert!(out.status.success(), "{stderr}");
     assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
 }
+
+const SEA: &str = r#"
+[camera]
+position = [0.0, 10.0, 0.0]
+look_at = [0.0, 2.0, -30.0]
+vfov_deg = 50.0
+resolution = [48, 32]
+
+[sky]
+sun_zenith_deg = 40.0
+
+[sea]
+depth_m = 12.0
+absorption = [0.343, 0.0585, 0.0180]
+scattering = [0.0369, 0.0489, 0.0620]
+"#;
+
+#[test]
+fn a_sea_scene_writes_each_term_as_a_layer() {
+    let run = render(SEA);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let layers = exr::prelude::read_all_flat_layers_from_file(run.out("out.exr")).unwrap();
+    let channels: Vec<String> = layers.layer_data[0].channel_data.list.iter().map(|c| c.name.to_string()).collect();
+    for c in ["sea.reflection.R", "sea.order1.G", "sea.order2.B", "sea.bottom.R", "sky.B"] {
+        assert!(channels.iter().any(|n| n == c), "no channel {c} in {channels:?}");
+    }
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(run.out("stats.json")).unwrap()).unwrap();
+    let ran = |name: &str| stats["passes"].as_array().unwrap().iter().any(|p| p["name"] == name && p["ran"] == true);
+    for name in ["sea.radiance_map", "sea.scattering_maps", "sea.accumulated_map", "sea.order2", "sea.bottom"] {
+        assert!(ran(name), "{name} did not run");
+    }
+    // Without second order and without a bottom, those passes cost nothing.
+    let lean = SEA.replace("depth_m = 12.0", "second_order = false");
+    let run = render(&lean);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(run.out("stats.json")).unwrap()).unwrap();
+    for p in stats["passes"].as_array().unwrap() {
+        let name = p["name"].as_str().unwrap();
+        if ["sea.radiance_map", "sea.scattering_maps", "sea.accumulated_map", "sea.order2", "sea.bottom"]
+            .contains(&name)
+        {
+            assert_eq!(p["ran"], false, "{name} ran");
+        }
+    }
+}
+
+#[test]
+fn bad_sea_settings_name_the_field() {
+    let cases: &[(&str, &str, &[&str])] = &[
+        ("[sky]\nsun_zenith_deg = 40.0\n", "", &["sea", "[sky]"]),
+        ("depth_m = 12.0", "depth_m = -1.0", &["sea.depth_m", "-1"]),
+        ("depth_m = 12.0", "depth_m = 12.0\ndirections = 100", &["sea.directions", "100"]),
+        ("depth_m = 12.0", "depth_m = 12.0\nplanes = 1", &["sea.planes"]),
+        ("depth_m = 12.0", "depth_m = 12.0\ng = 1.0", &["sea.g"]),
+        ("depth_m = 12.0", "depth_m = 12.0\nlevel_m = 20.0", &["sea.level_m", "below the camera"]),
+        (
+            "depth_m = 12.0",
+            "depth_m = 12.0\nwaves = { kind = \"spectrum\", wind_m_s = 5.0, size_m = 50.0, resolution = 100 }",
+            &["sea.waves.resolution", "power of two"],
+        ),
+        ("depth_m = 12.0", "depth_m = 12.0\nwaves = { kind = \"choppy\" }", &["scene.toml", "choppy"]),
+        ("absorption = [0.343, 0.0585, 0.0180]", "absorption = [0.343, -0.0585, 0.0180]", &["sea.absorption"]),
+    ];
+    for (from, to, needles) in cases {
+        let run = render(&SEA.replace(from, to));
+        assert_rejected(&run, needles);
+    }
+}

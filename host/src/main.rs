@@ -60,7 +60,8 @@ enum Command {
         spp: Option<u32>,
     },
     /// Time against error over the settings: of the shafts pass (scenes in
-    /// a medium) and of the sky passes (scenes of sky only): CSVs and PNG plots.
+    /// a medium), of the sky passes (scenes of sky only) and of the sea's
+    /// second-order scattering (scenes with a [sea]): CSVs and PNG plots.
     Bench {
         /// Scene files (default: the paper's Fig. 6 and Fig. 7 scenes and the
         /// stained-glass window; with --sky the noon, sunset and twilight skies).
@@ -68,6 +69,9 @@ enum Command {
         /// Benchmark the sky scenes (scenes/sky_noon, sky_sunset, sky_twilight) by default.
         #[arg(long)]
         sky: bool,
+        /// Benchmark the sea scenes (scenes/sea_open, sea_calm_noon) by default.
+        #[arg(long, conflicts_with = "sky")]
+        sea: bool,
         /// Backends to time (give it more than once).
         #[arg(long, value_enum, default_values = ["cpu"])]
         backend: Vec<BackendChoice>,
@@ -252,9 +256,11 @@ fn run(cli: Cli) -> Result<()> {
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
             write_outputs(&output, &pixels, &[], &data)
         }
-        Command::Bench { scenes, sky, backend, repeats, stride, quick, out_dir } => {
+        Command::Bench { scenes, sky, sea, backend, repeats, stride, quick, out_dir } => {
             let scenes: Vec<PathBuf> = if scenes.is_empty() {
-                let names: &[&str] = if sky {
+                let names: &[&str] = if sea {
+                    &["sea_open", "sea_calm_noon"]
+                } else if sky {
                     &["sky_noon", "sky_sunset", "sky_twilight"]
                 } else {
                     &["fig6_sphere", "fig7_stage", "stained_glass"]
@@ -263,12 +269,16 @@ fn run(cli: Cli) -> Result<()> {
             } else {
                 scenes
             };
-            // Scenes of sky alone go to the sky sweep, the rest to the shafts sweep.
+            // Sea scenes go to the sea sweep, scenes of sky alone to the sky
+            // sweep, the rest to the shafts sweep.
             let mut sky_scenes = Vec::new();
+            let mut sea_scenes = Vec::new();
             let mut shaft_scenes = Vec::new();
             for s in scenes {
                 let data = scene::load(&s)?;
-                if data.sky.enabled && !data.scatters() {
+                if data.sea.enabled {
+                    sea_scenes.push(s);
+                } else if data.sky.enabled && !data.scatters() {
                     sky_scenes.push(s);
                 } else {
                     shaft_scenes.push(s);
@@ -294,6 +304,16 @@ fn run(cli: Cli) -> Result<()> {
                     backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
                 slicelight::bench_sky::run(&sky_scenes, &backends, repeats, stride, quick, &out_dir)?;
                 eprintln!("wrote {0}/sky_bench.csv, {0}/sky_time_vs_error.png", out_dir.display());
+            }
+            if !sea_scenes.is_empty() {
+                let backends: Vec<render::Backend> =
+                    backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
+                // The sea's reference costs ~0.2 s a pixel: a coarser lattice.
+                slicelight::bench_sea::run(&sea_scenes, &backends, repeats, stride.max(40), quick, &out_dir)?;
+                eprintln!(
+                    "wrote {0}/sea_bench.csv, {0}/sea_time_vs_error.png, {0}/sea_convergence.csv, {0}/sea_fig7_planes.png, {0}/sea_fig8_directions.png",
+                    out_dir.display()
+                );
             }
             Ok(())
         }

@@ -18,11 +18,17 @@ use rayon::prelude::*;
 use slicelight_shaders::camera::sample_offset;
 use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, PROJECTION_FISHEYE};
 
+use crate::sea_reference::SeaReference;
 use crate::sky_reference::SkyReference;
 
 /// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`;
 /// the `reference_converges` test measures its error: below 1e-4 of the sky's peak).
 pub const SKY_TOLERANCE: f64 = 1e-6;
+
+/// Relative tolerance of the sea's adaptive quadratures (`sea_reference`):
+/// 1e-4 against 1e-6 changes orders 1 and 2 by less than 1e-4 of their
+/// values (test `reference_tolerance_is_converged`), at ~0.1 s per pixel.
+pub const SEA_TOLERANCE: f64 = 1e-4;
 
 use crate::scene::SceneData;
 
@@ -215,6 +221,9 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         return (DVec3::ZERO, f64::INFINITY);
     };
     let Some(hit) = nearest(data, o, d, 0.0, f64::INFINITY) else {
+        if data.sea.enabled && d.y < 0.0 {
+            return (sea_radiance(data, o, d), f64::INFINITY);
+        }
         // The sky (if any) where the ray meets no surface.
         let sky = data.sky.enabled.then(|| SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(d));
         return (sky.unwrap_or(DVec3::ZERO), f64::INFINITY);
@@ -243,6 +252,48 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
     }
     let radiance = hit.albedo * irradiance / std::f64::consts::PI;
     (radiance * (-sigma_t * hit.t).exp(), hit.t)
+}
+
+/// Unpolarised Fresnel reflectance from air onto index `n` at incidence cosine `cos_i`, f64.
+fn fresnel(cos_i: f64, n: f64) -> f64 {
+    let sin_t = (1.0 - cos_i * cos_i).max(0.0).sqrt() / n;
+    let cos_t = (1.0 - sin_t * sin_t).sqrt();
+    let rs = (cos_i - n * cos_t) / (cos_i + n * cos_t);
+    let rp = (cos_t - n * cos_i) / (cos_t + n * cos_i);
+    0.5 * (rs * rs + rp * rp)
+}
+
+/// The sea along the view ray `(o, d)` (downward, from above the surface),
+/// f64: the sky and sun reflected (the sky's reference), and orders 1, 2 and
+/// the bottom below the refracting surface (the sea's quadrature), times
+/// `(1 - R)/n^2`. The surface normal is the scene's (the wave map's at the
+/// hit, or up).
+pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
+    let p = &data.sea.params;
+    let t = (p.level as f64 - o.y) / d.y;
+    let hit = o + d * t;
+    let mut normal =
+        slicelight_shaders::sea::surface_normal(p, &data.sea.waves, hit.x as f32, hit.z as f32).as_dvec3().normalize();
+    if normal.dot(d) >= 0.0 {
+        normal = DVec3::Y;
+    }
+    let n = p.extinction.w as f64;
+    let cos_i = -d.dot(normal);
+    let r = fresnel(cos_i, n);
+    let reflected = d + normal * (2.0 * cos_i);
+    let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
+    let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(reflected);
+    // Snell: the refracted ray, reversed, is the direction light leaves the water toward the eye.
+    let eta = 1.0 / n;
+    let cos_t = (1.0 - eta * eta * (1.0 - cos_i * cos_i)).sqrt();
+    let mut view = -(d * eta + normal * (eta * cos_i - cos_t)).normalize();
+    if view.y < 1e-4 {
+        view = DVec3::new(view.x, 1e-4, view.z).normalize();
+    }
+    let sea = SeaReference::new(p, SEA_TOLERANCE);
+    let below =
+        sea.order1(view) + if data.sea.second_order { sea.order2(view) } else { DVec3::ZERO } + sea.bottom(view);
+    sky * r + below * ((1.0 - r) / (n * n))
 }
 
 /// Attenuated surface radiance of one pixel (the mean over its sub-pixel samples), f64.

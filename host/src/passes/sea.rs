@@ -170,7 +170,7 @@ pub const EPSILON: f32 = 1.0 / 255.0;
 /// Upward directions in the water (toward the eye) that the 1/255 rule
 /// checks: the nadir view, and 20 and 45 degrees toward and away from the
 /// sun (the refracted view cone reaches 48.6 degrees).
-fn rule_views(p: &SeaParams) -> Vec<Vec3> {
+pub fn rule_views(p: &SeaParams) -> Vec<Vec3> {
     let s = p.sun_in_water.truncate();
     let h = Vec3::new(s.x, 0.0, s.z);
     let t = if h.length_squared() > 1e-12 { h.normalize() } else { Vec3::X };
@@ -212,7 +212,7 @@ pub fn order2_by_maps(p: &SeaParams, views: &[Vec3]) -> Vec<Vec3> {
 /// The largest difference between two sets of radiances, per channel over
 /// that channel's peak (so that a dim channel, the red of clear water, is
 /// held to the same relative accuracy as the bright ones).
-fn max_difference(a: &[Vec3], b: &[Vec3]) -> f32 {
+pub fn max_difference(a: &[Vec3], b: &[Vec3]) -> f32 {
     let peak = b.iter().chain(a).fold(Vec3::ZERO, |m, v| m.max(*v));
     let worst = a.iter().zip(b).fold(Vec3::ZERO, |m, (x, y)| m.max((*x - *y).abs()));
     let relative = Vec3::select(peak.cmpgt(Vec3::ZERO), worst / peak.max(Vec3::splat(1e-30)), Vec3::ZERO);

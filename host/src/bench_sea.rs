@@ -1,0 +1,376 @@
+//! `slicelight bench` on sea scenes: run time against error of the
+//! second-order scattering over its settings (planes `n_z`, directions
+//! `n_d`, the scattering maps' resolution) on each scene and backend, and
+//! the paper's Fig. 7 and 8 (how the order-2 radiance changes from one
+//! count to the next) beside the error those counts leave; CSVs and PNG plots.
+//!
+//! Error is the `sea.order2` layer's difference from the f64 quadrature
+//! (`sea_reference`) at a lattice of pixel centres that see the sea,
+//! relative to the reference value per pixel and channel: RMS and largest.
+//! Times are medians over repeats: the whole render, the map passes, and the
+//! per-pixel sea passes.
+
+use anyhow::{Context, Result};
+use glam::{DVec3, Vec3, Vec4};
+use plotters::prelude::*;
+use rayon::prelude::*;
+use std::io::Write;
+use std::path::Path;
+
+use crate::bench::median;
+use crate::passes::sea::{order2_at, EPSILON};
+use crate::reference::SEA_TOLERANCE;
+use crate::render::{self, Backend};
+use crate::scene::{self, SceneData};
+use crate::sea_reference::SeaReference;
+use slicelight_shaders::sea::{sea_view, SeaParams};
+
+/// One configuration of the sweep.
+#[derive(Debug, Clone, Copy)]
+pub struct Config {
+    /// `planes`, `directions`, `map`, `paper` (12 planes, 32x32, the
+    /// nearest direction counts to the paper's 128) or `auto` (the scene's
+    /// 1/255 choice).
+    pub series: &'static str,
+    pub planes: u32,
+    /// `k`: `n_d = 3 k^2`.
+    pub polar: u32,
+    pub map: u32,
+}
+
+impl Config {
+    pub fn directions(&self) -> u32 {
+        3 * self.polar * self.polar
+    }
+}
+
+pub fn sweep(auto: &SeaParams, quick: bool) -> Vec<Config> {
+    let base = Config { series: "auto", planes: auto.planes, polar: auto.polar, map: auto.map_width };
+    let planes: &[u32] = if quick { &[2, 4, 8, 16] } else { &[2, 3, 4, 6, 8, 12, 16, 24] };
+    let polar: &[u32] = if quick { &[2, 6, 12] } else { &[2, 4, 6, 8, 10, 12, 16] };
+    let maps: &[u32] = if quick { &[8, 32] } else { &[8, 16, 32, 64] };
+    let mut v = vec![base];
+    v.extend(planes.iter().map(|&n| Config { series: "planes", planes: n, ..base }));
+    v.extend(polar.iter().map(|&k| Config { series: "directions", polar: k, ..base }));
+    v.extend(maps.iter().map(|&m| Config { series: "map", map: m, ..base }));
+    v.extend([6, 8].map(|k| Config { series: "paper", planes: 12, polar: k, map: 32 }));
+    v
+}
+
+fn configure(data: &SceneData, c: &Config) -> SceneData {
+    let mut d = data.clone();
+    let p = &mut d.sea.params;
+    p.planes = c.planes;
+    p.polar = c.polar;
+    p.azimuths = c.polar;
+    p.map_width = c.map;
+    p.map_height = c.map;
+    d
+}
+
+/// Pixels on a lattice of `stride` whose centre ray meets the sea, with the
+/// direction the light leaves the water toward the eye and the surface's
+/// `T_o / n^2` there.
+pub fn sea_pixels(data: &SceneData, stride: u32) -> Vec<(u32, Vec3, f32)> {
+    let common = slicelight_shaders::types::CommonParams { samples_per_pixel: 1, sample_index: 0, ..data.common };
+    let blank = slicelight_shaders::surface::no_surface();
+    let w = data.width();
+    (0..data.height())
+        .step_by(stride as usize)
+        .flat_map(|y| (0..w).step_by(stride as usize).map(move |x| y * w + x))
+        .filter_map(|i| {
+            let v = sea_view(i, &common, &data.sea.params, &data.sea.waves, &blank);
+            v.hit.then_some((i, v.view, v.transmission))
+        })
+        .collect()
+}
+
+/// RMS and largest difference over the values, each relative to the reference's.
+pub fn relative_error(values: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
+    let (mut sum2, mut max, mut n) = (0.0, 0.0f64, 0usize);
+    for (a, b) in values.iter().zip(reference) {
+        for ch in 0..3 {
+            if b[ch] > 0.0 {
+                let e = (a[ch] - b[ch]).abs() / b[ch];
+                sum2 += e * e;
+                max = max.max(e);
+                n += 1;
+            }
+        }
+    }
+    ((sum2 / n.max(1) as f64).sqrt(), max)
+}
+
+pub struct Row {
+    pub scene: String,
+    pub backend: &'static str,
+    pub config: Config,
+    pub median_seconds: f64,
+    pub maps_median_seconds: f64,
+    pub pixels_median_seconds: f64,
+    pub rms_relative: f64,
+    pub max_relative: f64,
+}
+
+/// The paper's Fig. 7 or 8: the largest change of the order-2 radiance
+/// from one count to the next (`n` to `n + 1` planes, `k` to `k + 2`), and the
+/// error at that count against the reference, over the 1/255 rule's views.
+pub struct Convergence {
+    pub scene: String,
+    pub what: &'static str,
+    pub count: u32,
+    pub step: f64,
+    pub error: f64,
+}
+
+fn convergence(name: &str, p: &SeaParams, quick: bool) -> Vec<Convergence> {
+    let views = crate::passes::sea::rule_views(p);
+    let reference = SeaReference::new(p, 1e-6);
+    let exact: Vec<DVec3> = views.par_iter().map(|v| reference.order2(v.as_dvec3())).collect();
+    let error = |values: &[Vec3]| {
+        let v: Vec<DVec3> = values.iter().map(|x| x.as_dvec3()).collect();
+        relative_error(&v, &exact).1
+    };
+    let step = |a: &[Vec3], b: &[Vec3]| crate::passes::sea::max_difference(a, b) as f64;
+    let mut out = Vec::new();
+    let planes: Vec<u32> = if quick { (2..=12).collect() } else { (2..=24).collect() };
+    for &n in &planes {
+        let (a, b) =
+            (order2_at(&SeaParams { planes: n, ..*p }, &views), order2_at(&SeaParams { planes: n + 1, ..*p }, &views));
+        out.push(Convergence { scene: name.into(), what: "planes", count: n, step: step(&a, &b), error: error(&a) });
+    }
+    let ks: Vec<u32> = if quick { vec![2, 4, 6, 8, 10] } else { (1..=10).map(|k| 2 * k).collect() };
+    for &k in &ks {
+        let at = |k: u32| order2_at(&SeaParams { polar: k, azimuths: k, ..*p }, &views);
+        let (a, b) = (at(k), at(k + 2));
+        out.push(Convergence {
+            scene: name.into(),
+            what: "directions",
+            count: 3 * k * k,
+            step: step(&a, &b),
+            error: error(&a),
+        });
+    }
+    out
+}
+
+/// Runs the sea sweep over `scenes` and writes `sea_bench.csv`,
+/// `sea_time_vs_error.png`, `sea_convergence.csv`, `sea_fig7_planes.png` and
+/// `sea_fig8_directions.png` into `out_dir`.
+pub fn run(
+    scenes: &[std::path::PathBuf],
+    backends: &[Backend],
+    repeats: usize,
+    stride: u32,
+    quick: bool,
+    out_dir: &Path,
+) -> Result<Vec<Row>> {
+    std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
+    let mut rows = Vec::new();
+    let mut curves = Vec::new();
+    for path in scenes {
+        let data = scene::load(path)?;
+        anyhow::ensure!(
+            data.sea.enabled && data.sea.second_order,
+            "{}: no [sea] with second-order scattering to benchmark",
+            path.display()
+        );
+        let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+        let pixels = sea_pixels(&data, stride.max(1));
+        let t = std::time::Instant::now();
+        let reference = SeaReference::new(&data.sea.params, SEA_TOLERANCE);
+        let exact: Vec<DVec3> =
+            pixels.par_iter().map(|&(_, v, tr)| reference.order2(v.as_dvec3()) * tr as f64).collect();
+        eprintln!("{name}: reference order 2 at {} pixels, {:.1} s", pixels.len(), t.elapsed().as_secs_f64());
+        let t = std::time::Instant::now();
+        curves.extend(convergence(&name, &data.sea.params, quick));
+        eprintln!("{name}: Fig. 7 and 8 curves, {:.1} s", t.elapsed().as_secs_f64());
+        for backend in backends {
+            for c in sweep(&data.sea.params, quick) {
+                let d = configure(&data, &c);
+                let (mut totals, mut maps, mut per_pixel) = (Vec::new(), Vec::new(), Vec::new());
+                let mut last = None;
+                for _ in 0..repeats.max(1) {
+                    let r = render::render_layers(&d, backend, false)?;
+                    let st = &r.stats;
+                    totals.push(st.total_seconds);
+                    let pass = |prefix: &[&str]| -> f64 {
+                        st.passes.iter().filter(|p| prefix.contains(&p.name)).map(|p| p.seconds).sum()
+                    };
+                    maps.push(pass(&["sea.radiance_map", "sea.scattering_maps", "sea.accumulated_map"]));
+                    per_pixel.push(pass(&["sea.reflection", "sea.order1", "sea.order2", "sea.bottom"]));
+                    last = Some(r);
+                }
+                let r = last.expect("at least one repeat");
+                let layer = r
+                    .layers
+                    .iter()
+                    .find(|(n, _)| *n == "sea.order2")
+                    .map(|(_, b)| b.as_slice::<Vec4>().to_vec())
+                    .context("no sea.order2 layer")?;
+                let at: Vec<DVec3> = pixels.iter().map(|&(i, _, _)| layer[i as usize].truncate().as_dvec3()).collect();
+                let (rms, max) = relative_error(&at, &exact);
+                let row = Row {
+                    scene: name.clone(),
+                    backend: backend.name(),
+                    config: c,
+                    median_seconds: median(totals),
+                    maps_median_seconds: median(maps),
+                    pixels_median_seconds: median(per_pixel),
+                    rms_relative: rms,
+                    max_relative: max,
+                };
+                eprintln!(
+                    "{name:>14} {:>4} {:<10} n_z={:<3} n_d={:<5} map={:<3} {:>8.4} s (maps {:.4} s, per-pixel {:.4} s)  rms {:.3}%  max {:.3}%",
+                    row.backend,
+                    c.series,
+                    c.planes,
+                    c.directions(),
+                    c.map,
+                    row.median_seconds,
+                    row.maps_median_seconds,
+                    row.pixels_median_seconds,
+                    100.0 * rms,
+                    100.0 * max
+                );
+                rows.push(row);
+            }
+        }
+    }
+    write_csv(&out_dir.join("sea_bench.csv"), &rows)?;
+    write_convergence(&out_dir.join("sea_convergence.csv"), &curves)?;
+    plot(&out_dir.join("sea_time_vs_error.png"), &rows)?;
+    plot_convergence(&out_dir.join("sea_fig7_planes.png"), &curves, "planes", "sampling planes n_z")?;
+    plot_convergence(&out_dir.join("sea_fig8_directions.png"), &curves, "directions", "sampling directions n_d")?;
+    Ok(rows)
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
+    let mut out = Vec::new();
+    writeln!(
+        out,
+        "scene,backend,series,planes,directions,map,median_seconds,maps_median_seconds,per_pixel_median_seconds,rms_relative_percent,max_relative_percent"
+    )?;
+    for r in rows {
+        let c = &r.config;
+        writeln!(
+            out,
+            "{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5}",
+            r.scene,
+            r.backend,
+            c.series,
+            c.planes,
+            c.directions(),
+            c.map,
+            r.median_seconds,
+            r.maps_median_seconds,
+            r.pixels_median_seconds,
+            100.0 * r.rms_relative,
+            100.0 * r.max_relative
+        )?;
+    }
+    crate::output::write_atomically(path, &out)
+}
+
+fn write_convergence(path: &Path, curves: &[Convergence]) -> Result<()> {
+    let mut out = Vec::new();
+    writeln!(out, "scene,sweep,count,max_step_relative,max_error_relative")?;
+    for c in curves {
+        writeln!(out, "{},{},{},{:.6e},{:.6e}", c.scene, c.what, c.count, c.step, c.error)?;
+    }
+    crate::output::write_atomically(path, &out)
+}
+
+/// Largest error (% of the reference) against the median map-pass time,
+/// one colour per scene, backend and series.
+fn plot(path: &Path, rows: &[Row]) -> Result<()> {
+    crate::bench::register_font()?;
+    crate::bench::save_plot(path, |root| {
+        let time = |r: &Row| r.maps_median_seconds.max(1e-5);
+        let (t0, t1) = rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(time(r)), b.max(time(r))));
+        let errors = rows.iter().map(|r| 100.0 * r.max_relative.max(1e-4));
+        let (e0, e1) = errors.fold((f64::INFINITY, 0.0f64), |(a, b), e| (a.min(e), b.max(e)));
+        let mut chart = ChartBuilder::on(&root)
+            .caption("Sea, order 2: map time against error (largest, % of the reference)", ("sans-serif", 24))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((t0 * 0.8..t1 * 1.25).log_scale(), (e0 * 0.8..e1 * 1.25).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("median time of the map passes, s")
+            .x_label_formatter(&|x| format!("{}", (x * 1e4).round() / 1e4))
+            .y_label_formatter(&|y| format!("{}", (y * 1e3).round() / 1e3))
+            .y_desc("largest error of sea.order2, %")
+            .label_style(("sans-serif", 15))
+            .draw()?;
+        let mut groups: Vec<(String, &'static str, &'static str)> =
+            rows.iter().map(|r| (r.scene.clone(), r.backend, r.config.series)).collect();
+        groups.dedup();
+        for (i, (scene, backend, series)) in groups.iter().enumerate() {
+            let color = crate::bench::COLORS[i % crate::bench::COLORS.len()];
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *series)
+                .map(|r| (time(r), 100.0 * r.max_relative.max(1e-4)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
+                .label(format!("{scene} ({backend}, {series})"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+        }
+        crate::bench::draw_legend(&mut chart)
+    })
+}
+
+/// The paper's Fig. 7 or 8: the step from one count to the next, and the
+/// error, against the count, with the 1/255 threshold.
+fn plot_convergence(path: &Path, curves: &[Convergence], what: &'static str, x_desc: &str) -> Result<()> {
+    crate::bench::register_font()?;
+    let mine: Vec<&Convergence> = curves.iter().filter(|c| c.what == what).collect();
+    crate::bench::save_plot(path, |root| {
+        let x1 = mine.iter().map(|c| c.count).max().unwrap_or(2) as f64;
+        let ys = mine.iter().flat_map(|c| [c.step, c.error]).map(|v| 100.0 * v.max(1e-5));
+        let (y0, y1) = ys.fold((100.0 * EPSILON as f64, 100.0 * EPSILON as f64), |(a, b), y| (a.min(y), b.max(y)));
+        let caption = if what == "planes" { "Fig. 7: order 2 against n_z" } else { "Fig. 8: order 2 against n_d" };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(caption, ("sans-serif", 24))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..x1 * 1.05, (y0 * 0.8..y1 * 1.25).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc("% of the order-2 radiance")
+            .y_label_formatter(&|y| format!("{}", (y * 1e4).round() / 1e4))
+            .label_style(("sans-serif", 15))
+            .draw()?;
+        let threshold = 100.0 * EPSILON as f64;
+        chart
+            .draw_series(LineSeries::new([(0.0, threshold), (x1 * 1.05, threshold)], BLACK.stroke_width(1)))?
+            .label("1/255")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(1)));
+        let mut scenes: Vec<&str> = mine.iter().map(|c| c.scene.as_str()).collect();
+        scenes.dedup();
+        for (i, scene) in scenes.iter().enumerate() {
+            for (j, (label, pick)) in
+                [("largest step to the next count", 0), ("largest error", 1)].into_iter().enumerate()
+            {
+                let color = crate::bench::COLORS[(2 * i + j) % crate::bench::COLORS.len()];
+                let pts: Vec<(f64, f64)> = mine
+                    .iter()
+                    .filter(|c| c.scene == *scene)
+                    .map(|c| (c.count as f64, 100.0 * if pick == 0 { c.step } else { c.error }.max(1e-5)))
+                    .collect();
+                chart
+                    .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
+                    .label(format!("{scene}: {label}"))
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                chart.draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
+            }
+        }
+        crate::bench::draw_legend(&mut chart)
+    })
+}

@@ -287,3 +287,21 @@ fn eq5_as_printed_against_the_orders_it_stands_for() {
         assert!((eq5 / o1).min_element() > 1.0, "eq. 5's reduced extinction always adds light");
     }
 }
+
+#[test]
+fn reference_tolerance_is_converged() {
+    // `slicelight reference` and the bench use SEA_TOLERANCE; against a
+    // tolerance 100 times tighter its orders 1 and 2 must agree to 1e-3
+    // (the accuracy targets are 1 %).
+    let data = sea(50.0, "depth_m = 20.0");
+    let p = &data.sea.params;
+    let (loose, tight) =
+        (SeaReference::new(p, slicelight::reference::SEA_TOLERANCE), SeaReference::new(p, slicelight::reference::SEA_TOLERANCE / 100.0));
+    let mut worst = 0.0f64;
+    for (zenith, azimuth) in [(0.0, 0.0), (40.0, 0.0), (70.0, 180.0), (89.0, 90.0)] {
+        let v = in_water(p, zenith, azimuth).as_dvec3();
+        worst = worst.max(relative(loose.order1(v), tight.order1(v))).max(relative(loose.order2(v), tight.order2(v)));
+    }
+    println!("SEA_TOLERANCE against 1/100 of it: largest relative difference {worst:e}");
+    assert!(worst < 1e-3, "{worst}");
+}

@@ -424,6 +424,55 @@ fn plot(dir: &Path, rows: &[Row]) -> Result<()> {
     })
 }
 
+/// Labels of a log-log plot of lines with markers.
+pub(crate) struct LogLogPlot<'a> {
+    pub caption: &'a str,
+    pub x_desc: &'a str,
+    pub y_desc: &'a str,
+}
+
+/// A log-log plot of labelled lines with markers (the time-against-error
+/// plots); values at or below 0 are drawn at `floor`.
+pub(crate) fn plot_log_log(
+    path: &Path,
+    labels: &LogLogPlot,
+    series: &[(String, Vec<(f64, f64)>)],
+    floor: f64,
+) -> Result<()> {
+    register_font()?;
+    save_plot(path, |root| {
+        let points = series.iter().flat_map(|s| s.1.iter().map(|&(x, y)| (x.max(floor), y.max(floor))));
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64);
+        for (x, y) in points {
+            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+        }
+        let mut chart = ChartBuilder::on(&root)
+            .caption(labels.caption, ("sans-serif", 24))
+            .margin(15)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0 * 0.8..x1 * 1.25).log_scale(), (y0 * 0.8..y1 * 1.25).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc(labels.x_desc)
+            .x_label_formatter(&|x| format!("{}", (x * 1e4).round() / 1e4))
+            .y_label_formatter(&|y| format!("{}", (y * 1e4).round() / 1e4))
+            .y_desc(labels.y_desc)
+            .label_style(("sans-serif", 15))
+            .draw()?;
+        for (i, (label, pts)) in series.iter().enumerate() {
+            let color = COLORS[i % COLORS.len()];
+            let pts: Vec<(f64, f64)> = pts.iter().map(|&(x, y)| (x.max(floor), y.max(floor))).collect();
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
+                .label(label.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+        }
+        draw_legend(&mut chart)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

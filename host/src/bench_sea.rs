@@ -284,44 +284,26 @@ fn write_convergence(path: &Path, curves: &[Convergence]) -> Result<()> {
 /// Largest error (% of the reference) against the median map-pass time,
 /// one colour per scene, backend and series.
 fn plot(path: &Path, rows: &[Row]) -> Result<()> {
-    crate::bench::register_font()?;
-    crate::bench::save_plot(path, |root| {
-        let time = |r: &Row| r.maps_median_seconds.max(1e-5);
-        let (t0, t1) = rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(time(r)), b.max(time(r))));
-        let errors = rows.iter().map(|r| 100.0 * r.max_relative.max(1e-4));
-        let (e0, e1) = errors.fold((f64::INFINITY, 0.0f64), |(a, b), e| (a.min(e), b.max(e)));
-        let mut chart = ChartBuilder::on(&root)
-            .caption("Sea, order 2: map time against error (largest, % of the reference)", ("sans-serif", 24))
-            .margin(15)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d((t0 * 0.8..t1 * 1.25).log_scale(), (e0 * 0.8..e1 * 1.25).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("median time of the map passes, s")
-            .x_label_formatter(&|x| format!("{}", (x * 1e4).round() / 1e4))
-            .y_label_formatter(&|y| format!("{}", (y * 1e3).round() / 1e3))
-            .y_desc("largest error of sea.order2, %")
-            .label_style(("sans-serif", 15))
-            .draw()?;
-        let mut groups: Vec<(String, &'static str, &'static str)> =
-            rows.iter().map(|r| (r.scene.clone(), r.backend, r.config.series)).collect();
-        groups.dedup();
-        for (i, (scene, backend, series)) in groups.iter().enumerate() {
-            let color = crate::bench::COLORS[i % crate::bench::COLORS.len()];
-            let pts: Vec<(f64, f64)> = rows
+    let mut groups: Vec<(String, &'static str, &'static str)> =
+        rows.iter().map(|r| (r.scene.clone(), r.backend, r.config.series)).collect();
+    groups.dedup();
+    let series: Vec<(String, Vec<(f64, f64)>)> = groups
+        .iter()
+        .map(|(scene, backend, name)| {
+            let pts = rows
                 .iter()
-                .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *series)
-                .map(|r| (time(r), 100.0 * r.max_relative.max(1e-4)))
+                .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *name)
+                .map(|r| (r.maps_median_seconds, 100.0 * r.max_relative))
                 .collect();
-            chart
-                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
-                .label(format!("{scene} ({backend}, {series})"))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
-        }
-        crate::bench::draw_legend(&mut chart)
-    })
+            (format!("{scene} ({backend}, {name})"), pts)
+        })
+        .collect();
+    let labels = crate::bench::LogLogPlot {
+        caption: "Sea, order 2: map time against error (largest, % of the reference)",
+        x_desc: "median time of the map passes, s",
+        y_desc: "largest error of sea.order2, %",
+    };
+    crate::bench::plot_log_log(path, &labels, &series, 1e-5)
 }
 
 /// The paper's Fig. 7 or 8: the step from one count to the next, and the

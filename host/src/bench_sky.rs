@@ -11,7 +11,6 @@
 
 use anyhow::{Context, Result};
 use glam::{DVec3, Vec4Swizzles};
-use plotters::prelude::*;
 use std::io::Write;
 use std::path::Path;
 
@@ -223,42 +222,24 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
 /// Error against the median render time, one colour per series, one
 /// marker shape per scene and backend.
 fn plot(path: &Path, rows: &[Row]) -> Result<()> {
-    crate::bench::register_font()?;
-    crate::bench::save_plot(path, |root| {
-        let (t0, t1) =
-            rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r.median_seconds), b.max(r.median_seconds)));
-        let errors = rows.iter().map(|r| 100.0 * r.rms_relative.max(1e-6));
-        let (e0, e1) = errors.fold((f64::INFINITY, 0.0f64), |(a, b), e| (a.min(e), b.max(e)));
-        let mut chart = ChartBuilder::on(&root)
-            .caption("Sky: run time against error (RMS % of the sky's peak)", ("sans-serif", 24))
-            .margin(15)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d((t0 * 0.8..t1 * 1.25).log_scale(), (e0 * 0.8..e1 * 1.25).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("median render time, s")
-            .x_label_formatter(&|x| format!("{}", (x * 1e4).round() / 1e4))
-            .y_label_formatter(&|y| format!("{}", (y * 1e4).round() / 1e4))
-            .y_desc("RMS error, % of the sky's peak")
-            .label_style(("sans-serif", 15))
-            .draw()?;
-        let mut groups: Vec<(String, &'static str, &'static str)> =
-            rows.iter().map(|r| (r.scene.clone(), r.backend, r.config.series)).collect();
-        groups.dedup();
-        for (i, (scene, backend, series)) in groups.iter().enumerate() {
-            let color = crate::bench::COLORS[i % crate::bench::COLORS.len()];
-            let pts: Vec<(f64, f64)> = rows
+    let mut groups: Vec<(String, &'static str, &'static str)> =
+        rows.iter().map(|r| (r.scene.clone(), r.backend, r.config.series)).collect();
+    groups.dedup();
+    let series: Vec<(String, Vec<(f64, f64)>)> = groups
+        .iter()
+        .map(|(scene, backend, name)| {
+            let pts = rows
                 .iter()
-                .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *series)
-                .map(|r| (r.median_seconds, 100.0 * r.rms_relative.max(1e-6)))
+                .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *name)
+                .map(|r| (r.median_seconds, 100.0 * r.rms_relative))
                 .collect();
-            chart
-                .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
-                .label(format!("{scene} ({backend}, {series})"))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
-        }
-        crate::bench::draw_legend(&mut chart)
-    })
+            (format!("{scene} ({backend}, {name})"), pts)
+        })
+        .collect();
+    let labels = crate::bench::LogLogPlot {
+        caption: "Sky: run time against error (RMS % of the sky's peak)",
+        x_desc: "median render time, s",
+        y_desc: "RMS error, % of the sky's peak",
+    };
+    crate::bench::plot_log_log(path, &labels, &series, 1e-6)
 }

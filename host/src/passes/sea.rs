@@ -370,6 +370,7 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32) -> Result
         _pad: [0; 2],
     };
     let mut sampling = Vec::new();
+    let chosen = std::time::Instant::now();
     if s.second_order {
         if polar.is_none() {
             let (k, curve) = choose_directions(&params);
@@ -381,6 +382,9 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32) -> Result
             let (planes, curve) = choose_planes(&params);
             params.planes = planes;
             sampling.push(format!("n_z = {planes} by the 1/255 rule ({} counts tried)", curve.len()));
+        }
+        if s.planes.is_none() || polar.is_none() {
+            sampling.push(format!("chosen in {:.0} ms", 1e3 * chosen.elapsed().as_secs_f64()));
         }
     }
     Ok(Setup {

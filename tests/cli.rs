@@ -376,6 +376,21 @@ fn bad_sea_settings_name_the_field() {
         ),
         ("depth_m = 12.0", "depth_m = 12.0\nwaves = { kind = \"choppy\" }", &["scene.toml", "choppy"]),
         ("absorption = [0.343, 0.0585, 0.0180]", "absorption = [0.343, -0.0585, 0.0180]", &["sea.absorption"]),
+        (
+            "depth_m = 12.0",
+            "depth_m = 12.0\nbottom = { kind = \"shore\", slope = 0.1, shallow_m = 1.0, deep_m = 30.0 }",
+            &["sea.bottom", "not both"],
+        ),
+        (
+            "depth_m = 12.0",
+            "bottom = { kind = \"image\", path = \"missing.png\", size_m = [10.0, 10.0], shallow_m = 1.0, deep_m = 30.0 }",
+            &["sea.bottom.path", "missing.png"],
+        ),
+        (
+            "depth_m = 12.0",
+            "bottom = { kind = \"shore\", slope = 0.1, shallow_m = 5.0, deep_m = 3.0 }",
+            &["sea.bottom.deep_m"],
+        ),
     ];
     for (from, to, needles) in cases {
         let run = render(&SEA.replace(from, to));

@@ -216,14 +216,14 @@ fn stress_image_sizes() {
     for (x, y) in [(0, 0), (n - 1, 0), (0, n - 1), (n - 1, n - 1), (n / 2, n / 2), (n / 2, n - 1), (0, n / 2)] {
         let i = y * n + x;
         for v in [
-            slicelight_shaders::sea::order1_pixel(i, &big.common, p, waves, &blank),
-            slicelight_shaders::sea::bottom_pixel(i, &big.common, p, waves, &blank),
+            slicelight_shaders::sea::order1_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank),
+            slicelight_shaders::sea::bottom_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank),
         ] {
             assert!(v.is_finite() && v.min_element() >= 0.0, "pixel ({x}, {y}): {v}");
         }
         // The lower half of the image looks down at the sea.
         if y > n / 2 + 8 {
-            let v = slicelight_shaders::sea::order1_pixel(i, &big.common, p, waves, &blank);
+            let v = slicelight_shaders::sea::order1_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank);
             assert!(v.max_element() > 0.0, "pixel ({x}, {y}) misses the sea");
         }
     }
@@ -295,8 +295,10 @@ fn reference_tolerance_is_converged() {
     // (the accuracy targets are 1 %).
     let data = sea(50.0, "depth_m = 20.0");
     let p = &data.sea.params;
-    let (loose, tight) =
-        (SeaReference::new(p, slicelight::reference::SEA_TOLERANCE), SeaReference::new(p, slicelight::reference::SEA_TOLERANCE / 100.0));
+    let (loose, tight) = (
+        SeaReference::new(p, slicelight::reference::SEA_TOLERANCE),
+        SeaReference::new(p, slicelight::reference::SEA_TOLERANCE / 100.0),
+    );
     let mut worst = 0.0f64;
     for (zenith, azimuth) in [(0.0, 0.0), (40.0, 0.0), (70.0, 180.0), (89.0, 90.0)] {
         let v = in_water(p, zenith, azimuth).as_dvec3();
@@ -304,4 +306,59 @@ fn reference_tolerance_is_converged() {
     }
     println!("SEA_TOLERANCE against 1/100 of it: largest relative difference {worst:e}");
     assert!(worst < 1e-3, "{worst}");
+}
+
+/// A scene folder holding `bottom.png` (grey `value(x, y)` over `w x h`) and
+/// a sea over it, rendered at 24x16.
+fn over_image(w: u32, h: u32, value: impl Fn(u32, u32) -> u8, sea: &str) -> (tempfile::TempDir, SceneData) {
+    let dir = tempfile::tempdir().unwrap();
+    image::GrayImage::from_fn(w, h, |x, y| image::Luma([value(x, y)])).save(dir.path().join("bottom.png")).unwrap();
+    let toml = format!(
+        "[camera]\nposition = [0.0, 8.0, 0.0]\nlook_at = [0.0, 0.0, -20.0]\nvfov_deg = 60.0\nresolution = [24, 16]\n\
+         [sky]\nsun_zenith_deg = 40.0\n[sea]\nabsorption = [0.343, 0.0585, 0.0180]\nscattering = [0.0369, 0.0489, 0.0620]\n{sea}\n"
+    );
+    std::fs::write(dir.path().join("scene.toml"), toml).unwrap();
+    let data = slicelight::scene::load(&dir.path().join("scene.toml")).unwrap();
+    (dir, data)
+}
+
+#[test]
+fn a_level_height_field_renders_as_the_flat_bottom() {
+    // A white image at shallow_m = 10 is a flat bottom 10 m down: the march
+    // and its secant are exact on a level bottom, and the shallowest order-2
+    // layer is built for exactly that depth.
+    let (_dir, field) = over_image(8, 8, |_, _| 255, "bottom = { kind = \"image\", path = \"bottom.png\", size_m = [400.0, 400.0], shallow_m = 10.0, deep_m = 30.0 }");
+    let flat = common::scene_from_str(
+        "[camera]\nposition = [0.0, 8.0, 0.0]\nlook_at = [0.0, 0.0, -20.0]\nvfov_deg = 60.0\nresolution = [24, 16]\n\
+         [sky]\nsun_zenith_deg = 40.0\n[sea]\nabsorption = [0.343, 0.0585, 0.0180]\nscattering = [0.0369, 0.0489, 0.0620]\ndepth_m = 10.0\n",
+    );
+    let mut flat = flat;
+    (flat.sea.params.planes, flat.sea.params.polar, flat.sea.params.azimuths) =
+        (field.sea.params.planes, field.sea.params.polar, field.sea.params.azimuths);
+    let (a, b) = (render_checked(&field, "level field"), render_checked(&flat, "flat"));
+    for (name, tol) in [("sea.order1", 1e-4f32), ("sea.bottom", 1e-4), ("sea.order2", 1e-4), ("sea.reflection", 0.0)] {
+        let (x, y) = (layer(&a, name), layer(&b, name));
+        assert_eq!(x.len(), y.len(), "{name}");
+        let peak = y.iter().fold(0.0f32, |m, v| m.max(v.max_element()));
+        assert!(peak > 0.0, "{name} is black");
+        let worst = x.iter().zip(y).fold(0.0f32, |m, (p, q)| m.max((*p - *q).abs().max_element()));
+        assert!(worst <= tol * peak, "{name}: {worst} of {peak}");
+    }
+}
+
+#[test]
+fn stress_a_bottom_with_cliffs() {
+    // Steps from 0.5 m to 60 m every 16 pixels, a lone pillar: no NaN, no
+    // infinity, nothing negative, and the shallow squares show brighter
+    // bottom than the deep ones.
+    let (_dir, data) = over_image(
+        64,
+        64,
+        |x, y| if (x / 16 + y / 16) % 2 == 0 || (x == 40 && y == 40) { 255 } else { 0 },
+        "bottom = { kind = \"image\", path = \"bottom.png\", size_m = [40.0, 40.0], center_m = [0.0, -15.0], shallow_m = 0.5, deep_m = 60.0 }",
+    );
+    let r = render_checked(&data, "cliffs");
+    let bottom = layer(&r, "sea.bottom");
+    let (lo, hi) = bottom.iter().fold((f32::INFINITY, 0.0f32), |(a, b), v| (a.min(v.y), b.max(v.y)));
+    assert!(hi > 10.0 * lo.max(1e-30), "the shallow squares show: {lo} .. {hi}");
 }

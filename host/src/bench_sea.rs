@@ -69,9 +69,9 @@ fn configure(data: &SceneData, c: &Config) -> SceneData {
 }
 
 /// Pixels on a lattice of `stride` whose centre ray meets the sea, with the
-/// direction the light leaves the water toward the eye and the surface's
-/// `T_o / n^2` there.
-pub fn sea_pixels(data: &SceneData, stride: u32) -> Vec<(u32, Vec3, f32)> {
+/// direction the light leaves the water toward the eye, the surface's
+/// `T_o / n^2` there, and the depth where the view ray meets the bottom.
+pub fn sea_pixels(data: &SceneData, stride: u32) -> Vec<(u32, Vec3, f32, f32)> {
     let common = slicelight_shaders::types::CommonParams { samples_per_pixel: 1, sample_index: 0, ..data.common };
     let blank = slicelight_shaders::surface::no_surface();
     let w = data.width();
@@ -80,7 +80,9 @@ pub fn sea_pixels(data: &SceneData, stride: u32) -> Vec<(u32, Vec3, f32)> {
         .flat_map(|y| (0..w).step_by(stride as usize).map(move |x| y * w + x))
         .filter_map(|i| {
             let v = sea_view(i, &common, &data.sea.params, &data.sea.waves, &blank);
-            v.hit.then_some((i, v.view, v.transmission))
+            let p = &data.sea.params;
+            let (depth, _) = slicelight_shaders::sea::bottom_hit(p, &data.sea.bottom, v.point.x, v.point.z, v.view);
+            v.hit.then_some((i, v.view, v.transmission, depth))
         })
         .collect()
 }
@@ -178,9 +180,16 @@ pub fn run(
         let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
         let pixels = sea_pixels(&data, stride.max(1));
         let t = std::time::Instant::now();
-        let reference = SeaReference::new(&data.sea.params, SEA_TOLERANCE);
-        let exact: Vec<DVec3> =
-            pixels.par_iter().map(|&(_, v, tr)| reference.order2(v.as_dvec3()) * tr as f64).collect();
+        // Over a varying bottom the reference takes the water under each
+        // pixel as flat at the depth its view ray meets (as `slicelight
+        // reference` does).
+        let exact: Vec<DVec3> = pixels
+            .par_iter()
+            .map(|&(_, v, tr, depth)| {
+                let local = SeaParams { depth, ..data.sea.params };
+                SeaReference::new(&local, SEA_TOLERANCE).order2(v.as_dvec3()) * tr as f64
+            })
+            .collect();
         eprintln!("{name}: reference order 2 at {} pixels, {:.1} s", pixels.len(), t.elapsed().as_secs_f64());
         let t = std::time::Instant::now();
         curves.extend(convergence(&name, &data.sea.params, quick));
@@ -208,7 +217,7 @@ pub fn run(
                     .find(|(n, _)| *n == "sea.order2")
                     .map(|(_, b)| b.as_slice::<Vec4>().to_vec())
                     .context("no sea.order2 layer")?;
-                let at: Vec<DVec3> = pixels.iter().map(|&(i, _, _)| layer[i as usize].truncate().as_dvec3()).collect();
+                let at: Vec<DVec3> = pixels.iter().map(|&(i, ..)| layer[i as usize].truncate().as_dvec3()).collect();
                 let (rms, max) = relative_error(&at, &exact);
                 let row = Row {
                     scene: name.clone(),

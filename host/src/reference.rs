@@ -290,9 +290,16 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     if view.y < 1e-4 {
         view = DVec3::new(view.x, 1e-4, view.z).normalize();
     }
-    let sea = SeaReference::new(p, SEA_TOLERANCE);
-    let below =
-        sea.order1(view) + if data.sea.second_order { sea.order2(view) } else { DVec3::ZERO } + sea.bottom(view);
+    // A varying bottom: the water column under the view ray taken as flat
+    // at the depth where the ray meets the bottom (the method's assumption
+    // too; the bottom's tilt enters eq. 9's cosine).
+    let (depth, cos_gamma) =
+        slicelight_shaders::sea::bottom_hit(p, &data.sea.bottom, hit.x as f32, hit.z as f32, view.as_vec3());
+    let local = slicelight_shaders::sea::SeaParams { depth, ..*p };
+    let sea = SeaReference::new(&local, SEA_TOLERANCE);
+    let bottom = sea.bottom(view) * (cos_gamma as f64 / sea.mu_s);
+    let second = if data.sea.second_order { sea.order2(view) } else { DVec3::ZERO };
+    let below = sea.order1(view) + second + bottom;
     sky * r + below * ((1.0 - r) / (n * n))
 }
 

@@ -80,6 +80,9 @@ pub struct SeaParams {
     pub bottom_albedo: Vec4,
     /// Depth of the lowest sampling plane per channel, m.
     pub plane_depth: Vec4,
+    /// A varying bottom's depth grid: x, z of its first sample's position
+    /// (m), the spacing (m), and w: the deepest depth (m), met beyond it.
+    pub bottom_grid: Vec4,
     /// Height of the surface (scene y), m.
     pub level: f32,
     /// Depth of the flat bottom below the surface, m (`DEEP` for no bottom).
@@ -98,11 +101,19 @@ pub struct SeaParams {
     /// Normal map: `wave_resolution`^2 texels over `wave_size` m, tiled.
     pub wave_resolution: u32,
     pub wave_size: f32,
-    pub _pad: [u32; 2],
+    /// A varying bottom: `bottom_nx x bottom_nz` depth samples (0: a flat
+    /// bottom at `depth`).
+    pub bottom_nx: u32,
+    pub bottom_nz: u32,
+    /// Bottom depths the order-2 maps are built for (1 for a flat bottom),
+    /// geometric from `shallow` to `bottom_grid.w`.
+    pub layers: u32,
+    pub shallow: f32,
+    pub _pad: [u32; 4],
 }
 
 #[cfg(not(target_arch = "spirv"))]
-// SAFETY: `repr(C)`, eight `Vec4`s and twelve 4-byte scalars, no padding; any bits are valid.
+// SAFETY: `repr(C)`, nine `Vec4`s and twenty 4-byte scalars, no padding; any bits are valid.
 unsafe impl bytemuck::Zeroable for SeaParams {}
 #[cfg(not(target_arch = "spirv"))]
 unsafe impl bytemuck::Pod for SeaParams {}
@@ -291,6 +302,31 @@ fn grade(u: f32, reach: f32, depth: f32) -> f32 {
     }
 }
 
+/// The bottom depth of order-2 layer `j`, m: the flat bottom's, or for a
+/// varying bottom geometric from `shallow` to the deepest.
+pub fn layer_depth(p: &SeaParams, j: u32) -> f32 {
+    if p.layers <= 1 {
+        return p.depth;
+    }
+    let t = j as f32 / (p.layers - 1) as f32;
+    p.shallow * (p.bottom_grid.w / p.shallow).powf(t)
+}
+
+/// `p` with the bottom of layer `j` (and the planes that reach it).
+pub fn layer_params(p: &SeaParams, j: u32) -> SeaParams {
+    if p.layers <= 1 {
+        return *p;
+    }
+    let depth = layer_depth(p, j);
+    let c = p.extinction.xyz();
+    let reach = Vec3::new(
+        (DEEP_OPTICAL_DEPTH / c.x).min(depth),
+        (DEEP_OPTICAL_DEPTH / c.y).min(depth),
+        (DEEP_OPTICAL_DEPTH / c.z).min(depth),
+    );
+    SeaParams { depth, plane_depth: reach.extend(0.0), ..*p }
+}
+
 /// Directions per set: `polar x azimuths` (`n_d` is three sets).
 pub fn set_size(p: &SeaParams) -> u32 {
     p.polar * p.azimuths
@@ -309,7 +345,8 @@ pub fn held_direction(p: &SeaParams, m: u32) -> Vec3 {
     }
 }
 
-/// Length of the radiance map buffer: the order-1 radiance for every
+/// Length of one layer's block of the radiance map buffer (the buffer holds
+/// `layers` of them): the order-1 radiance for every
 /// plane and held direction (`planes x 2N`), then the held directions
 /// themselves (`2N`, w: `p_s`), then the view set's directions in the
 /// view's frame (`N`: x, y across, z along the view), so that the
@@ -322,6 +359,13 @@ pub fn radiance_map_len(p: &SeaParams) -> u32 {
 /// `radiance_map_len` says; the radiance part is the order-1 radiance (rgb,
 /// W/(m^2 sr)) arriving at plane `k` travelling along held direction `m`.
 pub fn radiance_map_texel(index: u32, p: &SeaParams) -> Vec4 {
+    let len = radiance_map_len(p);
+    let q = layer_params(p, index / len);
+    layer_radiance_map_texel(index % len, &q)
+}
+
+/// `radiance_map_texel` within one layer's block.
+fn layer_radiance_map_texel(index: u32, p: &SeaParams) -> Vec4 {
     let n = set_size(p);
     let sun = p.sun_in_water.xyz();
     let g = p.scattering.w;
@@ -366,9 +410,12 @@ fn sun_azimuth_frame(p: &SeaParams) -> (Vec3, Vec3) {
 /// W/(m^3 sr)) toward the texel's direction (`scattering_source`).
 pub fn scattering_map_texel(index: u32, p: &SeaParams, radiance_map: &[Vec4]) -> Vec4 {
     let texels = p.map_width * p.map_height;
-    let (k, t) = (index / texels, index % texels);
-    let view = map_direction(p, t % p.map_width, t / p.map_width);
-    scattering_source(p, k, view, radiance_map).extend(0.0)
+    let per_layer = p.planes * texels;
+    let j = index / per_layer;
+    let q = layer_params(p, j);
+    let (k, t) = ((index % per_layer) / texels, index % texels);
+    let view = map_direction(&q, t % q.map_width, t / q.map_width);
+    scattering_source(&q, k, view, radiance_map, (j * radiance_map_len(p)) as usize).extend(0.0)
 }
 
 /// Width (in the vertical cosine) of the band about the horizontal that
@@ -392,7 +439,7 @@ pub fn horizon_window(mu: f32) -> f32 {
 /// of the other's than the balance heuristic), the uniform set alone at it,
 /// where the order-1 radiance near the surface (and the bottom) jumps and
 /// only the uniform set's cells do not straddle the jump.
-pub fn scattering_source(p: &SeaParams, k: u32, view: Vec3, radiance_map: &[Vec4]) -> Vec3 {
+pub fn scattering_source(p: &SeaParams, k: u32, view: Vec3, radiance_map: &[Vec4], base: usize) -> Vec3 {
     let n = set_size(p);
     let g = p.scattering.w;
     let sun = p.sun_in_water.xyz();
@@ -400,7 +447,7 @@ pub fn scattering_source(p: &SeaParams, k: u32, view: Vec3, radiance_map: &[Vec4
     let z = plane_depth(p, k);
     let uniform = 0.25 * FRAC_1_PI;
     let uniform2 = uniform * uniform;
-    let held = (p.planes * 2 * n) as usize;
+    let held = base + (p.planes * 2 * n) as usize;
     let mut sum = Vec3::ZERO;
     let mut m = 0;
     while m < 2 * n {
@@ -412,7 +459,7 @@ pub fn scattering_source(p: &SeaParams, k: u32, view: Vec3, radiance_map: &[Vec4
         // q_s = h p_s, q_v = h p_v, q_u = p_u.
         let own = if m < n { h * a_s } else { uniform };
         let weight = own / (a_s * a_s + a_v * a_v + uniform2);
-        sum += radiance_map[(k * 2 * n + m) as usize].xyz() * (pv * weight);
+        sum += radiance_map[base + (k * 2 * n + m) as usize].xyz() * (pv * weight);
         m += 1;
     }
     let (t, u) = basis(view);
@@ -488,9 +535,11 @@ fn exp_linear(length: f32, h_a: f32, h_b: f32, kappa: f32) -> f32 {
 /// interpolation), the order-2 radiance below the surface toward the eye.
 /// Per pixel one lookup of this map replaces the per-plane accumulation.
 pub fn accumulated_map_texel(index: u32, p: &SeaParams, maps: &[Vec4]) -> Vec4 {
-    let (col, row) = (index % p.map_width, index / p.map_width);
-    let view = map_direction(p, col, row);
-    accumulate_planes(p, view, maps, index, p.map_width * p.map_height).extend(0.0)
+    let texels = p.map_width * p.map_height;
+    let (j, t) = (index / texels, index % texels);
+    let q = layer_params(p, j);
+    let view = map_direction(&q, t % q.map_width, t / q.map_width);
+    accumulate_planes(&q, view, maps, j * q.planes * texels + t, texels).extend(0.0)
 }
 
 /// The order-2 radiance below the surface along unit upward `view`
@@ -548,6 +597,77 @@ pub struct SeaView {
     pub view: Vec3,
     /// `T_o / n^2`: the factor from radiance below the surface to radiance above.
     pub transmission: f32,
+    /// Where the view ray meets the surface.
+    pub point: Vec3,
+}
+
+/// Depth of a varying bottom at horizontal `(x, z)`, m: bilinear in the
+/// grid, clamped at its edges.
+pub fn bottom_depth(p: &SeaParams, grid: &[f32], x: f32, z: f32) -> f32 {
+    let g = p.bottom_grid;
+    let (nx, nz) = (p.bottom_nx, p.bottom_nz);
+    let fx = ((x - g.x) / g.z).clamp(0.0, (nx - 1) as f32);
+    let fz = ((z - g.y) / g.z).clamp(0.0, (nz - 1) as f32);
+    let (i, j) = ((fx as u32).min(nx - 2), (fz as u32).min(nz - 2));
+    let (ax, az) = (fx - i as f32, fz - j as f32);
+    let (r0, r1) = ((j * nx + i) as usize, ((j + 1) * nx + i) as usize);
+    (grid[r0] * (1.0 - ax) + grid[r0 + 1] * ax) * (1.0 - az) + (grid[r1] * (1.0 - ax) + grid[r1 + 1] * ax) * az
+}
+
+/// The bottom's upward unit normal at `(x, z)`, from central differences a
+/// grid spacing apart (depth grows downward: the normal leans toward it).
+pub fn bottom_normal(p: &SeaParams, grid: &[f32], x: f32, z: f32) -> Vec3 {
+    let h = p.bottom_grid.z;
+    let dx = (bottom_depth(p, grid, x + h, z) - bottom_depth(p, grid, x - h, z)) / (2.0 * h);
+    let dz = (bottom_depth(p, grid, x, z + h) - bottom_depth(p, grid, x, z - h)) / (2.0 * h);
+    Vec3::new(dx, 1.0, dz).normalize()
+}
+
+/// Where the refracted view ray from the surface at `(x, z)`, travelling
+/// against upward `view`, meets the bottom: its depth (m) and the cosine of
+/// eq. 9's `gamma`. A flat bottom in closed form; a varying one by marching
+/// half a grid spacing at a time (at most 2048 steps) and a secant between
+/// the last two; past the deepest depth, the deepest.
+pub fn bottom_hit(p: &SeaParams, grid: &[f32], x: f32, z: f32, view: Vec3) -> (f32, f32) {
+    let mu_s = p.sun_in_water.w;
+    if p.bottom_nx < 2 {
+        return (p.depth, mu_s);
+    }
+    let deep = p.bottom_grid.w;
+    let mu = view.y.max(1e-4);
+    let (hx, hz) = (-view.x, -view.z);
+    let t_max = deep / mu;
+    let horizontal = (hx * hx + hz * hz).sqrt().max(1e-6);
+    let dt = (0.5 * p.bottom_grid.z / horizontal).min(t_max).max(t_max / 2048.0);
+    let mut t_prev = 0.0;
+    let mut f_prev = -bottom_depth(p, grid, x, z);
+    let mut t = dt;
+    while t <= t_max + 0.5 * dt {
+        let (px, pz) = (x + hx * t, z + hz * t);
+        let f = t * mu - bottom_depth(p, grid, px, pz);
+        if f >= 0.0 {
+            let th = t_prev + dt * (-f_prev / (f - f_prev).max(1e-20));
+            let (qx, qz) = (x + hx * th, z + hz * th);
+            let up = -p.sun_in_water.xyz();
+            return (th * mu, bottom_normal(p, grid, qx, qz).dot(up).max(0.0));
+        }
+        t_prev = t;
+        f_prev = f;
+        t += dt;
+    }
+    (deep, mu_s)
+}
+
+/// The order-2 layers bracketing bottom depth `depth`: the lower index and
+/// the weight of the next (linear in the log of the depth).
+pub fn layer_at(p: &SeaParams, depth: f32) -> (u32, f32) {
+    if p.layers <= 1 {
+        return (0, 0.0);
+    }
+    let top = (p.layers - 1) as f32;
+    let t = ((depth.max(p.shallow) / p.shallow).ln() / (p.bottom_grid.w / p.shallow).ln() * top).clamp(0.0, top);
+    let j = (t as u32).min(p.layers - 2);
+    (j, t - j as f32)
 }
 
 /// The normal of the surface at horizontal position `(x, z)`: up for a flat
@@ -603,6 +723,7 @@ pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4]
     out.reflected = Vec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
     out.view = view;
     out.transmission = (1.0 - r) / (n * n);
+    out.point = hit;
     out
 }
 
@@ -627,22 +748,36 @@ pub fn reflection_pixel(
     (sky_light * v.reflectance).extend(0.0)
 }
 
-/// Per-pixel kernel, `sea.order1`: single scattering, above the surface.
-pub fn order1_pixel(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> Vec4 {
+/// Per-pixel kernel, `sea.order1`: single scattering down to where the
+/// view ray meets the bottom (section 5.4: eq. 5 with `z_Q` for `z_d`), above
+/// the surface.
+pub fn order1_pixel(
+    index: u32,
+    common: &CommonParams,
+    p: &SeaParams,
+    waves: &[Vec4],
+    bottom: &[f32],
+    texel: &GBufferTexel,
+) -> Vec4 {
     let v = sea_view(index, common, p, waves, texel);
     if !v.hit {
         return Vec4::ZERO;
     }
-    (order1_radiance(p, v.view, p.depth, p.order1_extinction.xyz()) * v.transmission).extend(0.0)
+    let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
+    (order1_radiance(p, v.view, depth, p.order1_extinction.xyz()) * v.transmission).extend(0.0)
 }
 
 /// Per-pixel kernel, `sea.order2`: second-order scattering, the
-/// accumulated map looked up toward the eye, above the surface.
+/// accumulated map looked up toward the eye (between the two layers whose
+/// bottoms bracket the depth under the pixel, for a varying bottom), above
+/// the surface.
+#[allow(clippy::too_many_arguments)]
 pub fn order2_pixel(
     index: u32,
     common: &CommonParams,
     p: &SeaParams,
     waves: &[Vec4],
+    bottom: &[f32],
     accumulated: &[Vec4],
     texel: &GBufferTexel,
 ) -> Vec4 {
@@ -650,17 +785,33 @@ pub fn order2_pixel(
     if !v.hit {
         return Vec4::ZERO;
     }
-    (scattering_map_lookup(p, accumulated, 0, map_coords(p, v.view)) * v.transmission).extend(0.0)
+    let at = map_coords(p, v.view);
+    let mut value = scattering_map_lookup(p, accumulated, 0, at);
+    if p.layers > 1 {
+        let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
+        let (j, w) = layer_at(p, depth);
+        value = scattering_map_lookup(p, accumulated, j, at) * (1.0 - w)
+            + scattering_map_lookup(p, accumulated, j + 1, at) * w;
+    }
+    (value * v.transmission).extend(0.0)
 }
 
 /// Per-pixel kernel, `sea.bottom`: the bottom's reflection of the refracted
-/// sunlight (eq. 9 with `1/pi`), above the surface.
-pub fn bottom_pixel(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> Vec4 {
+/// sunlight (eq. 9 with `1/pi`) where the view ray meets it, above the surface.
+pub fn bottom_pixel(
+    index: u32,
+    common: &CommonParams,
+    p: &SeaParams,
+    waves: &[Vec4],
+    bottom: &[f32],
+    texel: &GBufferTexel,
+) -> Vec4 {
     let v = sea_view(index, common, p, waves, texel);
     if !v.hit {
         return Vec4::ZERO;
     }
-    (bottom_radiance(p, v.view, p.depth, p.sun_in_water.w) * v.transmission).extend(0.0)
+    let (depth, cos_gamma) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
+    (bottom_radiance(p, v.view, depth, cos_gamma) * v.transmission).extend(0.0)
 }
 
 #[spirv(compute(threads(64)))]
@@ -672,7 +823,7 @@ pub fn radiance_map_kernel(
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
-    if index < radiance_map_len(p) {
+    if index < p.layers * radiance_map_len(p) {
         map[index as usize] = radiance_map_texel(index, p);
     }
 }
@@ -687,7 +838,7 @@ pub fn scattering_maps_kernel(
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
-    if index < p.planes * p.map_width * p.map_height {
+    if index < p.layers * p.planes * p.map_width * p.map_height {
         maps[index as usize] = scattering_map_texel(index, p, radiance_map);
     }
 }
@@ -702,7 +853,7 @@ pub fn accumulated_map_kernel(
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
-    if index < p.map_width * p.map_height {
+    if index < p.layers * p.map_width * p.map_height {
         accumulated[index as usize] = accumulated_map_texel(index, p, maps);
     }
 }
@@ -737,6 +888,7 @@ pub fn reflection_kernel(
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn order1_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
@@ -745,13 +897,14 @@ pub fn order1_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 24)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
         radiance[index as usize] =
-            order1_pixel(common.band_start + index, common, &params[0], waves, &gbuffer[index as usize]);
+            order1_pixel(common.band_start + index, common, &params[0], waves, bottom, &gbuffer[index as usize]);
     }
 }
 
@@ -765,16 +918,25 @@ pub fn order2_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 27)] accumulated: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 25)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
-        radiance[index as usize] =
-            order2_pixel(common.band_start + index, common, &params[0], waves, accumulated, &gbuffer[index as usize]);
+        radiance[index as usize] = order2_pixel(
+            common.band_start + index,
+            common,
+            &params[0],
+            waves,
+            bottom,
+            accumulated,
+            &gbuffer[index as usize],
+        );
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn bottom_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
@@ -783,13 +945,14 @@ pub fn bottom_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 26)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
         radiance[index as usize] =
-            bottom_pixel(common.band_start + index, common, &params[0], waves, &gbuffer[index as usize]);
+            bottom_pixel(common.band_start + index, common, &params[0], waves, bottom, &gbuffer[index as usize]);
     }
 }
 
@@ -816,6 +979,7 @@ mod tests {
             azimuths: 8,
             map_width: 32,
             map_height: 32,
+            layers: 1,
             ..Default::default()
         }
     }
@@ -904,7 +1068,7 @@ mod tests {
         let view = Vec3::new(0.2, 0.9, -0.1).normalize();
         let map: Vec<Vec4> = (0..radiance_map_len(&p)).map(|i| radiance_map_texel(i, &p)).collect();
         let k = 3;
-        let got = scattering_source(&p, k, view, &map);
+        let got = scattering_source(&p, k, view, &map, 0);
         let z = plane_depth(&p, k);
         let (nm, nphi) = (4000, 4);
         let mut want = Vec3::ZERO;

@@ -42,6 +42,12 @@ pub static SEA_ACCUMULATED_MAP: Resource = Resource {
     name: "sea accumulated map",
     kind: ResourceKind::Frame(|s| s.sea.accumulated_map_texels() * 16),
 };
+/// A varying bottom's depth grid (one 0 for a flat bottom).
+pub static SEA_BOTTOM_GRID: Resource = Resource {
+    binding: 28,
+    name: "sea bottom depths",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.sea.bottom)),
+};
 pub static SEA_REFLECTION: Resource =
     Resource { binding: 23, name: "sea reflection", kind: ResourceKind::PerPixel { blank: no_radiance } };
 pub static SEA_ORDER1: Resource =
@@ -58,8 +64,13 @@ pub struct Settings {
     /// Height of the surface (scene y), m.
     #[serde(default)]
     pub level_m: f32,
-    /// Depth of a flat bottom below the surface, m; none: no bottom.
+    /// Depth of a flat bottom below the surface, m; none: no bottom (or `bottom`).
     pub depth_m: Option<f32>,
+    /// A varying bottom (instead of `depth_m`).
+    pub bottom: Option<Bottom>,
+    /// Bottom depths the order-2 maps are built for over a varying bottom.
+    #[serde(default = "depth_layers")]
+    pub depth_layers: u32,
     /// Lambertian albedo of the bottom.
     #[serde(default = "sand")]
     pub bottom_albedo: [f32; 3],
@@ -91,6 +102,9 @@ pub struct Settings {
     pub waves: Waves,
 }
 
+fn depth_layers() -> u32 {
+    6
+}
 fn sand() -> [f32; 3] {
     [0.6, 0.55, 0.4]
 }
@@ -117,6 +131,118 @@ pub enum Single {
     PaperEq5,
 }
 
+/// `bottom = { kind = ... }` of `[sea]`: a height field.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Bottom {
+    /// A sloping shore: the depth grows by `slope` metres per metre along
+    /// `direction_deg` (from +x toward +z) from the shoreline, which passes
+    /// `offset_m` from the origin, between `shallow_m` and `deep_m`; sampled
+    /// on a `resolution`^2 grid over `extent_m` around `center_m`.
+    Shore {
+        slope: f32,
+        shallow_m: f32,
+        deep_m: f32,
+        #[serde(default)]
+        direction_deg: f32,
+        #[serde(default)]
+        offset_m: f32,
+        #[serde(default = "shore_extent")]
+        extent_m: f32,
+        #[serde(default)]
+        center_m: [f32; 2],
+        #[serde(default = "shore_grid")]
+        resolution: u32,
+    },
+    /// A grey image over `size_m` (x by z) centred on `center_m`: white is
+    /// `shallow_m` deep, black `deep_m`; path relative to the scene file.
+    Image {
+        path: std::path::PathBuf,
+        size_m: [f32; 2],
+        #[serde(default)]
+        center_m: [f32; 2],
+        shallow_m: f32,
+        deep_m: f32,
+    },
+}
+
+fn shore_extent() -> f32 {
+    400.0
+}
+fn shore_grid() -> u32 {
+    512
+}
+
+/// A bottom's depth grid: the samples (row by row in z), the first
+/// sample's (x, z), the spacing, the grid's size, and the depth range.
+struct Grid {
+    depths: Vec<f32>,
+    origin: [f32; 2],
+    spacing: f32,
+    size: [u32; 2],
+    shallow: f32,
+    deep: f32,
+}
+
+fn depth_range(shallow: f32, deep: f32) -> Result<(f32, f32)> {
+    if !(shallow.is_finite() && shallow >= 0.01) {
+        bail!(invalid("sea.bottom.shallow_m", "a depth of at least 0.01 m", shallow));
+    }
+    if !(deep.is_finite() && deep > shallow && deep <= 1e6) {
+        bail!(invalid("sea.bottom.deep_m", "a depth above shallow_m, at most 1e6 m", deep));
+    }
+    Ok((shallow, deep))
+}
+
+impl Bottom {
+    fn grid(&self, base: &std::path::Path) -> Result<Grid> {
+        match self {
+            Bottom::Shore { slope, shallow_m, deep_m, direction_deg, offset_m, extent_m, center_m, resolution } => {
+                let (shallow, deep) = depth_range(*shallow_m, *deep_m)?;
+                if !(slope.is_finite() && *slope > 0.0) {
+                    bail!(invalid("sea.bottom.slope", "a positive slope (m of depth per m)", slope));
+                }
+                if !(extent_m.is_finite() && *extent_m > 0.0 && *extent_m <= 1e6) {
+                    bail!(invalid("sea.bottom.extent_m", "a size in (0, 1e6] m", extent_m));
+                }
+                if !(2..=4096).contains(resolution) {
+                    bail!(invalid("sea.bottom.resolution", "a grid size in 2..=4096", resolution));
+                }
+                let n = *resolution;
+                let spacing = extent_m / (n - 1) as f32;
+                let origin = [center_m[0] - 0.5 * extent_m, center_m[1] - 0.5 * extent_m];
+                let (dx, dz) = (direction_deg.to_radians().cos(), direction_deg.to_radians().sin());
+                let depths = (0..n * n)
+                    .map(|i| {
+                        let (x, z) = (origin[0] + (i % n) as f32 * spacing, origin[1] + (i / n) as f32 * spacing);
+                        (shallow + slope * (x * dx + z * dz - offset_m)).clamp(shallow, deep)
+                    })
+                    .collect();
+                Ok(Grid { depths, origin, spacing, size: [n, n], shallow, deep })
+            }
+            Bottom::Image { path, size_m, center_m, shallow_m, deep_m } => {
+                let (shallow, deep) = depth_range(*shallow_m, *deep_m)?;
+                let file = base.join(path);
+                let img = image::open(&file)
+                    .map_err(|e| anyhow::anyhow!("sea.bottom.path: cannot read '{}': {e}", file.display()))?
+                    .to_luma32f();
+                let (w, h) = img.dimensions();
+                if w < 2 || h < 2 {
+                    bail!(invalid("sea.bottom.path", "an image of at least 2x2 pixels", (w, h)));
+                }
+                if !(size_m.iter().all(|v| v.is_finite() && *v > 0.0)) {
+                    bail!(invalid("sea.bottom.size_m", "two positive sizes in m", size_m));
+                }
+                // Square cells: the image's x spacing.
+                let spacing = size_m[0] / (w - 1) as f32;
+                let origin = [center_m[0] - 0.5 * size_m[0], center_m[1] - 0.5 * (h - 1) as f32 * spacing];
+                let depths = img.pixels().map(|p| deep - p[0].clamp(0.0, 1.0) * (deep - shallow)).collect();
+                Ok(Grid { depths, origin, spacing, size: [w, h], shallow, deep })
+            }
+        }
+    }
+}
+
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Waves {
@@ -133,6 +259,8 @@ pub struct Setup {
     pub params: SeaParams,
     /// The wave normal map (one up normal for a flat sea).
     pub waves: Vec<Vec4>,
+    /// A varying bottom's depth grid (one 0 for a flat bottom).
+    pub bottom: Vec<f32>,
     pub second_order: bool,
     pub single: Single,
     /// How `n_z` and `n_d` were chosen, for the plan.
@@ -142,21 +270,24 @@ pub struct Setup {
 impl Setup {
     pub fn radiance_map_texels(&self) -> u64 {
         if self.enabled && self.second_order {
-            radiance_map_len(&self.params) as u64
+            self.params.layers as u64 * radiance_map_len(&self.params) as u64
         } else {
             0
         }
     }
     pub fn accumulated_map_texels(&self) -> u64 {
         if self.enabled && self.second_order {
-            self.params.map_width as u64 * self.params.map_height as u64
+            self.params.layers as u64 * self.params.map_width as u64 * self.params.map_height as u64
         } else {
             0
         }
     }
     pub fn scattering_map_texels(&self) -> u64 {
         if self.enabled && self.second_order {
-            self.params.planes as u64 * self.params.map_width as u64 * self.params.map_height as u64
+            self.params.layers as u64
+                * self.params.planes as u64
+                * self.params.map_width as u64
+                * self.params.map_height as u64
         } else {
             0
         }
@@ -187,11 +318,12 @@ pub fn rule_views(p: &SeaParams) -> Vec<Vec3> {
 /// map and the sources computed directly (no scattering-map interpolation):
 /// what the 1/255 rule compares.
 pub fn order2_at(p: &SeaParams, views: &[Vec3]) -> Vec<Vec3> {
+    let p = &SeaParams { layers: 1, ..*p };
     let map: Vec<Vec4> = (0..radiance_map_len(p)).map(|i| radiance_map_texel(i, p)).collect();
     views
         .iter()
         .map(|&v| {
-            let sources: Vec<Vec4> = (0..p.planes).map(|k| scattering_source(p, k, v, &map).extend(0.0)).collect();
+            let sources: Vec<Vec4> = (0..p.planes).map(|k| scattering_source(p, k, v, &map, 0).extend(0.0)).collect();
             accumulate_planes(p, v, &sources, 0, 1)
         })
         .collect()
@@ -201,6 +333,7 @@ pub fn order2_at(p: &SeaParams, views: &[Vec3]) -> Vec<Vec3> {
 /// compute it (radiance map, scattering maps, accumulated map, lookup), on
 /// the CPU: what the accuracy tests and the bench measure.
 pub fn order2_by_maps(p: &SeaParams, views: &[Vec3]) -> Vec<Vec3> {
+    let p = &SeaParams { layers: 1, ..*p };
     let radiance: Vec<Vec4> = (0..radiance_map_len(p)).into_par_iter().map(|i| radiance_map_texel(i, p)).collect();
     let texels = p.map_width * p.map_height;
     let maps: Vec<Vec4> =
@@ -260,7 +393,7 @@ pub fn choose_directions(p: &SeaParams) -> (u32, Vec<(u32, f32)>) {
 
 /// Validates `[sea]` against the sky's sun and the camera's height, and
 /// returns the sea's setup; the error names the field under `sea.`.
-pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32) -> Result<Setup> {
+pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32, base: &std::path::Path) -> Result<Setup> {
     if !sky.enabled {
         bail!(invalid("sea", "a scene with a [sky] (the sea's sun and the sky it reflects)", "no [sky]"));
     }
@@ -274,7 +407,15 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32) -> Result
             s.level_m
         ));
     }
+    if s.depth_m.is_some() && s.bottom.is_some() {
+        bail!(invalid("sea.bottom", "either depth_m or bottom, not both", "both"));
+    }
+    if !(2..=64).contains(&s.depth_layers) {
+        bail!(invalid("sea.depth_layers", "a layer count in 2..=64", s.depth_layers));
+    }
+    let grid = s.bottom.as_ref().map(|b| b.grid(base)).transpose()?;
     let depth = match s.depth_m {
+        None if grid.is_some() => grid.as_ref().map_or(DEEP, |g| g.deep),
         None => DEEP,
         Some(d) => {
             if !(d.is_finite() && d > 0.0 && d <= 1e6) {
@@ -367,7 +508,15 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32) -> Result
         waves: waves_kind,
         wave_resolution,
         wave_size,
-        _pad: [0; 2],
+        bottom_grid: match &grid {
+            Some(g) => Vec4::new(g.origin[0], g.origin[1], g.spacing, g.deep),
+            None => Vec4::ZERO,
+        },
+        bottom_nx: grid.as_ref().map_or(0, |g| g.size[0]),
+        bottom_nz: grid.as_ref().map_or(0, |g| g.size[1]),
+        layers: if grid.is_some() { s.depth_layers } else { 1 },
+        shallow: grid.as_ref().map_or(0.0, |g| g.shallow),
+        _pad: [0; 4],
     };
     let mut sampling = Vec::new();
     let chosen = std::time::Instant::now();
@@ -391,6 +540,7 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32) -> Result
         enabled: true,
         params,
         waves,
+        bottom: grid.map_or(vec![0.0], |g| g.depths),
         second_order: s.second_order,
         single: s.single,
         sampling: sampling.join(", "),
@@ -453,10 +603,15 @@ impl Pass for SeaRadianceMap {
         // 2 % of its value, and the radiance that carries it 2 % of its own.
         let p = &scene.sea.params;
         let (g, c) = (gpu.get::<Vec4>(&SEA_RADIANCE_MAP), cpu.get::<Vec4>(&SEA_RADIANCE_MAP));
-        let held = (p.planes * 2 * set_size(p)) as usize;
-        let radiance = compare_rgb("radiance map", &g[..held], &c[..held], 1e-3, held * 3 / 100 + 1)?;
+        ensure!(g.len() == c.len(), "radiance maps of {} and {} values", g.len(), c.len());
+        let (len, held) = (radiance_map_len(p) as usize, (p.planes * 2 * set_size(p)) as usize);
+        let part = |v: &[Vec4], directions: bool| -> Vec<Vec4> {
+            v.chunks(len).flat_map(|b| if directions { &b[held..] } else { &b[..held] }).copied().collect()
+        };
+        let (gr, cr) = (part(g, false), part(c, false));
+        let radiance = compare_rgb("radiance map", &gr, &cr, 1e-3, cr.len() * 3 / 100 + 1)?;
         let flat = |v: &[Vec4]| v.iter().flat_map(|d| d.to_array()).collect::<Vec<f32>>();
-        let (gd, cd) = (flat(&g[held..]), flat(&c[held..]));
+        let (gd, cd) = (flat(&part(g, true)), flat(&part(c, true)));
         let (outliers, worst) = count_differences(&gd, &cd, |v| 1e-3 + 2e-2 * v.abs());
         ensure!(outliers == 0, "radiance map directions: {outliers} of {} values differ", cd.len());
         Ok(format!("{radiance}; directions and phase values: worst difference {worst:e}"))
@@ -643,7 +798,7 @@ impl Pass for SeaOrder1 {
         "sea::order1_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES]
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_BOTTOM_GRID]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_ORDER1]
@@ -668,8 +823,8 @@ impl Pass for SeaOrder1 {
         Plan::run(format!("single scattering, {how}"), 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let (p, waves) = (&scene.sea.params, &scene.sea.waves[..]);
-        run_term(common, frame, progress, &SEA_ORDER1, |i, t, _| order1_pixel(i, common, p, waves, t));
+        let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
+        run_term(common, frame, progress, &SEA_ORDER1, |i, t, _| order1_pixel(i, common, p, waves, bottom, t));
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea order 1", &SEA_ORDER1, gpu, cpu)
@@ -686,7 +841,7 @@ impl Pass for SeaOrder2 {
         "sea::order2_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_ACCUMULATED_MAP]
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_ACCUMULATED_MAP, SEA_BOTTOM_GRID]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_ORDER2]
@@ -707,8 +862,8 @@ impl Pass for SeaOrder2 {
         Plan::run("second-order scattering, looked up in the accumulated map", 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let (p, waves) = (&scene.sea.params, &scene.sea.waves[..]);
-        run_term(common, frame, progress, &SEA_ORDER2, |i, t, maps| order2_pixel(i, common, p, waves, maps, t));
+        let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
+        run_term(common, frame, progress, &SEA_ORDER2, |i, t, maps| order2_pixel(i, common, p, waves, bottom, maps, t));
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea order 2", &SEA_ORDER2, gpu, cpu)
@@ -725,7 +880,7 @@ impl Pass for SeaBottom {
         "sea::bottom_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES]
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_BOTTOM_GRID]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_BOTTOM]
@@ -742,7 +897,16 @@ impl Pass for SeaBottom {
         }
         let p = &scene.sea.params;
         if p.depth >= DEEP {
-            return Plan::skip("no bottom (depth_m not given)");
+            return Plan::skip("no bottom (neither depth_m nor bottom given)");
+        }
+        if p.layers > 1 {
+            return Plan::run(
+                format!(
+                    "a varying bottom from {} to {} m (eq. 9 with 1/pi; the view ray marched to it)",
+                    p.shallow, p.depth
+                ),
+                0,
+            );
         }
         // The brightest the bottom can be seen: straight down, sun overhead.
         let brightest = (-p.extinction.truncate() * 2.0 * p.depth).exp() * p.bottom_albedo.truncate();
@@ -752,8 +916,8 @@ impl Pass for SeaBottom {
         Plan::run(format!("the bottom at {} m (eq. 9 with 1/pi)", p.depth), 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let (p, waves) = (&scene.sea.params, &scene.sea.waves[..]);
-        run_term(common, frame, progress, &SEA_BOTTOM, |i, t, _| bottom_pixel(i, common, p, waves, t));
+        let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
+        run_term(common, frame, progress, &SEA_BOTTOM, |i, t, _| bottom_pixel(i, common, p, waves, bottom, t));
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea bottom", &SEA_BOTTOM, gpu, cpu)

@@ -767,6 +767,20 @@ pub fn order1_pixel(
     (order1_radiance(p, v.view, depth, p.order1_extinction.xyz()) * v.transmission).extend(0.0)
 }
 
+/// The weight of layer `j + 1` for a bottom at `depth` between layers `j`
+/// and `j + 1`, per channel: linear in `1 - e^(-2 c d)`, the share of a
+/// slab's light that a bottom at `d` leaves (the order-2 radiance saturates
+/// with depth much like it); where the two layers' shares are within 1e-6
+/// (both deep in that channel) the log-depth weight `w`.
+fn saturation_weight(p: &SeaParams, depth: f32, j: u32, w: f32) -> Vec3 {
+    let c = p.extinction.xyz() * 2.0;
+    let s = |d: f32| Vec3::ONE - exp3(-c * d);
+    let (a, b, x) = (s(layer_depth(p, j)), s(layer_depth(p, j + 1)), s(depth));
+    let span = b - a;
+    let weight = |x: f32, a: f32, span: f32| if span > 1e-6 { ((x - a) / span).clamp(0.0, 1.0) } else { w };
+    Vec3::new(weight(x.x, a.x, span.x), weight(x.y, a.y, span.y), weight(x.z, a.z, span.z))
+}
+
 /// Per-pixel kernel, `sea.order2`: second-order scattering, the
 /// accumulated map looked up toward the eye (between the two layers whose
 /// bottoms bracket the depth under the pixel, for a varying bottom), above
@@ -790,7 +804,8 @@ pub fn order2_pixel(
     if p.layers > 1 {
         let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
         let (j, w) = layer_at(p, depth);
-        value = scattering_map_lookup(p, accumulated, j, at) * (1.0 - w)
+        let w = saturation_weight(p, depth, j, w);
+        value = scattering_map_lookup(p, accumulated, j, at) * (Vec3::ONE - w)
             + scattering_map_lookup(p, accumulated, j + 1, at) * w;
     }
     (value * v.transmission).extend(0.0)

@@ -103,7 +103,7 @@ pub struct Settings {
 }
 
 fn depth_layers() -> u32 {
-    6
+    12
 }
 fn sand() -> [f32; 3] {
     [0.6, 0.55, 0.4]
@@ -641,7 +641,10 @@ impl Pass for SeaScatteringMaps {
             return skip;
         }
         let p = &scene.sea.params;
-        let how = if scene.sea.sampling.is_empty() { String::new() } else { format!(" ({})", scene.sea.sampling) };
+        let mut how = if scene.sea.sampling.is_empty() { String::new() } else { format!(" ({})", scene.sea.sampling) };
+        if p.layers > 1 {
+            how += &format!(", for {} bottom depths from {} to {} m", p.layers, p.shallow, p.depth);
+        }
         Plan::run(
             format!(
                 "second-order scattering maps (eq. 6, 8), {} planes of {}x{}, {} directions{how}",

@@ -781,6 +781,22 @@ fn saturation_weight(p: &SeaParams, depth: f32, j: u32, w: f32) -> Vec3 {
     Vec3::new(weight(x.x, a.x, span.x), weight(x.y, a.y, span.y), weight(x.z, a.z, span.z))
 }
 
+/// The cubic through `(xs[i], ys[i])` at `x`, or `fallback` where two nodes
+/// lie within 1e-5 of each other (a channel saturated over those layers).
+fn lagrange4(x: f32, xs: [f32; 4], ys: [f32; 4], fallback: f32) -> f32 {
+    let [x0, x1, x2, x3] = xs;
+    let (d01, d02, d03, d12, d13, d23) = (x0 - x1, x0 - x2, x0 - x3, x1 - x2, x1 - x3, x2 - x3);
+    let smallest = d01.abs().min(d02.abs()).min(d03.abs()).min(d12.abs()).min(d13.abs()).min(d23.abs());
+    if smallest < 1e-5 {
+        return fallback;
+    }
+    let l0 = (x - x1) * (x - x2) * (x - x3) / (d01 * d02 * d03);
+    let l1 = (x - x0) * (x - x2) * (x - x3) / (-d01 * d12 * d13);
+    let l2 = (x - x0) * (x - x1) * (x - x3) / (-d02 * -d12 * d23);
+    let l3 = (x - x0) * (x - x1) * (x - x2) / (-d03 * -d13 * -d23);
+    l0 * ys[0] + l1 * ys[1] + l2 * ys[2] + l3 * ys[3]
+}
+
 /// Per-pixel kernel, `sea.order2`: second-order scattering, the
 /// accumulated map looked up toward the eye (between the two layers whose
 /// bottoms bracket the depth under the pixel, for a varying bottom), above
@@ -804,9 +820,38 @@ pub fn order2_pixel(
     if p.layers > 1 {
         let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
         let (j, w) = layer_at(p, depth);
-        let w = saturation_weight(p, depth, j, w);
-        value = scattering_map_lookup(p, accumulated, j, at) * (Vec3::ONE - w)
-            + scattering_map_lookup(p, accumulated, j + 1, at) * w;
+        let (a, b) = (scattering_map_lookup(p, accumulated, j, at), scattering_map_lookup(p, accumulated, j + 1, at));
+        let linear = saturation_weight(p, depth, j, w);
+        value = a * (Vec3::ONE - linear) + b * linear;
+        if j >= 1 && j + 2 < p.layers {
+            // Four layers around the depth: a cubic in each channel's saturation.
+            let (before, after) =
+                (scattering_map_lookup(p, accumulated, j - 1, at), scattering_map_lookup(p, accumulated, j + 2, at));
+            let c = p.extinction.xyz() * 2.0;
+            let x = Vec3::ONE - exp3(-c * depth);
+            let node = |k: u32| Vec3::ONE - exp3(-c * layer_depth(p, k));
+            let cubic = Vec3::new(
+                lagrange4(
+                    x.x,
+                    [node(j - 1).x, node(j).x, node(j + 1).x, node(j + 2).x],
+                    [before.x, a.x, b.x, after.x],
+                    value.x,
+                ),
+                lagrange4(
+                    x.y,
+                    [node(j - 1).y, node(j).y, node(j + 1).y, node(j + 2).y],
+                    [before.y, a.y, b.y, after.y],
+                    value.y,
+                ),
+                lagrange4(
+                    x.z,
+                    [node(j - 1).z, node(j).z, node(j + 1).z, node(j + 2).z],
+                    [before.z, a.z, b.z, after.z],
+                    value.z,
+                ),
+            );
+            value = cubic.max(Vec3::ZERO);
+        }
     }
     (value * v.transmission).extend(0.0)
 }

@@ -10,9 +10,10 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Deserialize;
 use slicelight_shaders::sea::{
-    accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, fresnel, map_coords, order1_pixel,
-    order2_pixel, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup, scattering_map_texel,
-    scattering_source, set_size, SeaParams, DEEP, DEEP_OPTICAL_DEPTH, WAVES_FLAT, WAVES_NORMAL_MAP,
+    accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, fresnel, layer_params, map_coords,
+    order1_pixel, order2_pixel, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
+    scattering_map_texel, scattering_source, set_size, SeaParams, DEEP, DEEP_OPTICAL_DEPTH, WAVES_FLAT,
+    WAVES_NORMAL_MAP,
 };
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
@@ -103,7 +104,7 @@ pub struct Settings {
 }
 
 fn depth_layers() -> u32 {
-    12
+    8
 }
 fn sand() -> [f32; 3] {
     [0.6, 0.55, 0.4]
@@ -521,16 +522,32 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32, base: &st
     let mut sampling = Vec::new();
     let chosen = std::time::Instant::now();
     if s.second_order {
+        // Over a varying bottom the rule runs for the deepest bottom and
+        // for the middle layer's (geometric mean), and keeps the larger count.
+        let rule_at: Vec<SeaParams> = if params.layers > 1 {
+            vec![layer_params(&params, params.layers - 1), layer_params(&params, params.layers / 2)]
+        } else {
+            vec![params]
+        };
         if polar.is_none() {
-            let (k, curve) = choose_directions(&params);
+            let (mut k, mut tried) = (2, 0);
+            for q in &rule_at {
+                let (kq, curve) = choose_directions(&SeaParams { layers: 1, ..*q });
+                (k, tried) = (k.max(kq), tried + curve.len());
+            }
             params.polar = k;
             params.azimuths = k;
-            sampling.push(format!("n_d = {} by the 1/255 rule ({} counts tried)", 3 * k * k, curve.len()));
+            sampling.push(format!("n_d = {} by the 1/255 rule ({tried} counts tried)", 3 * k * k));
         }
         if s.planes.is_none() {
-            let (planes, curve) = choose_planes(&params);
+            let (mut planes, mut tried) = (2, 0);
+            for q in &rule_at {
+                let q = SeaParams { layers: 1, polar: params.polar, azimuths: params.azimuths, ..*q };
+                let (nq, curve) = choose_planes(&q);
+                (planes, tried) = (planes.max(nq), tried + curve.len());
+            }
             params.planes = planes;
-            sampling.push(format!("n_z = {planes} by the 1/255 rule ({} counts tried)", curve.len()));
+            sampling.push(format!("n_z = {planes} by the 1/255 rule ({tried} counts tried)"));
         }
         if s.planes.is_none() || polar.is_none() {
             sampling.push(format!("chosen in {:.0} ms", 1e3 * chosen.elapsed().as_secs_f64()));

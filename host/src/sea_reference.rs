@@ -204,22 +204,37 @@ impl SeaReference {
         (axis * cos + (u * phi.cos() + v * phi.sin()) * sin).normalize()
     }
 
-    /// One channel's backward random walk from the surface along `-view`:
-    /// each vertex adds the sun's next-event estimate to its order.
-    fn walk(&self, channel: usize, view: DVec3, rng: &mut impl Rng, max_orders: u32) -> (f64, f64, f64) {
+    /// One channel's backward random walk from the surface at horizontal
+    /// `start` along `-view`: each vertex adds the sun's next-event estimate
+    /// to its order. `bottom(x, z)` is the bottom's depth (m) under each
+    /// vertex; a path whose vertex falls below it ends there (the bottom
+    /// absorbs scattered light; the segment is not searched for a crossing,
+    /// so features thinner than a free path can be stepped over).
+    fn walk(
+        &self,
+        channel: usize,
+        view: DVec3,
+        start: (f64, f64),
+        bottom: &(dyn Fn(f64, f64) -> f64 + Sync),
+        rng: &mut impl Rng,
+        max_orders: u32,
+    ) -> (f64, f64, f64) {
         let (b, c) = (self.b[channel], self.c[channel]);
         if b <= 0.0 {
             return (0.0, 0.0, 0.0);
         }
         let beam = self.beam[channel];
         let mut depth = 0.0f64;
+        let (mut x, mut z) = start;
         let mut d = -view;
         let mut weight = 1.0f64;
         let (mut o1, mut o2, mut all) = (0.0, 0.0, 0.0);
         for order in 1..=max_orders {
             let t = -(1.0 - rng.random::<f64>()).ln() / c;
             depth -= t * d.y;
-            if depth <= 0.0 || depth >= self.depth {
+            x += t * d.x;
+            z += t * d.z;
+            if depth <= 0.0 || depth >= self.depth.min(bottom(x, z)) {
                 break;
             }
             weight *= b / c;
@@ -245,6 +260,20 @@ impl SeaReference {
     /// Monte Carlo estimates of orders 1, 2 and all along upward `view`,
     /// `paths` walks per channel (at most `max_orders` scatterings each), seeded.
     pub fn monte_carlo(&self, view: DVec3, paths: u64, seed: u64, max_orders: u32) -> MonteCarlo {
+        self.monte_carlo_over(view, (0.0, 0.0), &|_, _| f64::INFINITY, paths, seed, max_orders)
+    }
+
+    /// As `monte_carlo`, from the surface at horizontal `start` over a bottom
+    /// of depth `bottom(x, z)` (the sun's light is not shadowed by it).
+    pub fn monte_carlo_over(
+        &self,
+        view: DVec3,
+        start: (f64, f64),
+        bottom: &(dyn Fn(f64, f64) -> f64 + Sync),
+        paths: u64,
+        seed: u64,
+        max_orders: u32,
+    ) -> MonteCarlo {
         const CHUNK: u64 = 16_384;
         let mut out = MonteCarlo::default();
         for ch in 0..3 {
@@ -256,7 +285,7 @@ impl SeaReference {
                         rand::rngs::StdRng::seed_from_u64(seed ^ ((k * 3 + ch as u64 + 1) * 0x9E3779B97F4A7C15));
                     let mut s = [0.0; 6];
                     for _ in 0..CHUNK.min(paths - k * CHUNK) {
-                        let (a, b, c) = self.walk(ch, view, &mut rng, max_orders);
+                        let (a, b, c) = self.walk(ch, view, start, bottom, &mut rng, max_orders);
                         s[0] += a;
                         s[1] += a * a;
                         s[2] += b;

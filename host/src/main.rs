@@ -311,7 +311,7 @@ fn run(cli: Cli) -> Result<()> {
                 // The sea's reference costs ~0.2 s a pixel: a coarser lattice.
                 slicelight::bench_sea::run(&sea_scenes, &backends, repeats, stride.max(40), quick, &out_dir)?;
                 eprintln!(
-                    "wrote {0}/sea_bench.csv, {0}/sea_time_vs_error.png, {0}/sea_convergence.csv, {0}/sea_fig7_planes.png, {0}/sea_fig8_directions.png",
+                    "wrote {0}/sea_bench.csv, {0}/sea_time_vs_error_*.png, {0}/sea_convergence.csv, {0}/sea_fig7_planes.png, {0}/sea_fig8_directions.png",
                     out_dir.display()
                 );
             }

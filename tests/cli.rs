@@ -345,6 +345,14 @@ fn a_sea_scene_writes_each_term_as_a_layer() {
     for name in ["sea.radiance_map", "sea.scattering_maps", "sea.accumulated_map", "sea.order2", "sea.bottom"] {
         assert!(ran(name), "{name} did not run");
     }
+    // A preset water renders as its coefficients written out.
+    let preset = SEA
+        .replace("absorption = [0.343, 0.0585, 0.0180]", "water = \"clear-ocean\"")
+        .replace("scattering = [0.0369, 0.0489, 0.0620]", "");
+    let named = render(&preset);
+    assert_eq!(named.code, 0, "{}", named.stderr);
+    let (a, b) = (std::fs::read(named.out("out.exr")).unwrap(), std::fs::read(run.out("out.exr")).unwrap());
+    assert!(a == b, "the preset and its coefficients render differently");
     // Without second order and without a bottom, those passes cost nothing.
     let lean = SEA.replace("depth_m = 12.0", "second_order = false");
     let run = render(&lean);
@@ -376,6 +384,8 @@ fn bad_sea_settings_name_the_field() {
         ),
         ("depth_m = 12.0", "depth_m = 12.0\nwaves = { kind = \"choppy\" }", &["scene.toml", "choppy"]),
         ("absorption = [0.343, 0.0585, 0.0180]", "absorption = [0.343, -0.0585, 0.0180]", &["sea.absorption"]),
+        ("absorption = [0.343, 0.0585, 0.0180]", "", &["sea.absorption", "preset"]),
+        ("absorption = [0.343, 0.0585, 0.0180]", "water = \"muddy\"", &["scene.toml", "muddy"]),
         (
             "depth_m = 12.0",
             "depth_m = 12.0\nbottom = { kind = \"shore\", slope = 0.1, shallow_m = 1.0, deep_m = 30.0 }",

@@ -76,9 +76,12 @@ pub struct Settings {
     #[serde(default = "sand")]
     pub bottom_albedo: [f32; 3],
     /// Absorption coefficient `a`, 1/m per channel.
-    pub absorption: [f32; 3],
+    pub absorption: Option<[f32; 3]>,
     /// Scattering coefficient `b`, 1/m per channel.
-    pub scattering: [f32; 3],
+    pub scattering: Option<[f32; 3]>,
+    /// A preset water for `absorption` and `scattering` (either given
+    /// alongside overrides the preset's).
+    pub water: Option<Water>,
     /// Henyey-Greenstein `g` of the water's volume scattering function.
     #[serde(default = "petzold_g")]
     pub g: f32,
@@ -120,6 +123,26 @@ fn yes() -> bool {
 }
 fn map_size() -> [u32; 2] {
     [32, 32]
+}
+
+/// The preset waters of scenes/README.md ("Water presets"): absorption
+/// and scattering at 650, 550, 450 nm, 1/m.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Water {
+    ClearOcean,
+    Tropical,
+    Coastal,
+}
+
+impl Water {
+    pub fn coefficients(self) -> ([f32; 3], [f32; 3]) {
+        match self {
+            Water::ClearOcean => ([0.343, 0.0585, 0.0180], [0.0369, 0.0489, 0.0620]),
+            Water::Tropical => ([0.345, 0.0620, 0.0300], [0.0950, 0.1130, 0.1400]),
+            Water::Coastal => ([0.380, 0.120, 0.280], [0.390, 0.460, 0.560]),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
@@ -426,8 +449,18 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32, base: &st
         }
     };
     let albedo = validate::albedo("sea.bottom_albedo", s.bottom_albedo)?;
-    let a = validate::non_negative3("sea.absorption", s.absorption)?;
-    let b = validate::non_negative3("sea.scattering", s.scattering)?;
+    let preset = s.water.map(Water::coefficients);
+    let (Some(absorption), Some(scattering)) =
+        (s.absorption.or(preset.map(|p| p.0)), s.scattering.or(preset.map(|p| p.1)))
+    else {
+        bail!(invalid(
+            "sea.absorption",
+            "absorption and scattering, or a preset water = \"clear-ocean\" | \"tropical\" | \"coastal\"",
+            "missing"
+        ));
+    };
+    let a = validate::non_negative3("sea.absorption", absorption)?;
+    let b = validate::non_negative3("sea.scattering", scattering)?;
     if !(s.g > -1.0 && s.g < 1.0) {
         bail!(invalid("sea.g", "a number in (-1, 1)", s.g));
     }

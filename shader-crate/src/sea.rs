@@ -129,10 +129,6 @@ pub const DEEP: f32 = 1e20;
 /// `e^-tau (1/mu_s + 1/mu_v)`); the rest is extrapolated.
 pub const DEEP_OPTICAL_DEPTH: f32 = 6.0;
 
-fn exp3(v: Vec3) -> Vec3 {
-    Vec3::new(v.x.exp(), v.y.exp(), v.z.exp())
-}
-
 /// `(1 - e^-x) / x`, 1 at 0, without cancellation for small `|x|`.
 pub fn phi(x: f32) -> f32 {
     if x.abs() < 1e-3 {
@@ -250,12 +246,12 @@ pub fn order1_path(z: Vec3, mu: f32, p: &SeaParams) -> Vec3 {
         let mu = mu.max(1e-6);
         let below = (Vec3::splat(p.depth) - z).max(Vec3::ZERO);
         let length = below * (1.0 / mu_s + 1.0 / mu);
-        exp3(-c * z / mu_s) * below / mu * phi3(c * length)
+        (-c * z / mu_s).exp() * below / mu * phi3(c * length)
     } else {
         let m = (-mu).max(1e-6);
         let a = c * z / mu_s;
         let b = c * z / m;
-        exp3(-a.min(b)) * z / m * phi3((b - a).abs())
+        (-a.min(b)).exp() * z / m * phi3((b - a).abs())
     }
 }
 
@@ -279,7 +275,7 @@ pub fn bottom_radiance(p: &SeaParams, view: Vec3, depth: f32, cos_gamma: f32) ->
     let c = p.extinction.xyz();
     let mu_v = view.y.max(1e-6);
     let path = depth * (1.0 / p.sun_in_water.w + 1.0 / mu_v);
-    p.beam_irradiance.xyz() * exp3(-c * path) * cos_gamma.max(0.0) * p.bottom_albedo.xyz() * FRAC_1_PI
+    p.beam_irradiance.xyz() * (-c * path).exp() * cos_gamma.max(0.0) * p.bottom_albedo.xyz() * FRAC_1_PI
 }
 
 /// Depth of sampling plane `k` per channel, m, from the surface down to
@@ -318,13 +314,14 @@ pub fn layer_params(p: &SeaParams, j: u32) -> SeaParams {
         return *p;
     }
     let depth = layer_depth(p, j);
-    let c = p.extinction.xyz();
-    let reach = Vec3::new(
-        (DEEP_OPTICAL_DEPTH / c.x).min(depth),
-        (DEEP_OPTICAL_DEPTH / c.y).min(depth),
-        (DEEP_OPTICAL_DEPTH / c.z).min(depth),
-    );
-    SeaParams { depth, plane_depth: reach.extend(0.0), ..*p }
+    SeaParams { depth, plane_depth: plane_reach(p.extinction.xyz(), depth).extend(0.0), ..*p }
+}
+
+/// How deep the sampling planes reach per channel over a bottom at `depth`
+/// (m) in water of extinction `c` (1/m): to the bottom, or to
+/// `DEEP_OPTICAL_DEPTH` where that comes first.
+pub fn plane_reach(c: Vec3, depth: f32) -> Vec3 {
+    (Vec3::splat(DEEP_OPTICAL_DEPTH) / c).min(Vec3::splat(depth))
 }
 
 /// Directions per set: `polar x azimuths` (`n_d` is three sets).
@@ -398,7 +395,7 @@ pub fn map_direction(p: &SeaParams, col: u32, row: u32) -> Vec3 {
 
 /// Horizontal unit vectors: toward the sun's azimuth (the way the refracted
 /// sun travels, horizontally) and across it; any pair for a sun at the zenith.
-fn sun_azimuth_frame(p: &SeaParams) -> (Vec3, Vec3) {
+pub fn sun_azimuth_frame(p: &SeaParams) -> (Vec3, Vec3) {
     let s = p.sun_in_water.xyz();
     let h = Vec3::new(s.x, 0.0, s.z);
     let t = if h.length_squared() > 1e-12 { h.normalize() } else { Vec3::X };
@@ -580,7 +577,7 @@ pub fn accumulate_planes(p: &SeaParams, view: Vec3, sources: &[Vec4], first: u32
 
 /// The order-2 integrand at a plane: its source attenuated to the surface, per unit path.
 fn plane_integrand(source: Vec3, z: Vec3, c: Vec3, mu_v: f32) -> Vec3 {
-    source.max(Vec3::ZERO) * exp3(-c * z / mu_v) / mu_v
+    source.max(Vec3::ZERO) * (-c * z / mu_v).exp() / mu_v
 }
 
 /// What a pixel's view ray sees of the sea.
@@ -774,7 +771,7 @@ pub fn order1_pixel(
 /// (both deep in that channel) the log-depth weight `w`.
 fn saturation_weight(p: &SeaParams, depth: f32, j: u32, w: f32) -> Vec3 {
     let c = p.extinction.xyz() * 2.0;
-    let s = |d: f32| Vec3::ONE - exp3(-c * d);
+    let s = |d: f32| Vec3::ONE - (-c * d).exp();
     let (a, b, x) = (s(layer_depth(p, j)), s(layer_depth(p, j + 1)), s(depth));
     let span = b - a;
     let weight = |x: f32, a: f32, span: f32| if span > 1e-6 { ((x - a) / span).clamp(0.0, 1.0) } else { w };
@@ -828,8 +825,8 @@ pub fn order2_pixel(
             let (before, after) =
                 (scattering_map_lookup(p, accumulated, j - 1, at), scattering_map_lookup(p, accumulated, j + 2, at));
             let c = p.extinction.xyz() * 2.0;
-            let x = Vec3::ONE - exp3(-c * depth);
-            let node = |k: u32| Vec3::ONE - exp3(-c * layer_depth(p, k));
+            let x = Vec3::ONE - (-c * depth).exp();
+            let node = |k: u32| Vec3::ONE - (-c * layer_depth(p, k)).exp();
             let cubic = Vec3::new(
                 lagrange4(
                     x.x,
@@ -1032,7 +1029,7 @@ mod tests {
             extinction: c.extend(1.333),
             order1_extinction: c.extend(0.0),
             bottom_albedo: Vec4::splat(0.5),
-            plane_depth: (Vec3::splat(DEEP_OPTICAL_DEPTH) / c).min(Vec3::splat(depth)).extend(0.0),
+            plane_depth: plane_reach(c, depth).extend(0.0),
             depth,
             planes: 12,
             polar: 8,
@@ -1154,7 +1151,7 @@ mod tests {
         p.planes = 5;
         let c = p.extinction.xyz();
         let mu_s = p.sun_in_water.w;
-        let sources: Vec<Vec4> = (0..p.planes).map(|k| exp3(-c * plane_depth(&p, k) / mu_s).extend(0.0)).collect();
+        let sources: Vec<Vec4> = (0..p.planes).map(|k| (-c * plane_depth(&p, k) / mu_s).exp().extend(0.0)).collect();
         let view = Vec3::new(0.3, 0.8, 0.0).normalize();
         let got = accumulate_planes(&p, view, &sources, 0, 1);
         let want = Vec3::ONE / (view.y * c * (1.0 / mu_s + 1.0 / view.y));

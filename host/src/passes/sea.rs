@@ -11,9 +11,9 @@ use rayon::prelude::*;
 use serde::Deserialize;
 use slicelight_shaders::sea::{
     accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, fresnel, layer_params, map_coords,
-    order1_pixel, order2_pixel, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
-    scattering_map_texel, scattering_source, set_size, SeaParams, DEEP, DEEP_OPTICAL_DEPTH, WAVES_FLAT,
-    WAVES_NORMAL_MAP,
+    order1_pixel, order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel,
+    scattering_map_lookup, scattering_map_texel, scattering_source, set_size, sun_azimuth_frame, SeaParams, DEEP,
+    WAVES_FLAT, WAVES_NORMAL_MAP,
 };
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
@@ -326,9 +326,7 @@ pub const EPSILON: f32 = 1.0 / 255.0;
 /// checks: the nadir view, and 20 and 45 degrees toward and away from the
 /// sun (the refracted view cone reaches 48.6 degrees).
 pub fn rule_views(p: &SeaParams) -> Vec<Vec3> {
-    let s = p.sun_in_water.truncate();
-    let h = Vec3::new(s.x, 0.0, s.z);
-    let t = if h.length_squared() > 1e-12 { h.normalize() } else { Vec3::X };
+    let (t, _) = sun_azimuth_frame(p);
     let mut views = vec![Vec3::Y];
     for zenith in [20f32, 45.0] {
         let z = zenith.to_radians();
@@ -518,11 +516,7 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32, base: &st
         Single::Exact => c,
         Single::PaperEq5 => c * (Vec3::ONE - albedo0 * forward_fraction(s.g)),
     };
-    let plane_depth = Vec3::new(
-        (DEEP_OPTICAL_DEPTH / c.x).min(depth),
-        (DEEP_OPTICAL_DEPTH / c.y).min(depth),
-        (DEEP_OPTICAL_DEPTH / c.z).min(depth),
-    );
+    let plane_depth = plane_reach(c, depth);
     let mut params = SeaParams {
         sun_direction: sun.extend(cos_ii),
         sun_in_water: in_water.extend(cos_io),

@@ -82,12 +82,16 @@ fn good_scene_writes_png_exr_and_stats() {
         names,
         [
             "shadow_maps",
+            "caustics.table",
+            "caustics.lookup",
+            "caustics.maps",
             "sky_transmittance",
             "sky_view",
             "sea.radiance_map",
             "sea.scattering_maps",
             "sea.accumulated_map",
             "surface",
+            "caustics",
             "shafts",
             "sky",
             "sea.reflection",
@@ -101,6 +105,10 @@ fn good_scene_writes_png_exr_and_stats() {
     // and a scene without a [sky] or a [sea] pays nothing for their passes.
     let idle = [
         "scatter_check",
+        "caustics.table",
+        "caustics.lookup",
+        "caustics.maps",
+        "caustics",
         "sky_transmittance",
         "sky_view",
         "sky",

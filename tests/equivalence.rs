@@ -100,7 +100,17 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("sea_open", sky("sea_open", 180, 120)),
         ("sea_calm_noon", sky("sea_calm_noon", 180, 120)),
         ("sea_shore", sky("sea_shore", 180, 120)),
+        ("caustics_ball", traced("caustics_ball", 160, 120)),
     ]
+}
+
+/// A shipped scene at a smaller resolution, its light transport tables
+/// traced here even when the disk cache holds them (so that the table
+/// kernel itself is compared).
+fn traced(name: &str, width: u32, height: u32) -> SceneData {
+    let mut data = sky(name, width, height);
+    data.caustics.cached_table = None;
+    data
 }
 
 /// A shipped scene at a smaller resolution of the same aspect.

@@ -6,6 +6,7 @@ pub mod bench;
 pub mod bench_sea;
 pub mod bench_sky;
 pub mod bvh;
+pub mod caustics_reference;
 pub mod cpu;
 pub mod gpu;
 pub mod metrics;

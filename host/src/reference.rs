@@ -16,7 +16,7 @@
 use glam::{DVec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use slicelight_shaders::camera::sample_offset;
-use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, PROJECTION_FISHEYE};
+use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT, MATERIAL_GLASS, PROJECTION_FISHEYE};
 
 use crate::sea_reference::SeaReference;
 use crate::sky_reference::SkyReference;
@@ -32,14 +32,18 @@ pub const SEA_TOLERANCE: f64 = 1e-4;
 
 use crate::scene::SceneData;
 
-fn d3(v: Vec4) -> DVec3 {
+pub(crate) fn d3(v: Vec4) -> DVec3 {
     v.xyz().as_dvec3()
 }
 
-struct Surface {
-    t: f64,
-    normal: DVec3,
-    albedo: DVec3,
+pub(crate) struct Surface {
+    pub t: f64,
+    /// Unit geometric normal, not turned to face the ray.
+    pub normal: DVec3,
+    pub albedo: DVec3,
+    pub material: u32,
+    /// The triangle hit (BVH order), `usize::MAX` for a sphere.
+    pub triangle: usize,
 }
 
 /// Whether the ray meets the box `[lo, hi]` within `[t_min, t_max]`, f64 slab test.
@@ -56,7 +60,7 @@ fn hits_box(o: DVec3, inv: DVec3, lo: DVec3, hi: DVec3, t_min: f64, t_max: f64) 
 /// Nearest intersection beyond `t_min`, in f64. Triangles are found through
 /// the scene's BVH (its boxes padded beyond the triangles, so the walk
 /// skips only what cannot be hit), each tested exactly in f64.
-fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<Surface> {
+pub(crate) fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<Surface> {
     let mut best: Option<Surface> = None;
     let mut limit = t_max;
     let albedo = |material: u32| d3(data.materials[material as usize].albedo);
@@ -73,7 +77,13 @@ fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Opti
         for t in [tc - half, tc + half] {
             if t > t_min && t < limit {
                 limit = t;
-                best = Some(Surface { t, normal: (o + d * t - c).normalize(), albedo: albedo(s.material) });
+                best = Some(Surface {
+                    t,
+                    normal: (o + d * t - c).normalize(),
+                    albedo: albedo(s.material),
+                    material: s.material,
+                    triangle: usize::MAX,
+                });
                 break;
             }
         }
@@ -90,7 +100,7 @@ fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Opti
             n += 1;
             continue;
         }
-        for tri in &data.triangles[node.first as usize..(node.first + node.count) as usize] {
+        for (k, tri) in data.triangles[node.first as usize..(node.first + node.count) as usize].iter().enumerate() {
             let (a, b, c) = (d3(tri.v0), d3(tri.v1), d3(tri.v2));
             let nrm = (b - a).cross(c - a);
             let denom = nrm.dot(d);
@@ -108,7 +118,13 @@ fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Opti
                 && nrm.dot((a - c).cross(p - c)) >= 0.0;
             if inside {
                 limit = t;
-                best = Some(Surface { t, normal: nrm.normalize(), albedo: albedo(tri.material) });
+                best = Some(Surface {
+                    t,
+                    normal: nrm.normalize(),
+                    albedo: albedo(tri.material),
+                    material: tri.material,
+                    triangle: node.first as usize + k,
+                });
             }
         }
         n = node.skip as usize;
@@ -117,7 +133,7 @@ fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Opti
 }
 
 /// Whether the segment from `p` toward the light is free of geometry.
-fn sees_light(data: &SceneData, p: DVec3, to_light: DVec3, distance: f64) -> bool {
+pub(crate) fn sees_light(data: &SceneData, p: DVec3, to_light: DVec3, distance: f64) -> bool {
     // Start and stop a hair off the endpoints, relative to the scene's scale,
     // so that the surface the point lies on does not shadow itself.
     let eps = 1e-7 * (1.0 + p.length()).max(distance);
@@ -125,8 +141,11 @@ fn sees_light(data: &SceneData, p: DVec3, to_light: DVec3, distance: f64) -> boo
 }
 
 /// Light map and cone profile, evaluated directly from the light's definition.
-fn emitted(data: &SceneData, light: &GpuLight, local: DVec3) -> DVec3 {
+pub(crate) fn emitted(data: &SceneData, light: &GpuLight, local: DVec3) -> DVec3 {
     let power = d3(light.power);
+    if light.kind == LIGHT_POINT {
+        return power;
+    }
     let (u, v) = if light.kind == LIGHT_DIRECTIONAL {
         if local.z < 0.0 {
             return DVec3::ZERO;
@@ -174,7 +193,7 @@ fn light_map(data: &SceneData, light: &GpuLight, u: f64, v: f64) -> DVec3 {
 /// The view ray through sub-pixel sample `sample` of pixel `(x, y)`, in
 /// f64, at the kernels' sample position (`camera::sample_offset`); `None`
 /// outside a fisheye's image circle.
-fn camera_ray(data: &SceneData, x: u32, y: u32, sample: u32) -> Option<(DVec3, DVec3)> {
+pub(crate) fn camera_ray(data: &SceneData, x: u32, y: u32, sample: u32) -> Option<(DVec3, DVec3)> {
     let p = &data.common;
     let offset = sample_offset(sample, p.samples_per_pixel).as_dvec2();
     if p.projection == PROJECTION_FISHEYE {
@@ -202,7 +221,7 @@ fn camera_ray(data: &SceneData, x: u32, y: u32, sample: u32) -> Option<(DVec3, D
 /// A point in a light's frame, the unit direction from it toward the light,
 /// and the distance the light travels to it (from a spotlight, or from a
 /// directional light's entry plane), metres.
-fn toward_light(light: &GpuLight, point: DVec3) -> (DVec3, DVec3, f64) {
+pub(crate) fn toward_light(light: &GpuLight, point: DVec3) -> (DVec3, DVec3, f64) {
     let rel = point - d3(light.position);
     let local = DVec3::new(rel.dot(d3(light.axis_x)), rel.dot(d3(light.axis_y)), rel.dot(d3(light.axis_z)));
     if light.kind == LIGHT_DIRECTIONAL {
@@ -228,6 +247,25 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         let sky = data.sky.enabled.then(|| SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(d));
         return (sky.unwrap_or(DVec3::ZERO), f64::INFINITY);
     };
+    let sigma_t = d3(p.sigma_t);
+    if data.materials[hit.material as usize].kind == MATERIAL_GLASS {
+        // Through glass: the opaque surface behind, lit directly, per channel.
+        let mut radiance = DVec3::ZERO;
+        for c in 0..3 {
+            if let Some((q, dir, weight, behind)) = crate::caustics_reference::through_glass(data, o, d, hit.t, c) {
+                let l = direct(data, q, dir, &behind) * (-sigma_t * behind.t).exp();
+                radiance[c] += l[c] * weight;
+            }
+        }
+        return (radiance * (-sigma_t * hit.t).exp(), hit.t);
+    }
+    (direct(data, o, d, &hit) * (-sigma_t * hit.t).exp(), hit.t)
+}
+
+/// Radiance leaving the opaque surface `hit` of the ray `o + t d` toward
+/// its origin, lit directly by every light (shadow rays), f64.
+pub(crate) fn direct(data: &SceneData, o: DVec3, d: DVec3, hit: &Surface) -> DVec3 {
+    let p = &data.common;
     let point = o + d * hit.t;
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
     let sigma_t = d3(p.sigma_t);
@@ -250,8 +288,7 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         let attenuation = (-sigma_t * distance).exp();
         irradiance += e * attenuation * (cos * falloff);
     }
-    let radiance = hit.albedo * irradiance / std::f64::consts::PI;
-    (radiance * (-sigma_t * hit.t).exp(), hit.t)
+    hit.albedo * irradiance / std::f64::consts::PI
 }
 
 /// Unpolarised Fresnel reflectance from air onto index `n` at incidence cosine `cos_i`, f64.
@@ -416,15 +453,21 @@ pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> 
     while samples < 65536 {
         samples *= 2;
         let next = with_inscatter(samples);
-        let peak = next.iter().map(|p| p.max_element()).fold(1e-300, f64::max);
-        let sum2: f64 = next.iter().zip(&image).map(|(a, b)| (*a - *b).length_squared()).sum();
-        let change = (sum2 / (3 * next.len().max(1)) as f64).sqrt() / peak;
+        let change = relative_rms_change(&next, &image);
         image = next;
         if change < tolerance {
             break;
         }
     }
     (image, samples)
+}
+
+/// RMS of `next - last` over pixels and channels, relative to `next`'s peak:
+/// the references' convergence measure.
+pub fn relative_rms_change(next: &[DVec3], last: &[DVec3]) -> f64 {
+    let peak = next.iter().map(|p| p.max_element()).fold(1e-300, f64::max);
+    let sum2: f64 = next.iter().zip(last).map(|(a, b)| (*a - *b).length_squared()).sum();
+    (sum2 / (3 * next.len().max(1)) as f64).sqrt() / peak
 }
 
 /// The whole reference image at convergence (see `render_converged_at`).

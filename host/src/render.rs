@@ -166,8 +166,9 @@ fn final_outputs(running: &[(usize, &'static dyn Pass, u64)]) -> Vec<&'static Re
     running
         .iter()
         .filter(|r| r.1.dispatch() == Dispatch::Whole)
-        .flat_map(|r| r.1.writes().iter().copied())
-        .filter(|w| !read(w))
+        .flat_map(|r| {
+            r.1.writes().iter().copied().filter(|w| !read(w) || r.1.keeps().iter().any(|k| k.binding == w.binding))
+        })
         .collect()
 }
 
@@ -198,9 +199,16 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     // sample's buffer itself, moved, not copied).
     let mut sums: Vec<Option<Buffer>> = (0..layers.len()).map(|_| None).collect();
     let spp = data.samples_per_pixel();
+    // Outputs known before the frame (a cached table).
+    let mut known = Frame::default();
+    for pass in PASSES {
+        if let Some((r, bytes)) = pass.cached(data) {
+            known.insert(r, Buffer::from_bytes(bytes));
+        }
+    }
     let pass_timing = match backend {
         Backend::Cpu => {
-            let mut frame = Frame::default();
+            let mut frame = known;
             // Per-pixel resources no running pass writes hold their blank.
             for r in PASSES.iter().flat_map(|p| p.reads().iter().chain(p.writes())) {
                 let written = running.iter().any(|(_, p, _)| p.writes().iter().any(|w| w.binding == r.binding));
@@ -242,7 +250,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         }
         Backend::Gpu(ctx) => {
             let passes: Vec<&'static dyn Pass> = running.iter().map(|r| r.1).collect();
-            let frame = ctx.frame(data, &passes, None)?;
+            let frame = ctx.frame(data, &passes, Some(&known))?;
             let whole: Vec<(usize, &'static dyn Pass, u32)> = running
                 .iter()
                 .filter(|r| r.1.dispatch() == Dispatch::Whole)
@@ -254,6 +262,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
                 stats[*k].seconds += t;
                 pb.inc(*n as u64);
             }
+
             for w in final_outputs(&running) {
                 if let ResourceKind::Frame(len) = w.kind {
                     result.insert(w, frame.read(w, len(data))?);
@@ -296,6 +305,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     }
     let mut counters = BTreeMap::new();
     for &(k, pass, _) in &running {
+        pass.persist(data, &result);
         stats[k].report = pass.report(data, &result);
         counters.extend(pass.counters(data, &result));
     }

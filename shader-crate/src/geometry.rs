@@ -20,9 +20,25 @@ pub struct Hit {
     /// The scene object and the material hit (`NO_OBJECT` if nothing).
     pub object: u32,
     pub material: u32,
+    /// The triangle hit (its index in BVH order), `NO_OBJECT` for a sphere or nothing.
+    pub primitive: u32,
     /// BVH nodes whose boxes the walk tested: the cost of the trace (tests
     /// check that it grows about logarithmically with the triangle count).
     pub visits: u32,
+}
+
+impl Hit {
+    /// No hit at all.
+    pub fn none() -> Hit {
+        Hit {
+            distance: NO_HIT,
+            normal: Vec3::ZERO,
+            object: NO_OBJECT,
+            material: NO_OBJECT,
+            primitive: NO_OBJECT,
+            visits: 0,
+        }
+    }
 }
 
 /// The scene's geometry as the kernels see it: spheres (tested one by one,
@@ -114,31 +130,39 @@ pub fn ray_hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_min: f32,
 /// a stack the children are not visited nearest-first; the pruning by the
 /// nearest hit still keeps the cost about logarithmic in the triangle count.
 pub fn trace_nearest(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry) -> Hit {
-    trace(origin, dir, t_min, t_max, geometry, false)
+    trace(origin, dir, t_min, t_max, geometry, false, NO_OBJECT)
+}
+
+/// The nearest hit of a ray with one object of the scene (`object`), as if
+/// the rest were not there: the same walk, skipping other objects' triangles.
+pub fn trace_object(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, object: u32) -> Hit {
+    trace(origin, dir, t_min, t_max, geometry, false, object)
 }
 
 /// Whether anything lies on the ray between `t_min` and `t_max` (a shadow
 /// ray): the same walk, stopping at the first hit.
 pub fn occluded(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry) -> bool {
-    trace(origin, dir, t_min, t_max, geometry, true).distance < t_max
+    trace(origin, dir, t_min, t_max, geometry, true, NO_OBJECT).distance < t_max
 }
 
 /// The walk behind `trace_nearest` and `occluded`: with `any_hit`, it
-/// returns the first hit found rather than the nearest.
-fn trace(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, any_hit: bool) -> Hit {
-    let mut hit = Hit { distance: NO_HIT, normal: Vec3::ZERO, object: NO_OBJECT, material: NO_OBJECT, visits: 0 };
+/// returns the first hit found rather than the nearest; with `only` other
+/// than `NO_OBJECT`, only that object's spheres and triangles count.
+fn trace(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, any_hit: bool, only: u32) -> Hit {
+    let mut hit = Hit::none();
     let mut best = t_max;
     let mut i = 0;
     while i < geometry.sphere_count as usize {
         let s = geometry.spheres[i];
         let center = s.center_radius.xyz();
         let t = ray_sphere(origin, dir, center, s.center_radius.w, t_min);
-        if t < best {
+        if t < best && (only == NO_OBJECT || s.object == only) {
             best = t;
             hit.distance = t;
             hit.normal = (origin + dir * t - center).normalize();
             hit.object = s.object;
             hit.material = s.material;
+            hit.primitive = NO_OBJECT;
             if any_hit {
                 return hit;
             }
@@ -164,12 +188,13 @@ fn trace(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, a
             let tri = geometry.triangles[j];
             let (v0, v1, v2) = (tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz());
             let t = ray_triangle(origin, dir, v0, v1, v2, t_min);
-            if t < best {
+            if t < best && (only == NO_OBJECT || tri.object == only) {
                 best = t;
                 hit.distance = t;
                 hit.normal = (v1 - v0).cross(v2 - v0).normalize();
                 hit.object = tri.object;
                 hit.material = tri.material;
+                hit.primitive = j as u32;
                 if any_hit {
                     return hit;
                 }

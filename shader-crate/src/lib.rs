@@ -15,7 +15,9 @@
 #![cfg_attr(target_arch = "spirv", no_std)]
 
 pub mod camera;
+pub mod caustics;
 pub mod geometry;
+pub mod glass;
 pub mod light;
 pub mod phase;
 pub mod scatter;

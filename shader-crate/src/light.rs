@@ -5,7 +5,7 @@
 use spirv_std::num_traits::Float;
 
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
-use crate::types::{GpuLight, LIGHT_DIRECTIONAL};
+use crate::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT};
 
 /// Stored in a shadow-map texel whose ray hits nothing.
 pub const SHADOW_FAR: f32 = f32::MAX;
@@ -79,6 +79,9 @@ pub fn light_uv(light: &GpuLight, local: Vec3) -> (f32, f32) {
 /// radiant intensity in W/sr (spot: `I_l` of eq. 2, cone profile times light
 /// map) or irradiance in W/m^2 (directional: light map over the window).
 pub fn emitted(light: &GpuLight, light_map: &[Vec4], local: Vec3) -> Vec4 {
+    if light.kind == LIGHT_POINT {
+        return light.power;
+    }
     let mut strength = 1.0;
     if light.kind == LIGHT_DIRECTIONAL {
         if local.z < 0.0 {

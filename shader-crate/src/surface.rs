@@ -4,12 +4,13 @@
 //! It also writes the G-buffer that later passes read.
 
 use crate::camera::{camera_ray, in_image};
-use crate::geometry::{occluded, trace_nearest, Geometry, NO_HIT};
+use crate::geometry::{occluded, trace_nearest, Geometry, Hit, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
+use crate::glass::{dispersive, is_glass, shading_normal, trace_through, Glass, PATH_OUT};
 use crate::light::{emitted, light_local, shadow_visibility, transmittance};
 use crate::types::{
-    CommonParams, GBufferTexel, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle, LIGHT_DIRECTIONAL,
-    NO_OBJECT, SHADOWS_MAP,
+    CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
+    LIGHT_DIRECTIONAL, NO_OBJECT, SHADOWS_MAP,
 };
 use core::f32::consts::FRAC_1_PI;
 use spirv_std::spirv;
@@ -64,7 +65,7 @@ pub fn direct_radiance(
         if cos_incidence > 0.0 {
             let color = emitted(&light, light_map, local);
             if color.x > 0.0 || color.y > 0.0 || color.z > 0.0 {
-                let visible = if params.surface_shadows == SHADOWS_MAP {
+                let visible = if params.surface_shadows == SHADOWS_MAP && light.shadow_resolution > 0 {
                     shadow_visibility(&light, shadow, local, cos_incidence)
                 } else {
                     shadow_ray_visibility(geometry, p, normal, to_light, distance)
@@ -93,15 +94,100 @@ pub fn shadow_ray_visibility(geometry: &Geometry, p: Vec3, normal: Vec3, to_ligh
     }
 }
 
+/// The opaque surface a view ray finally lands on, directly or through glass.
+#[derive(Copy, Clone, Debug)]
+pub struct Receiver {
+    /// False if the ray meets no opaque surface (or is lost in glass).
+    pub found: bool,
+    /// The point, metres, and its unit normal turned toward the arriving ray.
+    pub point: Vec3,
+    pub normal: Vec3,
+    pub material: u32,
+    /// Transmittance per channel along the way (w = 0): the medium's, and
+    /// through glass the Fresnel transmittances and Beer's law.
+    pub weight: Vec4,
+}
+
+/// Where the view ray `origin + t dir`, whose first hit is `hit`, ends: the
+/// hit itself if it is opaque; through glass (section 5.3 of the caustics
+/// paper, traced exactly here rather than looked up in the table), the
+/// first opaque surface after the glass, in channel `channel` (a dispersive
+/// glass sends each channel its own way). Total internal reflection inside
+/// glass is followed; light reflected off the glass is not.
+#[allow(clippy::too_many_arguments)]
+pub fn receiver(
+    params: &CommonParams,
+    geometry: &Geometry,
+    glass: &Glass,
+    materials: &[GpuMaterial],
+    origin: Vec3,
+    dir: Vec3,
+    hit: &Hit,
+    channel: u32,
+) -> Receiver {
+    let mut r = Receiver { found: false, point: origin, normal: Vec3::Y, material: NO_OBJECT, weight: Vec4::ZERO };
+    if hit.distance == NO_HIT {
+        return r;
+    }
+    let p = origin + dir * hit.distance;
+    if !is_glass(materials, hit) {
+        r.found = true;
+        r.point = p;
+        r.normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
+        r.material = hit.material;
+        r.weight = transmittance(params.sigma_t, hit.distance);
+        return r;
+    }
+    let n = shading_normal(geometry, glass, hit, p);
+    let path = trace_through(geometry, glass, materials, p, n, hit.material, dir, channel, NO_OBJECT, true);
+    if path.status != PATH_OUT || path.next.distance == NO_HIT {
+        return r;
+    }
+    let next = path.next;
+    r.found = true;
+    r.point = path.position + path.direction * next.distance;
+    r.normal = if next.normal.dot(path.direction) > 0.0 { -next.normal } else { next.normal };
+    r.material = next.material;
+    r.weight = path.transmittance() * transmittance(params.sigma_t, hit.distance + next.distance);
+    r
+}
+
+/// Channels traced separately for a view ray whose first hit is `hit`: 3
+/// through dispersive glass, else 1 (every channel takes the same path).
+pub fn view_channels(materials: &[GpuMaterial], hit: &Hit) -> u32 {
+    if is_glass(materials, hit) && dispersive(&materials[hit.material as usize]) {
+        3
+    } else {
+        1
+    }
+}
+
+/// `v` with only channel `c` kept when `channels` is 3 (all of it when 1).
+pub fn channel_part(v: Vec4, c: u32, channels: u32) -> Vec4 {
+    if channels == 1 {
+        v
+    } else if c == 0 {
+        Vec4::new(v.x, 0.0, 0.0, 0.0)
+    } else if c == 1 {
+        Vec4::new(0.0, v.y, 0.0, 0.0)
+    } else {
+        Vec4::new(0.0, 0.0, v.z, 0.0)
+    }
+}
+
 /// Per-pixel kernel of the lit-surface pass, at the current sub-pixel
 /// sample. Returns the attenuated surface radiance `I_o exp(-sigma_t T)`
 /// (eq. 1, first term) in rgb, W/(m^2 sr) (w = 0), and the pixel's G-buffer
 /// texel: normal toward the viewer, distance `T` (metres), object, material.
+/// A pixel that sees glass gets the opaque surface behind it (`receiver`);
+/// its G-buffer texel is the glass's.
+#[allow(clippy::too_many_arguments)]
 pub fn surface_pixel(
     index: u32,
     params: &CommonParams,
     lights: &[GpuLight],
     geometry: &Geometry,
+    glass: &Glass,
     materials: &[GpuMaterial],
     light_map: &[Vec4],
     shadow: &[f32],
@@ -116,11 +202,19 @@ pub fn surface_pixel(
     if hit.distance == NO_HIT {
         return (Vec4::ZERO, no_surface());
     }
-    let p = origin + dir * hit.distance;
     let normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
-    let albedo = materials[hit.material as usize].albedo;
-    let radiance = direct_radiance(params, lights, geometry, light_map, shadow, p, normal, albedo)
-        * transmittance(params.sigma_t, hit.distance);
+    let channels = view_channels(materials, &hit);
+    let mut radiance = Vec4::ZERO;
+    let mut c = 0;
+    while c < channels {
+        let r = receiver(params, geometry, glass, materials, origin, dir, &hit, c);
+        if r.found {
+            let albedo = materials[r.material as usize].albedo;
+            let l = direct_radiance(params, lights, geometry, light_map, shadow, r.point, r.normal, albedo) * r.weight;
+            radiance += channel_part(l, c, channels);
+        }
+        c += 1;
+    }
     let texel = GBufferTexel {
         normal_distance: normal.extend(hit.distance),
         object: hit.object,
@@ -145,13 +239,16 @@ pub fn surface_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] shadow: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &mut [GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] radiance: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
 ) {
     let index = crate::flat_index(id, groups);
     let params = &common[0];
     if index < params.band_pixels {
         let geometry = crate::scene_geometry(params, spheres, triangles, nodes);
+        let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
         let (color, texel) =
-            surface_pixel(params.band_start + index, params, lights, &geometry, materials, light_map, shadow);
+            surface_pixel(params.band_start + index, params, lights, &geometry, &glass, materials, light_map, shadow);
         radiance[index as usize] = color;
         gbuffer[index as usize] = texel;
     }

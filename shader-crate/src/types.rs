@@ -77,6 +77,10 @@ pub const SHADOWS_MAP: u32 = 1;
 
 pub const LIGHT_SPOT: u32 = 0;
 pub const LIGHT_DIRECTIONAL: u32 = 1;
+/// A point light: `power` is its radiant intensity, W/sr, the same in every
+/// direction (no cone, no light map, no shadow map: surfaces test it with
+/// shadow rays). A line light becomes a row of them.
+pub const LIGHT_POINT: u32 = 2;
 
 /// A light, in the frame the kernels use.
 ///
@@ -95,7 +99,7 @@ pub struct GpuLight {
     /// Radiant intensity W/sr per channel (spot) or irradiance W/m^2 on a
     /// surface facing the light (directional).
     pub power: Vec4,
-    /// `LIGHT_SPOT` or `LIGHT_DIRECTIONAL`.
+    /// `LIGHT_SPOT`, `LIGHT_DIRECTIONAL` or `LIGHT_POINT`.
     pub kind: u32,
     /// Offset of the first light-map texel in the texel buffer.
     pub light_map_offset: u32,
@@ -146,10 +150,16 @@ pub struct GpuTriangle {
     pub v2: Vec4,
     pub object: u32,
     pub material: u32,
-    pub _pad: [u32; 2],
+    /// Index of this triangle in the glass triangle list (`GlassTriangle`,
+    /// whose vertices carry the smooth normals refraction uses), or
+    /// `NO_OBJECT` for a triangle of an opaque object.
+    pub glass: u32,
+    pub _pad: u32,
 }
 
 pub const MATERIAL_DIFFUSE: u32 = 0;
+/// Smooth glass: Fresnel refraction at its surface, Beer's law inside.
+pub const MATERIAL_GLASS: u32 = 1;
 
 /// How a surface reflects light.
 #[repr(C)]
@@ -160,6 +170,37 @@ pub struct GpuMaterial {
     /// One of the `MATERIAL_*` constants.
     pub kind: u32,
     pub _pad: [u32; 3],
+    /// Glass: index of refraction per channel (w unused; 1 for diffuse).
+    pub ior: Vec4,
+    /// Glass: absorption coefficient inside per channel, 1/m (w unused).
+    pub absorption: Vec4,
+}
+
+/// A vertex of a glass mesh: position (metres; w = 1) and the unit
+/// outward normal refraction uses there (w = 0), shared by the triangles
+/// around it so that a tessellated curved surface refracts like the curve.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct GlassVertex {
+    pub position: Vec4,
+    pub normal: Vec4,
+    /// The object and material of the mesh it belongs to.
+    pub object: u32,
+    pub material: u32,
+    /// Channels its material traces separately: 3 for dispersive glass, else 1.
+    pub channels: u32,
+    /// Sum of `channels` over the vertices before it: its light transport
+    /// table starts at entry `table_block * directions`.
+    pub table_block: u32,
+}
+
+/// A triangle of a glass mesh: indices of its three `GlassVertex`es and
+/// the object it belongs to.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct GlassTriangle {
+    pub vertices: [u32; 3],
+    pub object: u32,
 }
 
 /// A node of the triangle BVH, flattened in depth-first order so that it
@@ -216,7 +257,9 @@ mod pod {
         super::GpuTriangle,
         super::GpuMaterial,
         super::GpuBvhNode,
-        super::GBufferTexel
+        super::GBufferTexel,
+        super::GlassVertex,
+        super::GlassTriangle
     );
 
     const _: () = {
@@ -224,8 +267,10 @@ mod pod {
         assert!(core::mem::size_of::<super::GpuLight>() == 5 * 16 + 64);
         assert!(core::mem::size_of::<super::GpuSphere>() == 32);
         assert!(core::mem::size_of::<super::GpuTriangle>() == 64);
-        assert!(core::mem::size_of::<super::GpuMaterial>() == 32);
+        assert!(core::mem::size_of::<super::GpuMaterial>() == 64);
         assert!(core::mem::size_of::<super::GpuBvhNode>() == 48);
         assert!(core::mem::size_of::<super::GBufferTexel>() == 32);
+        assert!(core::mem::size_of::<super::GlassVertex>() == 48);
+        assert!(core::mem::size_of::<super::GlassTriangle>() == 16);
     };
 }

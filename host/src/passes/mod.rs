@@ -29,6 +29,7 @@ macro_rules! resources {
     }};
 }
 
+pub mod caustics;
 pub mod scatter_check;
 pub mod sea;
 pub mod shadow_maps;
@@ -39,12 +40,16 @@ pub mod surface;
 /// Every pass, in the order the renderer runs them.
 pub static PASSES: &[&dyn Pass] = &[
     &shadow_maps::ShadowMaps,
+    &caustics::CausticsTable,
+    &caustics::CausticsLookup,
+    &caustics::CausticsMaps,
     &sky::SkyTransmittance,
     &sky::SkyView,
     &sea::SeaRadianceMap,
     &sea::SeaScatteringMaps,
     &sea::SeaAccumulatedMap,
     &surface::Surface,
+    &caustics::Caustics,
     &shafts::Shafts,
     &sky::Sky,
     &sea::SeaReflection,
@@ -126,6 +131,17 @@ pub static GBUFFER: Resource = Resource {
     kind: ResourceKind::PerPixel { blank: || bytemuck::bytes_of(&slicelight_shaders::surface::no_surface()).to_vec() },
 };
 
+pub static GLASS_VERTICES: Resource = Resource {
+    binding: 29,
+    name: "glass vertices",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.glass_vertices)),
+};
+pub static GLASS_TRIANGLES: Resource = Resource {
+    binding: 30,
+    name: "glass triangles",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.glass_triangles)),
+};
+
 /// How a pass's kernel is dispatched.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Dispatch {
@@ -186,6 +202,20 @@ pub trait Pass: Sync {
     fn counters(&self, _scene: &SceneData, _frame: &Frame) -> Vec<(&'static str, u64)> {
         Vec::new()
     }
+    /// An output the pass need not compute because it is already known (a
+    /// light transport table from the disk cache): the renderer puts these
+    /// bytes in the frame (uploads them on the GPU) and the pass's plan
+    /// skips it.
+    fn cached<'a>(&self, _scene: &'a SceneData) -> Option<(&'static Resource, &'a [u8])> {
+        None
+    }
+    /// Outputs that later passes consume but that stay in the frame's
+    /// results for `report`, `counters` and `persist` (read back from the GPU).
+    fn keeps(&self) -> &'static [&'static Resource] {
+        &[]
+    }
+    /// Keeps outputs beyond the frame (writes the cache), from the results.
+    fn persist(&self, _scene: &SceneData, _results: &Frame) {}
     /// Compares what the GPU wrote with what the CPU wrote, from the same
     /// inputs, within tolerances the pass states and justifies; returns a
     /// line describing the agreement, or an error.

@@ -52,7 +52,18 @@ impl Pass for Surface {
         "surface::surface_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, LIGHTS, SPHERES, TRIANGLES, BVH_NODES, MATERIALS, LIGHT_MAPS, SHADOW_MAPS]
+        resources![
+            COMMON,
+            LIGHTS,
+            SPHERES,
+            TRIANGLES,
+            BVH_NODES,
+            MATERIALS,
+            LIGHT_MAPS,
+            SHADOW_MAPS,
+            GLASS_VERTICES,
+            GLASS_TRIANGLES
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![GBUFFER, SURFACE_RADIANCE]
@@ -82,6 +93,8 @@ impl Pass for Surface {
         let mut radiance = Buffer::zeroed::<Vec4>(n);
         let mut gbuffer = Buffer::zeroed::<GBufferTexel>(n);
         let geometry = scene.geometry();
+        let glass =
+            slicelight_shaders::glass::Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
         let shadow = frame.get::<f32>(&SHADOW_MAPS);
         for_each_invocation2(
             radiance.as_mut_slice::<Vec4>(),
@@ -89,8 +102,16 @@ impl Pass for Surface {
             common.band_start,
             progress,
             |i, color, texel| {
-                (*color, *texel) =
-                    surface_pixel(i, common, &scene.lights, &geometry, &scene.materials, &scene.light_map, shadow);
+                (*color, *texel) = surface_pixel(
+                    i,
+                    common,
+                    &scene.lights,
+                    &geometry,
+                    &glass,
+                    &scene.materials,
+                    &scene.light_map,
+                    shadow,
+                );
             },
         );
         frame.insert(&SURFACE_RADIANCE, radiance);

@@ -2,12 +2,14 @@
 //! object, and the triangles' BVH.
 
 use anyhow::{anyhow, bail, Result};
-use glam::Vec3;
-use slicelight_shaders::types::{GpuMaterial, GpuSphere, GpuTriangle, MATERIAL_DIFFUSE};
+use glam::{Vec3, Vec4};
+use slicelight_shaders::types::{
+    GlassTriangle, GlassVertex, GpuMaterial, GpuSphere, GpuTriangle, MATERIAL_DIFFUSE, MATERIAL_GLASS, NO_OBJECT,
+};
 use std::path::Path;
 
-use super::schema::{MeshObject, Object, TorusObject};
-use super::validate::{albedo, finite3, invalid, unit3};
+use super::schema::{Material, MeshObject, Object, TorusObject, TrefoilKnotObject};
+use super::validate::{albedo, finite3, invalid, non_negative3, unit3};
 
 /// Everything the objects of a scene become.
 #[derive(Default)]
@@ -15,6 +17,48 @@ pub struct Objects {
     pub spheres: Vec<GpuSphere>,
     pub triangles: Vec<GpuTriangle>,
     pub materials: Vec<GpuMaterial>,
+    /// The glass meshes' vertices (with smooth normals) and triangles; each
+    /// glass triangle is also in `triangles`, with `glass` pointing here.
+    pub glass_vertices: Vec<GlassVertex>,
+    pub glass_triangles: Vec<GlassTriangle>,
+}
+
+/// A triangle mesh with one normal per vertex (outward).
+#[derive(Default)]
+pub struct IndexedMesh {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    pub indices: Vec<[u32; 3]>,
+}
+
+/// Most triangles one procedural object may have.
+const MAX_PROCEDURAL_TRIANGLES: u64 = 20_000_000;
+
+/// Validates an object's material: its albedo, or glass's index and absorption.
+fn material(field: &str, albedo3: [f32; 3], m: &Option<Material>) -> Result<GpuMaterial> {
+    let a = albedo(&format!("{field}.albedo"), albedo3)?;
+    Ok(match m {
+        None | Some(Material::Diffuse) => {
+            GpuMaterial { albedo: a, kind: MATERIAL_DIFFUSE, ior: Vec4::ONE, ..Default::default() }
+        }
+        Some(Material::Glass { ior, absorption }) => {
+            let ior = ior.rgb();
+            if !ior.iter().all(|n| n.is_finite() && *n >= 1.0001 && *n <= 4.0) {
+                bail!(invalid(
+                    &format!("{field}.material.ior"),
+                    "an index of refraction in [1.0001, 4], or three of them (r, g, b)",
+                    ior
+                ));
+            }
+            GpuMaterial {
+                albedo: a,
+                kind: MATERIAL_GLASS,
+                ior: Vec3::from(ior).extend(1.0),
+                absorption: non_negative3(&format!("{field}.material.absorption"), *absorption)?.extend(0.0),
+                ..Default::default()
+            }
+        }
+    })
 }
 
 /// Validates the `[[object]]`s and converts them; object `i` gets material `i`.
@@ -23,22 +67,42 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
     for (i, obj) in objects.iter().enumerate() {
         let field = format!("object[{i}]");
         let id = i as u32;
-        let material = |a: [f32; 3]| -> Result<GpuMaterial> {
-            Ok(GpuMaterial { albedo: albedo(&format!("{field}.albedo"), a)?, kind: MATERIAL_DIFFUSE, _pad: [0; 3] })
+        let (albedo3, mat) = match obj {
+            Object::Sphere(s) => (s.albedo, &s.material),
+            Object::Box(b) => (b.albedo, &b.material),
+            Object::Quad(q) => (q.albedo, &q.material),
+            Object::Mesh(m) => (m.albedo, &m.material),
+            Object::Torus(t) => (t.albedo, &t.material),
+            Object::TrefoilKnot(k) => (k.albedo, &k.material),
         };
-        match obj {
+        let m = material(&field, albedo3, mat)?;
+        let glass = m.kind == MATERIAL_GLASS;
+        out.materials.push(m);
+        let mesh = match obj {
             Object::Sphere(s) => {
                 let c = finite3(&format!("{field}.center"), s.center)?;
                 if !(s.radius.is_finite() && s.radius > 0.0) {
                     bail!(invalid(&format!("{field}.radius"), "a positive number of metres", s.radius));
                 }
-                out.materials.push(material(s.albedo)?);
-                out.spheres.push(GpuSphere {
-                    center_radius: c.extend(s.radius),
-                    object: id,
-                    material: id,
-                    _pad: [0; 2],
-                });
+                if !glass {
+                    if s.segments.is_some() {
+                        bail!(invalid(
+                            &format!("{field}.segments"),
+                            "no segments: only a glass sphere is tessellated",
+                            s.segments
+                        ));
+                    }
+                    out.spheres.push(GpuSphere {
+                        center_radius: c.extend(s.radius),
+                        object: id,
+                        material: id,
+                        _pad: [0; 2],
+                    });
+                    continue;
+                }
+                let segments = s.segments.unwrap_or([96, 64]);
+                check_segments(&format!("{field}.segments"), segments)?;
+                uv_sphere(c, s.radius, segments)
             }
             Object::Box(b) => {
                 let lo = finite3(&format!("{field}.min"), b.min)?;
@@ -46,66 +110,168 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
                 if lo.cmpge(hi).any() {
                     bail!(invalid(&format!("{field}.max"), "every coordinate above min's", b.max));
                 }
-                out.materials.push(material(b.albedo)?);
-                push_box(&mut out.triangles, lo, hi, id);
+                box_mesh(lo, hi)
             }
             Object::Quad(q) => {
+                if glass {
+                    bail!(invalid(
+                        &format!("{field}.material"),
+                        "glass only on closed objects (sphere, box, torus, trefoil_knot, mesh): a quad has no inside",
+                        "glass"
+                    ));
+                }
                 let c = finite3(&format!("{field}.center"), q.center)?;
                 let u = finite3(&format!("{field}.u"), q.u)?;
                 let v = finite3(&format!("{field}.v"), q.v)?;
                 if u.cross(v).length() < 1e-12 {
                     bail!(invalid(&format!("{field}.v"), "an edge not parallel to u and both non-zero", q.v));
                 }
-                out.materials.push(material(q.albedo)?);
                 let (hu, hv) = (u * 0.5, v * 0.5);
-                push_quad(&mut out.triangles, [c - hu - hv, c + hu - hv, c + hu + hv, c - hu + hv], id);
+                let n = u.cross(v).normalize();
+                IndexedMesh {
+                    positions: vec![c - hu - hv, c + hu - hv, c + hu + hv, c - hu + hv],
+                    normals: vec![n; 4],
+                    indices: vec![[0, 1, 2], [0, 2, 3]],
+                }
             }
-            Object::Mesh(mesh) => {
-                out.materials.push(material(mesh.albedo)?);
-                load_mesh(&field, base, mesh, id, &mut out.triangles)?;
-            }
-            Object::Torus(t) => {
-                out.materials.push(material(t.albedo)?);
-                push_torus(&field, t, id, &mut out.triangles)?;
-            }
-        }
+            Object::Mesh(mesh) => load_mesh(&field, base, mesh)?,
+            Object::Torus(t) => torus(&field, t)?,
+            Object::TrefoilKnot(k) => trefoil_knot(&field, k)?,
+        };
+        push_mesh(&mut out, &mesh, id, glass);
     }
     Ok(out)
 }
 
-fn triangle(v: [Vec3; 3], object: u32) -> GpuTriangle {
-    GpuTriangle {
-        v0: v[0].extend(1.0),
-        v1: v[1].extend(1.0),
-        v2: v[2].extend(1.0),
-        object,
-        material: object,
-        _pad: [0; 2],
+/// Appends a mesh's triangles (and, for glass, its vertices and indexed
+/// triangles, sharing normals).
+fn push_mesh(out: &mut Objects, mesh: &IndexedMesh, object: u32, glass: bool) {
+    let first_vertex = out.glass_vertices.len() as u32;
+    if glass {
+        let channels = if slicelight_shaders::glass::dispersive(&out.materials[object as usize]) { 3 } else { 1 };
+        let mut block = out.glass_vertices.last().map_or(0, |v| v.table_block + v.channels);
+        for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
+            out.glass_vertices.push(GlassVertex {
+                position: p.extend(1.0),
+                normal: n.extend(0.0),
+                object,
+                material: object,
+                channels,
+                table_block: block,
+            });
+            block += channels;
+        }
+    }
+    for f in &mesh.indices {
+        let v = f.map(|i| mesh.positions[i as usize]);
+        let glass_index = if glass {
+            out.glass_triangles.push(GlassTriangle { vertices: f.map(|i| first_vertex + i), object });
+            out.glass_triangles.len() as u32 - 1
+        } else {
+            NO_OBJECT
+        };
+        out.triangles.push(GpuTriangle {
+            v0: v[0].extend(1.0),
+            v1: v[1].extend(1.0),
+            v2: v[2].extend(1.0),
+            object,
+            material: object,
+            glass: glass_index,
+            _pad: 0,
+        });
     }
 }
 
-fn push_quad(tris: &mut Vec<GpuTriangle>, [a, b, c, d]: [Vec3; 4], object: u32) {
-    tris.push(triangle([a, b, c], object));
-    tris.push(triangle([a, c, d], object));
+fn check_segments(field: &str, [nu, nv]: [u32; 2]) -> Result<()> {
+    if nu < 3 || nv < 3 || 2 * nu as u64 * nv as u64 > MAX_PROCEDURAL_TRIANGLES {
+        bail!(invalid(
+            field,
+            &format!("two counts of at least 3 with at most {MAX_PROCEDURAL_TRIANGLES} triangles in all"),
+            [nu, nv]
+        ));
+    }
+    Ok(())
 }
 
-fn push_box(tris: &mut Vec<GpuTriangle>, lo: Vec3, hi: Vec3, object: u32) {
+/// A closed `nu x nv` grid of quads (wrapping in both directions) from a
+/// parametrisation giving each grid point's position and outward normal.
+fn wrapped_grid(nu: u32, nv: u32, point: impl Fn(u32, u32) -> (Vec3, Vec3)) -> IndexedMesh {
+    let mut mesh = IndexedMesh::default();
+    for i in 0..nu {
+        for j in 0..nv {
+            let (p, n) = point(i, j);
+            mesh.positions.push(p);
+            mesh.normals.push(n);
+        }
+    }
+    let at = |i: u32, j: u32| (i % nu) * nv + (j % nv);
+    for i in 0..nu {
+        for j in 0..nv {
+            let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+            mesh.indices.push([a, b, c]);
+            mesh.indices.push([a, c, d]);
+        }
+    }
+    mesh
+}
+
+/// A UV sphere: `nu` meridians, `nv` bands from pole to pole, analytic normals.
+fn uv_sphere(c: Vec3, r: f32, [nu, nv]: [u32; 2]) -> IndexedMesh {
+    let mut mesh = IndexedMesh::default();
+    let pi = std::f32::consts::PI;
+    mesh.positions.push(c + Vec3::Y * r);
+    mesh.normals.push(Vec3::Y);
+    for j in 1..nv {
+        let polar = pi * j as f32 / nv as f32;
+        for i in 0..nu {
+            let az = std::f32::consts::TAU * i as f32 / nu as f32;
+            let n = Vec3::new(polar.sin() * az.cos(), polar.cos(), polar.sin() * az.sin());
+            mesh.positions.push(c + n * r);
+            mesh.normals.push(n);
+        }
+    }
+    mesh.positions.push(c - Vec3::Y * r);
+    mesh.normals.push(Vec3::NEG_Y);
+    let south = mesh.positions.len() as u32 - 1;
+    let ring = |j: u32, i: u32| 1 + (j - 1) * nu + (i % nu);
+    for i in 0..nu {
+        mesh.indices.push([0, ring(1, i + 1), ring(1, i)]);
+        for j in 1..nv - 1 {
+            mesh.indices.push([ring(j, i), ring(j, i + 1), ring(j + 1, i + 1)]);
+            mesh.indices.push([ring(j, i), ring(j + 1, i + 1), ring(j + 1, i)]);
+        }
+        mesh.indices.push([ring(nv - 1, i), ring(nv - 1, i + 1), south]);
+    }
+    mesh
+}
+
+/// A box: six faces of two triangles, each face its own four vertices
+/// (flat normals, sharp edges).
+fn box_mesh(lo: Vec3, hi: Vec3) -> IndexedMesh {
+    let mut mesh = IndexedMesh::default();
     let c = |x: bool, y: bool, z: bool| {
         Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
     };
     let (f, t) = (false, true);
-    push_quad(tris, [c(f, f, f), c(t, f, f), c(t, t, f), c(f, t, f)], object);
-    push_quad(tris, [c(f, f, t), c(t, f, t), c(t, t, t), c(f, t, t)], object);
-    push_quad(tris, [c(f, f, f), c(f, t, f), c(f, t, t), c(f, f, t)], object);
-    push_quad(tris, [c(t, f, f), c(t, t, f), c(t, t, t), c(t, f, t)], object);
-    push_quad(tris, [c(f, f, f), c(t, f, f), c(t, f, t), c(f, f, t)], object);
-    push_quad(tris, [c(f, t, f), c(t, t, f), c(t, t, t), c(f, t, t)], object);
+    let faces = [
+        ([c(f, f, f), c(f, t, f), c(t, t, f), c(t, f, f)], Vec3::NEG_Z),
+        ([c(f, f, t), c(t, f, t), c(t, t, t), c(f, t, t)], Vec3::Z),
+        ([c(f, f, f), c(f, f, t), c(f, t, t), c(f, t, f)], Vec3::NEG_X),
+        ([c(t, f, f), c(t, t, f), c(t, t, t), c(t, f, t)], Vec3::X),
+        ([c(f, f, f), c(t, f, f), c(t, f, t), c(f, f, t)], Vec3::NEG_Y),
+        ([c(f, t, f), c(f, t, t), c(t, t, t), c(t, t, f)], Vec3::Y),
+    ];
+    for (quad, n) in faces {
+        let first = mesh.positions.len() as u32;
+        mesh.positions.extend(quad);
+        mesh.normals.extend([n; 4]);
+        mesh.indices.push([first, first + 1, first + 2]);
+        mesh.indices.push([first, first + 2, first + 3]);
+    }
+    mesh
 }
 
-/// Most triangles one procedural object may have.
-const MAX_PROCEDURAL_TRIANGLES: u64 = 20_000_000;
-
-fn push_torus(field: &str, t: &TorusObject, object: u32, tris: &mut Vec<GpuTriangle>) -> Result<()> {
+fn torus(field: &str, t: &TorusObject) -> Result<IndexedMesh> {
     let c = finite3(&format!("{field}.center"), t.center)?;
     let axis = unit3(&format!("{field}.axis"), t.axis)?;
     if !(t.major_radius.is_finite() && t.major_radius > 0.0) {
@@ -119,31 +285,52 @@ fn push_torus(field: &str, t: &TorusObject, object: u32, tris: &mut Vec<GpuTrian
         ));
     }
     let [nu, nv] = t.segments;
-    if nu < 3 || nv < 3 || 2 * nu as u64 * nv as u64 > MAX_PROCEDURAL_TRIANGLES {
-        bail!(invalid(
-            &format!("{field}.segments"),
-            &format!("two counts of at least 3 with at most {MAX_PROCEDURAL_TRIANGLES} triangles in all"),
-            t.segments
-        ));
-    }
+    check_segments(&format!("{field}.segments"), t.segments)?;
     // An orthonormal frame (e1, e2) of the plane normal to the axis.
     let e1 = axis.any_orthonormal_vector();
     let e2 = axis.cross(e1);
-    let point = |i: u32, j: u32| {
-        let u = std::f32::consts::TAU * (i % nu) as f32 / nu as f32;
-        let v = std::f32::consts::TAU * (j % nv) as f32 / nv as f32;
+    Ok(wrapped_grid(nu, nv, |i, j| {
+        let u = std::f32::consts::TAU * i as f32 / nu as f32;
+        let v = std::f32::consts::TAU * j as f32 / nv as f32;
         let radial = e1 * u.cos() + e2 * u.sin();
-        c + radial * (t.major_radius + t.minor_radius * v.cos()) + axis * (t.minor_radius * v.sin())
-    };
-    for i in 0..nu {
-        for j in 0..nv {
-            push_quad(tris, [point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1)], object);
-        }
-    }
-    Ok(())
+        let n = radial * v.cos() + axis * v.sin();
+        (c + radial * t.major_radius + n * t.minor_radius, n)
+    }))
 }
 
-fn load_mesh(field: &str, base: &Path, m: &MeshObject, object: u32, tris: &mut Vec<GpuTriangle>) -> Result<()> {
+fn trefoil_knot(field: &str, k: &TrefoilKnotObject) -> Result<IndexedMesh> {
+    let c = finite3(&format!("{field}.center"), k.center)?;
+    if !(k.scale.is_finite() && k.scale > 0.0) {
+        bail!(invalid(&format!("{field}.scale"), "a positive number of metres", k.scale));
+    }
+    // The strands pass within about 0.9 scale of each other.
+    if !(k.tube_radius.is_finite() && k.tube_radius > 0.0 && k.tube_radius < 0.4 * k.scale) {
+        bail!(invalid(
+            &format!("{field}.tube_radius"),
+            "a positive number of metres below 0.4 scale (thicker tubes cross)",
+            k.tube_radius
+        ));
+    }
+    check_segments(&format!("{field}.segments"), k.segments)?;
+    let [nu, nv] = k.segments;
+    // The curve with x, z horizontal and its third coordinate up.
+    let world = |x: f32, y: f32, z: f32| Vec3::new(x, z, y);
+    Ok(wrapped_grid(nu, nv, |i, j| {
+        let t = std::f32::consts::TAU * i as f32 / nu as f32;
+        let v = std::f32::consts::TAU * j as f32 / nv as f32;
+        let r = world(t.sin() + 2.0 * (2.0 * t).sin(), t.cos() - 2.0 * (2.0 * t).cos(), -(3.0 * t).sin());
+        let d1 = world(t.cos() + 4.0 * (2.0 * t).cos(), -t.sin() + 4.0 * (2.0 * t).sin(), -3.0 * (3.0 * t).cos());
+        let d2 = world(-t.sin() - 8.0 * (2.0 * t).sin(), -t.cos() + 8.0 * (2.0 * t).cos(), 9.0 * (3.0 * t).sin());
+        // The Frenet frame: periodic along a closed curve, so the tube closes.
+        let tangent = d1.normalize();
+        let normal = (d2 - tangent * d2.dot(tangent)).normalize();
+        let binormal = tangent.cross(normal);
+        let n = normal * v.cos() + binormal * v.sin();
+        (c + r * k.scale + n * k.tube_radius, n)
+    }))
+}
+
+fn load_mesh(field: &str, base: &Path, m: &MeshObject) -> Result<IndexedMesh> {
     let path = base.join(&m.file);
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (models, _) = tobj::load_obj(&path, &options)
@@ -152,22 +339,47 @@ fn load_mesh(field: &str, base: &Path, m: &MeshObject, object: u32, tris: &mut V
     if !(m.scale.is_finite() && m.scale > 0.0) {
         return Err(invalid(&format!("{field}.scale"), "a positive number", m.scale));
     }
-    let before = tris.len();
+    let mut mesh = IndexedMesh::default();
     for model in models {
+        let first = mesh.positions.len() as u32;
         let p = &model.mesh.positions;
-        let vertex =
-            |i: u32| Vec3::new(p[3 * i as usize], p[3 * i as usize + 1], p[3 * i as usize + 2]) * m.scale + translate;
+        let count = p.len() / 3;
+        mesh.positions
+            .extend((0..count).map(|i| Vec3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]) * m.scale + translate));
+        let n = &model.mesh.normals;
+        let file_normals = n.len() == p.len();
         for f in model.mesh.indices.as_chunks::<3>().0 {
-            tris.push(triangle([vertex(f[0]), vertex(f[1]), vertex(f[2])], object));
+            mesh.indices.push(f.map(|i| first + i));
+        }
+        if file_normals {
+            mesh.normals
+                .extend((0..count).map(|i| Vec3::new(n[3 * i], n[3 * i + 1], n[3 * i + 2]).normalize_or_zero()));
+        } else {
+            mesh.normals.extend(std::iter::repeat_n(Vec3::ZERO, count));
         }
     }
-    if tris.len() == before {
+    if mesh.indices.is_empty() {
         return Err(anyhow!("{field}.file: mesh '{}' has no triangles", path.display()));
     }
-    if let Some(t) = tris[before..].iter().find(|t| !(t.v0.is_finite() && t.v1.is_finite() && t.v2.is_finite())) {
-        return Err(anyhow!("{field}.file: mesh '{}' has a vertex that is not finite: {t:?}", path.display()));
+    if let Some(v) = mesh.positions.iter().find(|v| !v.is_finite()) {
+        return Err(anyhow!("{field}.file: mesh '{}' has a vertex that is not finite: {v}", path.display()));
     }
-    Ok(())
+    // Vertices without a normal from the file: the area-weighted mean of
+    // their faces' (by winding: counter-clockwise seen from outside).
+    let mut sums = vec![Vec3::ZERO; mesh.positions.len()];
+    for f in &mesh.indices {
+        let [a, b, c] = f.map(|i| mesh.positions[i as usize]);
+        let n = (b - a).cross(c - a);
+        for i in f {
+            sums[*i as usize] += n;
+        }
+    }
+    for (n, s) in mesh.normals.iter_mut().zip(sums) {
+        if *n == Vec3::ZERO {
+            *n = s.normalize_or(Vec3::Y);
+        }
+    }
+    Ok(mesh)
 }
 
 /// Axis-aligned bounds of all geometry (spheres and triangles).

@@ -8,8 +8,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use glam::{Vec3, Vec4};
 use slicelight_shaders::geometry::Geometry;
 use slicelight_shaders::types::{
-    CommonParams, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle, PHASE_DOBASHI, PHASE_HENYEY_GREENSTEIN,
-    PHASE_ISOTROPIC, PHASE_RAYLEIGH, PROJECTION_FISHEYE, PROJECTION_PINHOLE,
+    CommonParams, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle, PHASE_DOBASHI,
+    PHASE_HENYEY_GREENSTEIN, PHASE_ISOTROPIC, PHASE_RAYLEIGH, PROJECTION_FISHEYE, PROJECTION_PINHOLE,
 };
 use std::path::Path;
 
@@ -39,6 +39,9 @@ pub struct SceneData {
     pub bvh_nodes: Vec<GpuBvhNode>,
     /// One per object.
     pub materials: Vec<GpuMaterial>,
+    /// The glass meshes (vertices with smooth normals, indexed triangles).
+    pub glass_vertices: Vec<GlassVertex>,
+    pub glass_triangles: Vec<GlassTriangle>,
     pub light_map: Vec<Vec4>,
     /// Axis-aligned bounds of the geometry, if there is any.
     pub bounds: Option<(Vec3, Vec3)>,
@@ -49,6 +52,8 @@ pub struct SceneData {
     pub sky: crate::passes::sky::Setup,
     /// The sea passes' parameter block and wave normals (`enabled` false without `[sea]`).
     pub sea: crate::passes::sea::Setup,
+    /// The caustics passes' parameter block (`enabled` false without glass and light on it).
+    pub caustics: crate::passes::caustics::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
 }
@@ -251,7 +256,22 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
             shadow_map_resolution: None,
         });
     }
-    let lights = lights::build(&file.spotlight, &[&file.directional_light[..], &directionals].concat(), base, bounds)?;
+    let point_lights = !file.point_light.is_empty() || !file.line_light.is_empty();
+    if point_lights && common.sigma_s.truncate().max_element() > 0.0 {
+        bail!(invalid(
+            if file.point_light.is_empty() { "line_light" } else { "point_light" },
+            "a clear medium (sigma_s = 0): the shafts pass's shadow maps cover spotlight cones and directional beams only",
+            "a light in a scattering medium"
+        ));
+    }
+    let lights = lights::build(
+        &file.spotlight,
+        &[&file.directional_light[..], &directionals].concat(),
+        &file.point_light,
+        &file.line_light,
+        base,
+        bounds,
+    )?;
     let bvh = crate::bvh::Bvh::build(objects.triangles);
     common.light_count = lights.lights.len() as u32;
     common.sphere_count = objects.spheres.len() as u32;
@@ -265,17 +285,21 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         triangles: bvh.triangles,
         bvh_nodes: bvh.nodes,
         materials: objects.materials,
+        glass_vertices: objects.glass_vertices,
+        glass_triangles: objects.glass_triangles,
         light_map: lights.light_map,
         bounds,
         exposure: file.camera.exposure,
         shafts: Default::default(),
         sky,
         sea,
+        caustics: Default::default(),
         requested_passes: Vec::new(),
     };
     if !data.has_geometry() {
         data.without_shadow_maps();
     }
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;
+    data.caustics = crate::passes::caustics::configure(&file.caustics, &data).map_err(|e| anyhow!("caustics.{e}"))?;
     Ok(data)
 }

@@ -15,6 +15,10 @@ pub struct SceneFile {
     #[serde(default)]
     pub directional_light: Vec<DirectionalLight>,
     #[serde(default)]
+    pub point_light: Vec<PointLight>,
+    #[serde(default)]
+    pub line_light: Vec<LineLight>,
+    #[serde(default)]
     pub object: Vec<Object>,
     #[serde(default)]
     pub shafts: crate::passes::shafts::Settings,
@@ -22,6 +26,8 @@ pub struct SceneFile {
     pub surface: crate::passes::surface::Settings,
     pub sky: Option<crate::passes::sky::Settings>,
     pub sea: Option<crate::passes::sea::Settings>,
+    #[serde(default)]
+    pub caustics: crate::passes::caustics::Settings,
 }
 
 #[derive(Debug, Deserialize)]
@@ -110,6 +116,27 @@ pub struct DirectionalLight {
     pub shadow_map_resolution: Option<u32>,
 }
 
+/// A light radiating the same intensity in every direction.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointLight {
+    pub position: [f32; 3],
+    /// W/sr per channel.
+    pub intensity: [f32; 3],
+}
+
+/// A segment radiating like a row of point lights: `intensity` W/sr per
+/// metre of its length, per channel.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LineLight {
+    pub from: [f32; 3],
+    pub to: [f32; 3],
+    pub intensity: [f32; 3],
+    /// Point lights it becomes (default: one per 5 cm, 4 to 64).
+    pub points: Option<u32>,
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Object {
@@ -118,6 +145,59 @@ pub enum Object {
     Quad(QuadObject),
     Mesh(MeshObject),
     Torus(TorusObject),
+    TrefoilKnot(TrefoilKnotObject),
+}
+
+/// What an object is made of; without one, a diffuse surface of the
+/// object's `albedo`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Material {
+    Diffuse,
+    Glass {
+        ior: Ior,
+        /// 1/m per channel (Beer's law inside).
+        #[serde(default)]
+        absorption: [f32; 3],
+    },
+}
+
+/// One index of refraction, or one per channel (dispersion).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(untagged)]
+pub enum Ior {
+    One(f32),
+    Rgb([f32; 3]),
+}
+
+impl Ior {
+    pub fn rgb(self) -> [f32; 3] {
+        match self {
+            Ior::One(n) => [n; 3],
+            Ior::Rgb(v) => v,
+        }
+    }
+}
+
+/// A trefoil knot: the curve `(sin t + 2 sin 2t, cos t - 2 cos 2t, -sin 3t)`
+/// scaled by `scale` around `center` (x, z horizontal, y up from the third
+/// coordinate), swept by a tube of radius `tube_radius`, tessellated into
+/// `segments[0] x segments[1] x 2` triangles (along the curve, around the tube).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrefoilKnotObject {
+    pub center: [f32; 3],
+    pub scale: f32,
+    pub tube_radius: f32,
+    #[serde(default = "default_knot_segments")]
+    pub segments: [u32; 2],
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+    pub material: Option<Material>,
+}
+
+fn default_knot_segments() -> [u32; 2] {
+    [256, 24]
 }
 
 #[derive(Debug, Deserialize)]
@@ -125,8 +205,12 @@ pub enum Object {
 pub struct SphereObject {
     pub center: [f32; 3],
     pub radius: f32,
+    /// A glass sphere is tessellated (the caustics method works on a mesh's
+    /// vertices): `[around, pole to pole]`, default `[96, 64]` (6 050 vertices).
+    pub segments: Option<[u32; 2]>,
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
+    pub material: Option<Material>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -136,6 +220,7 @@ pub struct BoxObject {
     pub max: [f32; 3],
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
+    pub material: Option<Material>,
 }
 
 /// The rectangle `center +- u/2 +- v/2`.
@@ -147,6 +232,7 @@ pub struct QuadObject {
     pub v: [f32; 3],
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
+    pub material: Option<Material>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -159,6 +245,7 @@ pub struct MeshObject {
     pub translate: [f32; 3],
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
+    pub material: Option<Material>,
 }
 
 /// A torus around `axis` through `center`: tube radius `minor_radius` swept
@@ -176,6 +263,7 @@ pub struct TorusObject {
     pub segments: [u32; 2],
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
+    pub material: Option<Material>,
 }
 
 fn default_torus_segments() -> [u32; 2] {

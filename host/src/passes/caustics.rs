@@ -1,0 +1,750 @@
+//! The caustics passes (kernels: `shader-crate/src/caustics.rs`): the light
+//! transport table of every glass mesh (`caustics.table`), the exit rays for
+//! the scene's lights (`caustics.lookup`), the illumination volumes
+//! rasterised into caustics maps on horizontal sample planes
+//! (`caustics.maps`), and the caustic light on the surfaces each pixel sees
+//! (`caustics`, an EXR layer).
+
+use anyhow::{bail, ensure, Result};
+use glam::{Vec3, Vec4};
+use indicatif::ProgressBar;
+use slicelight_shaders::caustics::{
+    caustics_pixel, light_at_vertex, lookup, map_bins, rasterize, read_bin, table_entry, table_slot, triangle_flux,
+    CausticsParams, ExitRay, TableEntry, MAP_BINS, MAX_SLOPE,
+};
+use slicelight_shaders::glass::{dispersive, trace_through, Glass, PATH_OUT};
+use slicelight_shaders::scatter::{words_for, CpuAtomics};
+use slicelight_shaders::types::{CommonParams, GBufferTexel, MATERIAL_GLASS, NO_OBJECT};
+use std::sync::atomic::AtomicU32;
+
+use super::*;
+use crate::cpu::{for_each_index, for_each_invocation};
+use crate::scene::{invalid, SceneData};
+use rayon::prelude::*;
+
+/// The scene's `[caustics]` table.
+#[derive(Debug, Clone, Copy, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Settings {
+    /// Draw caustics at all (true).
+    pub enabled: bool,
+    /// Table directions per vertex: `[rings, azimuths]`, `1 + rings x
+    /// azimuths` in all (default `[8, 16]`: the paper's 129).
+    pub directions: [u32; 2],
+    /// Horizontal sample planes through the receivers (default 6, the paper's).
+    pub planes: u32,
+    /// Texels along the longer side of the caustics maps (default 512, the paper's).
+    pub map_resolution: u32,
+    /// Keep light transport tables on disk and reuse them (true).
+    pub cache: bool,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings { enabled: true, directions: [8, 16], planes: 6, map_resolution: 512, cache: true }
+    }
+}
+
+/// What the caustics passes run with.
+#[derive(Debug, Clone, Default)]
+pub struct Setup {
+    pub enabled: bool,
+    /// The whole light transport table, when every glass object's is in the cache.
+    pub cached_table: Option<std::sync::Arc<Vec<TableEntry>>>,
+    /// Where each glass object's table is kept, and its entries in the table.
+    pub cache_files: Vec<CacheFile>,
+    /// Vertex-channels the table holds (`GlassVertex::table_block` of the end).
+    pub table_blocks: u32,
+    /// Why not, when not enabled.
+    pub reason: String,
+    pub params: CausticsParams,
+}
+
+/// Largest light transport table, bytes (lavapipe binds at most 128 MiB).
+const MAX_TABLE_BYTES: u64 = 120 << 20;
+
+/// Validates the settings and places the sample planes and maps over the
+/// area the scene's lights can send light through its glass to.
+pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
+    let [rings, azimuths] = s.directions;
+    if !(1..=64).contains(&rings) || !(3..=256).contains(&azimuths) {
+        bail!(invalid("directions", "[rings, azimuths] with rings in 1..=64 and azimuths in 3..=256", s.directions));
+    }
+    if !(1..=64).contains(&s.planes) {
+        bail!(invalid("planes", "a count in 1..=64", s.planes));
+    }
+    if !(16..=4096).contains(&s.map_resolution) {
+        bail!(invalid("map_resolution", "a texel count in 16..=4096", s.map_resolution));
+    }
+    let off = |reason: &str| Ok(Setup { enabled: false, reason: reason.into(), ..Default::default() });
+    if scene.glass_vertices.is_empty() {
+        return off("no glass");
+    }
+    if !s.enabled {
+        return off("[caustics] enabled = false");
+    }
+    if scene.lights.is_empty() {
+        return off("no lights");
+    }
+    let channels = if scene.materials.iter().any(|m| m.kind == MATERIAL_GLASS && dispersive(m)) { 3 } else { 1 };
+    let directions = 1 + rings * azimuths;
+    let vertex_count = scene.glass_vertices.len() as u32;
+    let blocks = scene.glass_vertices.last().map_or(0, |v| v.table_block + v.channels) as u64;
+    let table_bytes = blocks * directions as u64 * 48;
+    if table_bytes > MAX_TABLE_BYTES {
+        bail!(invalid(
+            "directions",
+            &format!(
+                "a light transport table of at most {} MiB: {vertex_count} glass vertices ({blocks} vertex-channels) x {directions} directions x 48 B is {} MiB",
+                MAX_TABLE_BYTES >> 20,
+                table_bytes >> 20
+            ),
+            s.directions
+        ));
+    }
+    // Receivers: every surface that is not glass.
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for sph in &scene.spheres {
+        let c = sph.center_radius.truncate();
+        lo = lo.min(c - sph.center_radius.w);
+        hi = hi.max(c + sph.center_radius.w);
+    }
+    for t in scene.triangles.iter().filter(|t| t.glass == NO_OBJECT) {
+        for v in [t.v0, t.v1, t.v2] {
+            lo = lo.min(v.truncate());
+            hi = hi.max(v.truncate());
+        }
+    }
+    if lo.x > hi.x {
+        return off("no opaque surface to receive caustics");
+    }
+    let glass_top = scene.glass_vertices.iter().map(|v| v.position.y).fold(f32::NEG_INFINITY, f32::max);
+    let y_lo = lo.y;
+    let y_hi = hi.y.min(glass_top).max(y_lo);
+    let scale = lo.abs().max(hi.abs()).max_element().max(1.0);
+    let (planes, spacing) = if s.planes == 1 || y_hi - y_lo < 1e-4 * scale {
+        (1, 0.0)
+    } else {
+        (s.planes, (y_hi - y_lo) / (s.planes - 1) as f32)
+    };
+
+    // Where the light leaving the glass crosses the lowest and highest
+    // planes, from exactly traced exit rays at up to 4096 vertices per light.
+    let geometry = scene.geometry();
+    let glass = Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
+    let stride = (scene.glass_vertices.len() / 4096).max(1);
+    let mut xz_lo = glam::Vec2::splat(f32::INFINITY);
+    let mut xz_hi = glam::Vec2::splat(f32::NEG_INFINITY);
+    for light in &scene.lights {
+        for v in scene.glass_vertices.iter().step_by(stride) {
+            let (lit, dir) = light_at_vertex(light, &geometry, v);
+            if !lit {
+                continue;
+            }
+            for c in if channels == 3 { [0, 2] } else { [0, 0] } {
+                let path = trace_through(
+                    &geometry,
+                    &glass,
+                    &scene.materials,
+                    v.position.truncate(),
+                    v.normal.truncate(),
+                    v.material,
+                    dir,
+                    c,
+                    v.object,
+                    false,
+                );
+                if path.status != PATH_OUT || path.direction.y >= 0.0 {
+                    continue;
+                }
+                for y in [y_lo, y_lo + spacing * (planes - 1) as f32] {
+                    let t = (y - path.position.y) / path.direction.y;
+                    if t >= 0.0 {
+                        let q = path.position + path.direction * t;
+                        xz_lo = xz_lo.min(glam::Vec2::new(q.x, q.z));
+                        xz_hi = xz_hi.max(glam::Vec2::new(q.x, q.z));
+                    }
+                }
+            }
+        }
+    }
+    if xz_lo.x > xz_hi.x {
+        return off("no light leaves the glass downward toward the receivers");
+    }
+    // A margin for the rays between the sampled vertices, then the receivers' extent.
+    let margin = (xz_hi - xz_lo).max_element() * 0.1 + 1e-3 * scale;
+    let xz_lo = (xz_lo - margin).max(glam::Vec2::new(lo.x, lo.z));
+    let xz_hi = (xz_hi + margin).min(glam::Vec2::new(hi.x, hi.z));
+    let size = (xz_hi - xz_lo).max(glam::Vec2::splat(1e-6 * scale));
+    let texel = size.max_element() / s.map_resolution as f32;
+    let map_width = ((size.x / texel).ceil() as u32).clamp(1, s.map_resolution);
+    let map_height = ((size.y / texel).ceil() as u32).clamp(1, s.map_resolution);
+
+    // The fixed-point scale: no texel can hold more than all the flux that
+    // falls on the glass, in one texel, times the largest slope, in 2^60 units.
+    let mut flux_bound = 0.0f64;
+    for light in &scene.lights {
+        for t in &scene.glass_triangles {
+            let [a, b, c] = t.vertices.map(|i| scene.glass_vertices[i as usize].position.truncate());
+            let f = triangle_flux(&scene.common, light, &scene.light_map, a, b, c, Vec4::ONE);
+            flux_bound += f.truncate().max_element() as f64;
+        }
+    }
+    if flux_bound.is_nan() || flux_bound <= 0.0 {
+        return off("the lights send no light onto the glass");
+    }
+    let peak = flux_bound / (texel as f64 * texel as f64) * 3.0 * MAX_SLOPE as f64;
+    let fixed_scale = (2f64.powi(60) / peak).min(1e30) as f32;
+
+    let params = CausticsParams {
+        map_origin: Vec4::new(xz_lo.x, y_lo, xz_lo.y, texel),
+        rings,
+        azimuths,
+        directions,
+        channels,
+        vertex_count,
+        triangle_count: scene.glass_triangles.len() as u32,
+        light_count: scene.lights.len() as u32,
+        planes,
+        map_width,
+        map_height,
+        plane_spacing: spacing,
+        scale: fixed_scale,
+    };
+    let mut setup = Setup { enabled: true, table_blocks: blocks as u32, params, ..Default::default() };
+    if s.cache {
+        if let Some(dir) = cache::directory() {
+            cache::load(&mut setup, scene, &dir);
+        }
+    }
+    Ok(setup)
+}
+
+/// One glass object's light transport table on disk.
+#[derive(Debug, Clone)]
+pub struct CacheFile {
+    pub path: std::path::PathBuf,
+    pub key: [u8; 16],
+    /// Its entries in the scene's table.
+    pub entries: std::ops::Range<usize>,
+}
+
+/// The disk cache of light transport tables: one file per glass object,
+/// named by a 128-bit hash (XXH3) of everything its table depends on (the
+/// object's vertices, normals and triangles, its material, the table's
+/// directions and format). A file holds a magic string, the format
+/// version, the key, the entry count, the entries and a 64-bit checksum of
+/// them; a file that fails any check is rebuilt, never trusted.
+pub mod cache {
+    use super::*;
+    use std::path::{Path, PathBuf};
+    use twox_hash::{XxHash3_128, XxHash3_64};
+
+    const MAGIC: &[u8; 8] = b"SLCTABLE";
+    /// Bump when the table's contents change for the same inputs.
+    const VERSION: u32 = 2;
+    const HEADER: usize = 8 + 4 + 16 + 8;
+
+    /// `SLICELIGHT_CACHE_DIR` (`off`: no cache), else
+    /// `$XDG_CACHE_HOME/slicelight/tables`, else `~/.cache/slicelight/tables`.
+    pub fn directory() -> Option<PathBuf> {
+        match std::env::var_os("SLICELIGHT_CACHE_DIR") {
+            Some(d) if d == "off" => None,
+            Some(d) => Some(PathBuf::from(d)),
+            None => {
+                let base = std::env::var_os("XDG_CACHE_HOME")
+                    .map(PathBuf::from)
+                    .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+                Some(base.join("slicelight").join("tables"))
+            }
+        }
+    }
+
+    /// The key of the table of the glass object whose vertices are `verts`
+    /// (contiguous from index `first`).
+    fn key(
+        scene: &SceneData,
+        params: &CausticsParams,
+        first: usize,
+        verts: &[slicelight_shaders::types::GlassVertex],
+    ) -> [u8; 16] {
+        let object = verts[0].object;
+        let mut bytes: Vec<u8> = Vec::new();
+        bytes.extend(VERSION.to_le_bytes());
+        bytes.extend(env!("CARGO_PKG_VERSION").as_bytes());
+        bytes.extend(params.rings.to_le_bytes());
+        bytes.extend(params.azimuths.to_le_bytes());
+        for v in verts {
+            bytes.extend(bytemuck::bytes_of(&v.position));
+            bytes.extend(bytemuck::bytes_of(&v.normal));
+            bytes.extend(v.channels.to_le_bytes());
+        }
+        for t in scene.glass_triangles.iter().filter(|t| t.object == object) {
+            for i in t.vertices {
+                bytes.extend((i as u64 - first as u64).to_le_bytes());
+            }
+        }
+        let m = &scene.materials[verts[0].material as usize];
+        bytes.extend(bytemuck::bytes_of(&m.ior));
+        bytes.extend(bytemuck::bytes_of(&m.absorption));
+        XxHash3_128::oneshot(&bytes).to_le_bytes()
+    }
+
+    /// Finds each glass object's file; when all are there and sound, the
+    /// whole table is `setup.cached_table`.
+    pub fn load(setup: &mut Setup, scene: &SceneData, dir: &Path) {
+        let d = setup.params.directions as usize;
+        let verts = &scene.glass_vertices;
+        let mut tables = Vec::new();
+        let mut first = 0;
+        while first < verts.len() {
+            let object = verts[first].object;
+            let end = first + verts[first..].iter().take_while(|v| v.object == object).count();
+            let block =
+                |i: usize| if i < verts.len() { verts[i].table_block as usize } else { setup.table_blocks as usize };
+            let entries = block(first) * d..block(end) * d;
+            let key = key(scene, &setup.params, first, &verts[first..end]);
+            let hex: String = key.iter().map(|b| format!("{b:02x}")).collect();
+            let path = dir.join(format!("{hex}.table"));
+            tables.push(read(&path, &key, entries.len()));
+            setup.cache_files.push(CacheFile { path, key, entries });
+            first = end;
+        }
+        if tables.iter().all(Option::is_some) {
+            let table: Vec<TableEntry> = tables.into_iter().flatten().flatten().collect();
+            setup.cached_table = Some(std::sync::Arc::new(table));
+        }
+    }
+
+    /// The entries of a cache file, if it is sound and has `key` and `count` entries.
+    fn read(path: &Path, key: &[u8; 16], count: usize) -> Option<Vec<TableEntry>> {
+        let bytes = std::fs::read(path).ok()?;
+        let size = std::mem::size_of::<TableEntry>();
+        let sound = bytes.len() == HEADER + count * size + 8
+            && &bytes[..8] == MAGIC
+            && bytes[8..12] == VERSION.to_le_bytes()
+            && &bytes[12..28] == key
+            && bytes[28..36] == (count as u64).to_le_bytes()
+            && bytes[HEADER + count * size..]
+                == XxHash3_64::oneshot(&bytes[HEADER..HEADER + count * size]).to_le_bytes();
+        if !sound {
+            eprintln!("{}: a stale or corrupt light transport table; tracing it again", path.display());
+            return None;
+        }
+        Some(bytemuck::pod_collect_to_vec(&bytes[HEADER..HEADER + count * size]))
+    }
+
+    /// Writes each object's part of `table` to its file (whole or not at all).
+    pub fn save(setup: &Setup, table: &[TableEntry]) {
+        for f in &setup.cache_files {
+            let Some(entries) = table.get(f.entries.clone()) else {
+                return;
+            };
+            let payload: &[u8] = bytemuck::cast_slice(entries);
+            let mut bytes = Vec::with_capacity(HEADER + payload.len() + 8);
+            bytes.extend(MAGIC);
+            bytes.extend(VERSION.to_le_bytes());
+            bytes.extend(f.key);
+            bytes.extend((entries.len() as u64).to_le_bytes());
+            bytes.extend(payload);
+            bytes.extend(XxHash3_64::oneshot(payload).to_le_bytes());
+            let written = f
+                .path
+                .parent()
+                .map_or(Ok(()), std::fs::create_dir_all)
+                .map_err(anyhow::Error::from)
+                .and_then(|_| crate::output::write_atomically(&f.path, &bytes));
+            if let Err(e) = written {
+                eprintln!("{}: cannot keep the light transport table: {e:#}", f.path.display());
+            }
+        }
+    }
+}
+
+impl Setup {
+    /// Entries of the table: `directions` per vertex and channel it traces.
+    pub fn table_len(&self) -> u64 {
+        self.table_blocks as u64 * self.params.directions as u64
+    }
+    /// Invocations of the table kernel: every vertex, direction and channel.
+    pub fn table_invocations(&self) -> u64 {
+        let p = &self.params;
+        p.vertex_count as u64 * p.directions as u64 * p.channels as u64
+    }
+    pub fn rays_len(&self) -> u64 {
+        let p = &self.params;
+        p.light_count as u64 * p.vertex_count as u64 * p.channels as u64
+    }
+    pub fn map_invocations(&self) -> u64 {
+        let p = &self.params;
+        p.light_count as u64 * p.triangle_count as u64 * p.channels as u64 * p.planes as u64
+    }
+    pub fn map_words(&self) -> u64 {
+        if self.enabled {
+            words_for(map_bins(&self.params)) as u64
+        } else {
+            1
+        }
+    }
+}
+
+pub static CAUSTICS_PARAMS: Resource = Resource {
+    binding: 31,
+    name: "caustics parameters",
+    kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.caustics.params)),
+};
+/// The light transport table (section 4): `TableEntry` per vertex, direction and channel.
+pub static CAUSTICS_TABLE: Resource = Resource {
+    binding: 32,
+    name: "light transport table",
+    kind: ResourceKind::Frame(|s| s.caustics.table_len() * std::mem::size_of::<TableEntry>() as u64),
+};
+/// Exit rays per light, vertex and channel.
+pub static CAUSTICS_RAYS: Resource = Resource {
+    binding: 33,
+    name: "caustics exit rays",
+    kind: ResourceKind::Frame(|s| s.caustics.rays_len() * std::mem::size_of::<ExitRay>() as u64),
+};
+/// The caustics maps' fixed-point words (`scatter.rs`), `MAP_BINS` bins per texel.
+pub static CAUSTICS_MAPS: Resource =
+    Resource { binding: 34, name: "caustics maps", kind: ResourceKind::Frame(|s| s.caustics.map_words() * 4) };
+/// Caustic radiance per pixel (rgb; w = 0).
+pub static CAUSTICS_RADIANCE: Resource =
+    Resource { binding: 35, name: "caustics radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
+
+fn skip(scene: &SceneData) -> Option<Plan> {
+    (!scene.caustics.enabled).then(|| Plan::skip(scene.caustics.reason.clone()))
+}
+
+fn glass(scene: &SceneData) -> Glass<'_> {
+    Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles }
+}
+
+/// Compares two buffers of table entries or exit rays: each position and
+/// direction within `tol` (metres, or of a unit vector), transmittances
+/// within `tol`, statuses equal, except `allowed` entries (paths that pass
+/// an edge of the mesh at a hair's breadth and take another triangle on
+/// one backend: f32 intersection tests differ by ulps between them).
+fn compare_entries(what: &str, gpu: &[TableEntry], cpu: &[TableEntry], tol: f32) -> Result<String> {
+    ensure!(gpu.len() == cpu.len(), "{what}: {} and {} entries", gpu.len(), cpu.len());
+    let mut differ = 0;
+    let mut worst = 0.0f32;
+    for (g, c) in gpu.iter().zip(cpu) {
+        let d = (g.position - c.position)
+            .abs()
+            .max((g.direction - c.direction).abs())
+            .max((g.transmittance - c.transmittance).abs())
+            .max_element();
+        let within = d <= tol * c.position.truncate().abs().max_element().max(1.0);
+        if g.position.w != c.position.w || !within {
+            differ += 1;
+        } else {
+            worst = worst.max(d);
+        }
+    }
+    let allowed = cpu.len() / 100 + 1;
+    ensure!(differ <= allowed, "{what}: {differ} of {} entries differ (allowed {allowed})", cpu.len());
+    Ok(format!("{what}: {} entries, {differ} differ, worst other difference {worst:e}", cpu.len()))
+}
+
+pub struct CausticsTable;
+
+impl Pass for CausticsTable {
+    fn name(&self) -> &'static str {
+        "caustics.table"
+    }
+    fn kernel(&self) -> &'static str {
+        "caustics::caustics_table_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, SPHERES, TRIANGLES, BVH_NODES, MATERIALS, GLASS_VERTICES, GLASS_TRIANGLES, CAUSTICS_PARAMS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![CAUSTICS_TABLE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(s) = skip(scene) {
+            return s;
+        }
+        let p = &scene.caustics.params;
+        if scene.caustics.cached_table.is_some() {
+            return Plan::skip(format!(
+                "light transport table of {} glass vertices x {} directions from the cache ({} file(s))",
+                p.vertex_count,
+                p.directions,
+                scene.caustics.cache_files.len()
+            ));
+        }
+        Plan::run(
+            format!(
+                "light transport table (section 4): {} glass vertices x {} directions{}",
+                p.vertex_count,
+                p.directions,
+                if p.channels == 3 { ", 3 channels where the glass disperses" } else { "" }
+            ),
+            scene.caustics.table_invocations(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let (geometry, glass, p) = (scene.geometry(), glass(scene), &scene.caustics.params);
+        let verts = &scene.glass_vertices;
+        // The entries in invocation order, each with its slot (see `table_slot`).
+        let invocations = scene.caustics.table_invocations() as u32;
+        let entries: Vec<(u32, TableEntry)> = (0..invocations)
+            .into_par_iter()
+            .with_min_len(4096)
+            .filter_map(|i| {
+                if i % 4096 == 0 {
+                    progress.inc(4096.min(invocations - i) as u64);
+                }
+                let slot = table_slot(i, p, verts);
+                (slot != u32::MAX).then(|| (slot, table_entry(i, p, &geometry, &glass, &scene.materials)))
+            })
+            .collect();
+        frame.write::<TableEntry>(&CAUSTICS_TABLE, scene.caustics.table_len() as usize, |_, out| {
+            for (slot, e) in entries {
+                out[slot as usize] = e;
+            }
+        });
+    }
+    fn cached<'a>(&self, scene: &'a SceneData) -> Option<(&'static Resource, &'a [u8])> {
+        let table = scene.caustics.cached_table.as_ref()?;
+        Some((&CAUSTICS_TABLE, bytemuck::cast_slice(table.as_slice())))
+    }
+    fn keeps(&self) -> &'static [&'static Resource] {
+        resources![CAUSTICS_TABLE]
+    }
+    fn persist(&self, scene: &SceneData, results: &Frame) {
+        cache::save(&scene.caustics, results.get::<TableEntry>(&CAUSTICS_TABLE));
+    }
+    fn counters(&self, _scene: &SceneData, frame: &Frame) -> Vec<(&'static str, u64)> {
+        let table = frame.get::<TableEntry>(&CAUSTICS_TABLE);
+        let count = |s: u32| table.iter().filter(|e| e.position.w == s as f32).count() as u64;
+        vec![
+            ("table entries leaving the glass", count(PATH_OUT)),
+            ("table entries totally reflected", count(slicelight_shaders::glass::PATH_TOTAL_REFLECTION)),
+            ("table entries self-occluded", count(slicelight_shaders::glass::PATH_OCCLUDED)),
+            ("table entries lost", count(slicelight_shaders::glass::PATH_LOST)),
+        ]
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Positions and directions come from a chain of refractions (sqrt,
+        // divisions) over up to 16 interfaces: 1e-3 relative.
+        compare_entries(
+            "light transport table",
+            gpu.get::<TableEntry>(&CAUSTICS_TABLE),
+            cpu.get::<TableEntry>(&CAUSTICS_TABLE),
+            1e-3,
+        )
+    }
+}
+
+pub struct CausticsLookup;
+
+impl Pass for CausticsLookup {
+    fn name(&self) -> &'static str {
+        "caustics.lookup"
+    }
+    fn kernel(&self) -> &'static str {
+        "caustics::caustics_lookup_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![
+            COMMON,
+            LIGHTS,
+            SPHERES,
+            TRIANGLES,
+            BVH_NODES,
+            MATERIALS,
+            GLASS_VERTICES,
+            CAUSTICS_PARAMS,
+            CAUSTICS_TABLE
+        ]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![CAUSTICS_RAYS]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(s) = skip(scene) {
+            return s;
+        }
+        Plan::run(
+            format!(
+                "exit rays of the lit vertices for {} light(s): four table directions, bilinear and quaternion interpolation (5.1)",
+                scene.caustics.params.light_count
+            ),
+            scene.caustics.rays_len(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let (geometry, p) = (scene.geometry(), &scene.caustics.params);
+        frame.write::<ExitRay>(&CAUSTICS_RAYS, scene.caustics.rays_len() as usize, |f, out| {
+            let table = f.get::<TableEntry>(&CAUSTICS_TABLE);
+            for_each_invocation(out, 0, progress, |i, r| {
+                *r = lookup(i, p, &scene.lights, &geometry, &scene.glass_vertices, &scene.materials, table)
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // As the table, plus acos/atan2 for the angles (Vulkan: 2^-11
+        // absolute), which move the interpolation weights: 2e-3.
+        compare_entries("exit rays", gpu.get::<ExitRay>(&CAUSTICS_RAYS), cpu.get::<ExitRay>(&CAUSTICS_RAYS), 2e-3)
+    }
+}
+
+pub struct CausticsMaps;
+
+/// The maps' densities (rgb, W/m^2 of the plane) per texel, decoded.
+pub fn decode_maps(scene: &SceneData, words: &[u32]) -> Vec<Vec4> {
+    let p = &scene.caustics.params;
+    let texels = map_bins(p) / MAP_BINS;
+    (0..texels)
+        .map(|t| {
+            let b = t * MAP_BINS;
+            Vec4::new(read_bin(words, p, b), read_bin(words, p, b + 1), read_bin(words, p, b + 2), 0.0)
+        })
+        .collect()
+}
+
+impl Pass for CausticsMaps {
+    fn name(&self) -> &'static str {
+        "caustics.maps"
+    }
+    fn kernel(&self) -> &'static str {
+        "caustics::caustics_maps_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, LIGHTS, LIGHT_MAPS, GLASS_VERTICES, GLASS_TRIANGLES, CAUSTICS_PARAMS, CAUSTICS_RAYS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![CAUSTICS_MAPS]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(s) = skip(scene) {
+            return s;
+        }
+        let p = &scene.caustics.params;
+        Plan::run(
+            format!(
+                "illumination volumes of {} triangles cut by {} sample plane(s) into {}x{} caustics maps (eq. 2)",
+                p.triangle_count, p.planes, p.map_width, p.map_height
+            ),
+            scene.caustics.map_invocations(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let (glass, p) = (glass(scene), &scene.caustics.params);
+        let atomics: Vec<AtomicU32> = (0..scene.caustics.map_words()).map(|_| AtomicU32::new(0)).collect();
+        {
+            let rays = frame.get::<ExitRay>(&CAUSTICS_RAYS);
+            for_each_index(scene.caustics.map_invocations() as u32, progress, |i| {
+                rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, &mut CpuAtomics(&atomics));
+            });
+        }
+        let words: Vec<u32> = atomics.into_iter().map(AtomicU32::into_inner).collect();
+        frame.put(&CAUSTICS_MAPS, &words);
+    }
+    fn keeps(&self) -> &'static [&'static Resource] {
+        resources![CAUSTICS_MAPS]
+    }
+    fn report(&self, scene: &SceneData, frame: &Frame) -> Option<String> {
+        let words = frame.get::<u32>(&CAUSTICS_MAPS);
+        if words.is_empty() {
+            return None;
+        }
+        let p = &scene.caustics.params;
+        let maps = decode_maps(scene, words);
+        let per_plane = (p.map_width * p.map_height) as usize;
+        let area = p.map_origin.w as f64 * p.map_origin.w as f64;
+        let flux: Vec<String> = maps
+            .chunks(per_plane)
+            .map(|m| {
+                let sum = m.iter().fold(glam::DVec3::ZERO, |s, v| s + v.truncate().as_dvec3()) * area;
+                format!("[{:.4e}, {:.4e}, {:.4e}]", sum.x, sum.y, sum.z)
+            })
+            .collect();
+        Some(format!(
+            "flux on each plane (W, from the lowest): {}; {} rejected contributions",
+            flux.join(", "),
+            words[0]
+        ))
+    }
+    fn compare(&self, scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Each texel sums the same flux on both backends, except where an
+        // exit ray differs (see the lookup's tolerance) and moves a
+        // cross-section's edge across texel centres: 1e-3 of the peak
+        // density, 1 % of the texels free to differ.
+        let (g, c) =
+            (decode_maps(scene, gpu.get::<u32>(&CAUSTICS_MAPS)), decode_maps(scene, cpu.get::<u32>(&CAUSTICS_MAPS)));
+        compare_rgb("caustics maps", &g, &c, 1e-3, c.len() * 3 / 100 + 1)
+    }
+}
+
+pub struct Caustics;
+
+impl Pass for Caustics {
+    fn name(&self) -> &'static str {
+        "caustics"
+    }
+    fn kernel(&self) -> &'static str {
+        "caustics::caustics_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![
+            COMMON,
+            SPHERES,
+            TRIANGLES,
+            BVH_NODES,
+            MATERIALS,
+            GBUFFER,
+            GLASS_VERTICES,
+            GLASS_TRIANGLES,
+            CAUSTICS_PARAMS,
+            CAUSTICS_MAPS
+        ]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![CAUSTICS_RADIANCE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&CAUSTICS_RADIANCE)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(s) = skip(scene) {
+            return s;
+        }
+        Plan::run("caustic light on the surfaces seen, directly or through glass (5.2, 5.3)", 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let (geometry, glass, p) = (scene.geometry(), glass(scene), &scene.caustics.params);
+        let n = common.band_pixels as usize;
+        frame.write::<Vec4>(&CAUSTICS_RADIANCE, n, |f, out| {
+            let words = f.get::<u32>(&CAUSTICS_MAPS);
+            let gbuffer = f.get::<GBufferTexel>(&GBUFFER);
+            for_each_invocation(out, common.band_start, progress, |i, v| {
+                let texel = &gbuffer[(i - common.band_start) as usize];
+                *v = caustics_pixel(i, common, p, &geometry, &glass, &scene.materials, words, texel);
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Bilinear reads of maps that agree to 1e-3 of their peak (above),
+        // along view rays that may refract differently at a silhouette:
+        // 2e-3 of the peak, 1 % of the values free to differ.
+        let (g, c) = (gpu.get::<Vec4>(&CAUSTICS_RADIANCE), cpu.get::<Vec4>(&CAUSTICS_RADIANCE));
+        compare_rgb("caustics radiance", g, c, 2e-3, c.len() * 3 / 100 + 1)
+    }
+}

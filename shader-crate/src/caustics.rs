@@ -1,0 +1,914 @@
+//! Refractive caustics with light transport tables (Iwasaki, Yoshimoto,
+//! Dobashi and Nishita 2005; `shared/papers/003_*`).
+//!
+//! Four kernels, one per stage of the paper:
+//! - `caustics_table_kernel` (section 4): for every vertex of a glass mesh
+//!   and every sampling direction of eq. 3 over the hemisphere above it, the
+//!   ray refracted in at the vertex, traced through the object (`glass.rs`)
+//!   until it leaves: exit position, exit direction and transmittance
+//!   (the light transport function, eq. 1), or a flag (total internal
+//!   reflection, self-occlusion, lost).
+//! - `caustics_lookup_kernel` (section 5.1): for every light and every
+//!   vertex the light reaches, the exit ray for the light's actual
+//!   direction: the four table directions around it, bilinear
+//!   interpolation of the exit position and transmittance, quaternion
+//!   interpolation (rotation about the axis between two directions by a
+//!   fraction of their angle) of the exit direction.
+//! - `caustics_maps_kernel` (section 5.1-5.2, eq. 2): every lit triangle's
+//!   three exit rays sweep an illumination volume; its cross-section with
+//!   each horizontal sample plane is a triangle, rasterised into that
+//!   plane's caustics map with the flux it carries, by the scatter
+//!   primitive (`scatter.rs`).
+//! - `caustics_kernel` (per pixel): the caustic irradiance at the surface a
+//!   pixel sees (directly or through glass), interpolated between the two
+//!   sample planes around it, times `albedo / pi`.
+//!
+//! # Units and the flux ratio
+//! A lit triangle of area `S` whose normal makes the angle `theta` with the
+//! light receives the flux `Phi = E_perp S cos(theta)` (W; `E_perp` the
+//! irradiance normal to the light's rays: `I / r^2` for a point or spot
+//! light, `E` for a directional one), of which the fraction `F_t` (the
+//! interpolated transmittance, per channel) leaves the glass. Spread over
+//! the cross-section of area `S_p` it is the flux density `F_t Phi / S_p`
+//! (W/m^2 of the plane): eq. 2's `L_in cos(theta) F_t F_p` with
+//! `F_p = S / S_p`. The rasteriser deposits it over the texels whose
+//! centres the cross-section covers, `F_t Phi / (k A_texel)` each for `k`
+//! covered texels, and, when it covers none (a cross-section smaller than a
+//! texel, or a focal line where `S_p -> 0`), all of it into the texel under
+//! its centroid, `F_t Phi / A_texel`: the map receives exactly the flux
+//! each volume carries, never more, and the density stays bounded by one
+//! texel's worth.
+//!
+//! A receiver of unit normal `n` at a point where the rays cross the plane
+//! in mean direction `w` gets the irradiance `density * |n . w| / |w_y|`.
+//! Each texel keeps, besides the density per channel, the density-weighted
+//! sums of `w_x / |w_y|` and `w_z / |w_y|` (positive and negative parts in
+//! separate bins, as the scatter primitive adds non-negative numbers), from
+//! which the mean direction is rebuilt. Only rays going down cross the
+//! planes (light from above the receivers).
+
+use crate::camera::{camera_ray, in_image};
+use crate::geometry::{trace_nearest, trace_object, Geometry, NO_HIT};
+use crate::glam::{Quat, UVec3, Vec3, Vec4, Vec4Swizzles};
+use crate::glass::{
+    fresnel_transmittance, pick, surface_epsilon, trace_through, Glass, PATH_LOST, PATH_OCCLUDED, PATH_OUT,
+};
+use crate::light::{emitted, light_local, transmittance};
+use crate::scatter::{scatter_add, AtomicWords};
+use crate::surface::{channel_part, receiver, shadow_ray_visibility, view_channels};
+use crate::types::{
+    CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
+    LIGHT_DIRECTIONAL, MATERIAL_GLASS, NO_OBJECT,
+};
+use core::f32::consts::{FRAC_1_PI, FRAC_PI_2, TAU};
+#[cfg(target_arch = "spirv")]
+use spirv_std::num_traits::Float;
+use spirv_std::spirv;
+
+/// Bins per caustics-map texel: density in r, g, b (W/m^2 of the plane),
+/// then the density-weighted `+w_x/|w_y|`, `-w_x/|w_y|`, `+w_z/|w_y|`,
+/// `-w_z/|w_y|`.
+pub const MAP_BINS: u32 = 7;
+/// Largest `|w_x / w_y|` kept (rays within 89 degrees of the vertical).
+pub const MAX_SLOPE: f32 = 64.0;
+
+/// The caustics passes' parameter block.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct CausticsParams {
+    /// The lowest sample plane's corner: x, y (its height), z, metres; w:
+    /// the texel size, metres.
+    pub map_origin: Vec4,
+    /// Rings of sampling directions away from the normal (eq. 3's `phi`
+    /// from 0 to 90 degrees in `rings` steps) and azimuths per ring: the
+    /// table has `1 + rings * azimuths` directions per vertex.
+    pub rings: u32,
+    pub azimuths: u32,
+    pub directions: u32,
+    /// 3 when some glass disperses (each channel its own path), else 1.
+    pub channels: u32,
+    pub vertex_count: u32,
+    pub triangle_count: u32,
+    /// Lights (the first `light_count` of the scene's) whose caustics are drawn.
+    pub light_count: u32,
+    /// Horizontal sample planes, `plane_spacing` apart from `map_origin.y` up.
+    pub planes: u32,
+    pub map_width: u32,
+    pub map_height: u32,
+    pub plane_spacing: f32,
+    /// Fixed-point units per W/m^2 of the maps' bins (see `scatter.rs`).
+    pub scale: f32,
+}
+
+/// One entry of the light transport table: the exit ray's point nearest
+/// the vertex (w: the path's status, `glass::PATH_*`), exit direction (w:
+/// the distance from that point to the exit point along it, metres), and
+/// the transmittance per channel after the entry interface (w unused). The
+/// exit point is `position + direction * direction.w`.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct TableEntry {
+    pub position: Vec4,
+    pub direction: Vec4,
+    pub transmittance: Vec4,
+}
+
+/// The exit ray of one vertex for one light: exit point (w: 1 if valid),
+/// direction, transmittance per channel (entry included).
+pub type ExitRay = TableEntry;
+
+#[cfg(not(target_arch = "spirv"))]
+mod pod {
+    // SAFETY: `repr(C)`, only `Vec4`s and 4-byte scalars, sizes multiples
+    // of 16 with no padding; any bits are valid.
+    unsafe impl bytemuck::Zeroable for super::CausticsParams {}
+    unsafe impl bytemuck::Pod for super::CausticsParams {}
+    unsafe impl bytemuck::Zeroable for super::TableEntry {}
+    unsafe impl bytemuck::Pod for super::TableEntry {}
+    const _: () = assert!(core::mem::size_of::<super::CausticsParams>() == 64);
+    const _: () = assert!(core::mem::size_of::<super::TableEntry>() == 48);
+}
+
+/// The local frame of a vertex (section 4, Fig. 3): tangent `t` and
+/// binormal `b` from the unit normal `n`, the same on every call.
+pub fn vertex_frame(n: Vec3) -> (Vec3, Vec3) {
+    let a = if n.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
+    let t = a.cross(n).normalize();
+    (t, n.cross(t))
+}
+
+/// Eq. 3's angles of table direction `j`: (`phi` from the inward normal,
+/// `theta` around it), radians. Direction 0 is the pole (`phi = 0`); then
+/// rings `k = 1..=rings` at `phi = k pi / (2 rings)`, `azimuths` each.
+pub fn direction_angles(params: &CausticsParams, j: u32) -> (f32, f32) {
+    if j == 0 {
+        return (0.0, 0.0);
+    }
+    let k = (j - 1) / params.azimuths + 1;
+    let m = (j - 1) % params.azimuths;
+    (k as f32 * FRAC_PI_2 / params.rings as f32, m as f32 * TAU / params.azimuths as f32)
+}
+
+/// Eq. 3: `w = -cos(phi) n - sin(phi) cos(theta) t - sin(phi) sin(theta) b`,
+/// a direction of light arriving at the vertex.
+pub fn sampling_direction(n: Vec3, t: Vec3, b: Vec3, phi: f32, theta: f32) -> Vec3 {
+    let (sp, cp) = phi.sin_cos();
+    let (st, ct) = theta.sin_cos();
+    -(n * cp) - t * (sp * ct) - b * (sp * st)
+}
+
+/// Where table invocation `index` = `(vertex * directions + j) * channels +
+/// channel` stores its entry: at `table_block * directions + j * channels_v +
+/// channel` (`channels_v` its vertex's), or nowhere (`u32::MAX`) for a
+/// channel its vertex does not trace (a glass that does not disperse traces
+/// channel 0 for all three).
+pub fn table_slot(index: u32, params: &CausticsParams, vertices: &[GlassVertex]) -> u32 {
+    let c = index % params.channels;
+    let j = (index / params.channels) % params.directions;
+    let v = vertices[(index / (params.channels * params.directions)) as usize];
+    if c >= v.channels {
+        return u32::MAX;
+    }
+    v.table_block * params.directions + j * v.channels + c
+}
+
+/// The table entry of invocation `index` (see `table_slot`): the path of
+/// table direction `j` in channel `channel` from the vertex.
+pub fn table_entry(
+    index: u32,
+    params: &CausticsParams,
+    geometry: &Geometry,
+    glass: &Glass,
+    materials: &[GpuMaterial],
+) -> TableEntry {
+    let c = index % params.channels;
+    let j = (index / params.channels) % params.directions;
+    let v = glass.vertices[(index / (params.channels * params.directions)) as usize];
+    let (p, n) = (v.position.xyz(), v.normal.xyz());
+    let (t, b) = vertex_frame(n);
+    let (phi, theta) = direction_angles(params, j);
+    let w = sampling_direction(n, t, b, phi, theta);
+    // Self-occlusion (section 4): a ray from the vertex back toward the
+    // light that meets the object itself.
+    let eps = surface_epsilon(p);
+    let back = trace_object(p + n * eps, -w, eps, NO_HIT, geometry, v.object);
+    if back.distance != NO_HIT {
+        return TableEntry {
+            position: p.extend(PATH_OCCLUDED as f32),
+            direction: w.extend(0.0),
+            transmittance: Vec4::ZERO,
+        };
+    }
+    // The last ring is traced just inside grazing, where the entry's
+    // Fresnel transmittance is not yet 0 (see below).
+    let w = if phi > MAX_TRACED_PHI { sampling_direction(n, t, b, MAX_TRACED_PHI, theta) } else { w };
+    let path = trace_through(geometry, glass, materials, p, n, v.material, w, c, v.object, false);
+    if path.status != PATH_OUT {
+        return TableEntry {
+            position: path.position.extend(path.status as f32),
+            direction: path.direction.extend(0.0),
+            transmittance: Vec4::ZERO,
+        };
+    }
+    // The exit ray as a line: its point nearest the vertex and the distance
+    // from there to the exit point. Interpolated between table directions,
+    // these follow the line far more closely than the exit point does (for
+    // glass of index 1 the point nearest the vertex is the vertex itself).
+    let d = path.direction;
+    let s_exit = (path.position - p).dot(d);
+    let anchor = path.position - d * s_exit;
+    // The entry's Fresnel transmittance is left out (the lookup applies it
+    // for the light's exact angle): it falls to 0 at grazing faster than
+    // the table's rings can follow.
+    let entry = fresnel_transmittance(-w.dot(n), 1.0 / pick(materials[v.material as usize].ior, c));
+    TableEntry {
+        position: anchor.extend(PATH_OUT as f32),
+        direction: d.extend(s_exit),
+        transmittance: path.transmittance() / entry,
+    }
+}
+
+/// Largest angle from the inward normal traced for the table, radians
+/// (89.5 degrees; the entry's Fresnel transmittance there is at least 0.4 %
+/// for indices up to 4).
+pub const MAX_TRACED_PHI: f32 = 1.562_069;
+
+/// `a` turned toward `b` by the fraction `w` of the angle between them:
+/// the rotation about `a x b` as a quaternion (section 5.1's
+/// quaternion-based vector interpolation).
+pub fn rotate_toward(a: Vec3, b: Vec3, w: f32) -> Vec3 {
+    let axis = a.cross(b);
+    let sin = axis.length();
+    let cos = a.dot(b);
+    if sin < 1e-7 {
+        return (a * (1.0 - w) + b * w).normalize();
+    }
+    let angle = sin.atan2(cos);
+    Quat::from_axis_angle(axis / sin, angle * w).mul_vec3(a)
+}
+
+/// A table corner's exit ray in the frame turned about the vertex normal
+/// by minus its own azimuth (`theta_j`; the pole, which has none, takes the
+/// light's): the rotation (a quaternion) from its sampling direction to its
+/// exit direction, and its point nearest the vertex, relative to the
+/// vertex. Around a locally symmetric surface these hardly change between
+/// the azimuths of a ring.
+#[allow(clippy::too_many_arguments)]
+fn corner_local(
+    params: &CausticsParams,
+    p: Vec3,
+    n: Vec3,
+    t: Vec3,
+    k: u32,
+    m: u32,
+    theta_light: f32,
+    e: &TableEntry,
+) -> (Quat, Vec3) {
+    let (phi, theta) = direction_angles(params, ring_index(params, k, m));
+    let theta = if k == 0 { theta_light } else { theta };
+    let r = Quat::from_axis_angle(n, -theta);
+    let (sp, cp) = phi.min(MAX_TRACED_PHI).sin_cos();
+    let sampled = -(n * cp) - t * sp;
+    (rotation_arc(sampled, r.mul_vec3(e.direction.xyz())), r.mul_vec3(e.position.xyz() - p))
+}
+
+/// The shortest rotation taking unit `a` to unit `b` (glam's
+/// `Quat::from_rotation_arc` without its `signum`, whose NaN case becomes
+/// a NaN constant naga rejects): about `a x b`, or for opposite vectors by
+/// pi about an axis normal to `a`.
+pub fn rotation_arc(a: Vec3, b: Vec3) -> Quat {
+    let dot = a.dot(b);
+    if dot < -0.999_999 {
+        let other = if a.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
+        return Quat::from_axis_angle(a.cross(other).normalize(), core::f32::consts::PI);
+    }
+    let c = a.cross(b);
+    Quat::from_xyzw(c.x, c.y, c.z, 1.0 + dot).normalize()
+}
+
+/// Two directions' interpolation by `rotate_toward` with weights `wa`,
+/// `wb`; either may be missing (weight 0). Returns it and the weight sum.
+fn blend(a: Vec3, wa: f32, b: Vec3, wb: f32) -> (Vec3, f32) {
+    if wa > 0.0 && wb > 0.0 {
+        (rotate_toward(a, b, wb / (wa + wb)), wa + wb)
+    } else if wa > 0.0 {
+        (a, wa)
+    } else {
+        (b, wb)
+    }
+}
+
+/// Ring `k`'s sampling direction in the frame turned by its azimuth.
+fn sampled_local(params: &CausticsParams, n: Vec3, t: Vec3, k: u32) -> Vec3 {
+    let phi = (k as f32 * FRAC_PI_2 / params.rings as f32).min(MAX_TRACED_PHI);
+    -(n * phi.cos()) - t * phi.sin()
+}
+
+/// The rotation of the heaviest of four corners.
+#[allow(clippy::too_many_arguments)]
+fn heaviest(q0: Quat, w0: f32, q1: Quat, w1: f32, q2: Quat, w2: f32, q3: Quat, w3: f32) -> Quat {
+    let mut q = q0;
+    let mut best = w0;
+    if w1 > best {
+        q = q1;
+        best = w1;
+    }
+    if w2 > best {
+        q = q2;
+        best = w2;
+    }
+    if w3 > best {
+        q = q3;
+    }
+    q
+}
+
+/// Table index of ring `k`, azimuth `m` (every azimuth of ring 0 is the pole).
+fn ring_index(params: &CausticsParams, k: u32, m: u32) -> u32 {
+    if k == 0 {
+        0
+    } else {
+        1 + (k - 1) * params.azimuths + m
+    }
+}
+
+/// Whether light from `light` reaches the glass vertex `v`, and its
+/// direction of travel there.
+pub fn light_at_vertex(light: &GpuLight, geometry: &Geometry, v: &GlassVertex) -> (bool, Vec3) {
+    let (p, n) = (v.position.xyz(), v.normal.xyz());
+    let (dir, distance) = if light.kind == LIGHT_DIRECTIONAL {
+        (light.axis_z.xyz(), light_local(light, p).z)
+    } else {
+        let d = p - light.position.xyz();
+        let s = d.length();
+        (d / s.max(1e-30), s)
+    };
+    if !(dir.dot(n) < 0.0 && distance > 0.0) {
+        return (false, dir);
+    }
+    (shadow_ray_visibility(geometry, p, n, -dir, distance) > 0.0, dir)
+}
+
+/// Lookup `index` = `(light * vertex_count + vertex) * channels + channel`
+/// (section 5.1): the exit ray for the light's direction at the vertex, from
+/// the four table directions around it. Corners whose paths do not leave the
+/// glass add no transmittance, and the position and direction are taken
+/// from the others.
+pub fn lookup(
+    index: u32,
+    params: &CausticsParams,
+    lights: &[GpuLight],
+    geometry: &Geometry,
+    vertices: &[GlassVertex],
+    materials: &[GpuMaterial],
+    table: &[TableEntry],
+) -> ExitRay {
+    let invalid = ExitRay { position: Vec4::ZERO, direction: Vec4::ZERO, transmittance: Vec4::ZERO };
+    let c = index % params.channels;
+    let vi = (index / params.channels) % params.vertex_count;
+    let li = index / (params.channels * params.vertex_count);
+    let v = vertices[vi as usize];
+    let (lit, l) = light_at_vertex(&lights[li as usize], geometry, &v);
+    if !lit {
+        return invalid;
+    }
+    let n = v.normal.xyz();
+    let (t, b) = vertex_frame(n);
+    let phi = (-l.dot(n)).clamp(0.0, 1.0).acos();
+    let mut theta = (-l.dot(b)).atan2(-l.dot(t));
+    if theta < 0.0 {
+        theta += TAU;
+    }
+    let fk = phi / FRAC_PI_2 * params.rings as f32;
+    let k0 = (fk.floor() as u32).min(params.rings - 1);
+    // Between rings k0 and k0 + 1 by angle, the last ring where it was
+    // traced (`MAX_TRACED_PHI`); beyond that, the last ring.
+    let phi0 = k0 as f32 * FRAC_PI_2 / params.rings as f32;
+    let phi1 = ((k0 + 1) as f32 * FRAC_PI_2 / params.rings as f32).min(MAX_TRACED_PHI);
+    let wk = ((phi - phi0) / (phi1 - phi0)).clamp(0.0, 1.0);
+    let fm = theta / TAU * params.azimuths as f32;
+    let m0 = (fm.floor() as u32).min(params.azimuths - 1);
+    let wm = (fm - m0 as f32).clamp(0.0, 1.0);
+    let m1 = (m0 + 1) % params.azimuths;
+    let base = v.table_block * params.directions;
+    let (vc, c) = (v.channels, c.min(v.channels - 1));
+    let e00 = table[(base + ring_index(params, k0, m0) * vc + c) as usize];
+    let e01 = table[(base + ring_index(params, k0, m1) * vc + c) as usize];
+    let e10 = table[(base + ring_index(params, k0 + 1, m0) * vc + c) as usize];
+    let e11 = table[(base + ring_index(params, k0 + 1, m1) * vc + c) as usize];
+    // Corners whose paths leave the glass give the exit ray. Those that
+    // meet total internal reflection or the object itself transmit
+    // nothing, so they count toward the transmittance as 0; a lost path (a
+    // ray slipping between triangles at a shared vertex, an open mesh) says
+    // nothing and counts toward neither.
+    let valid = |e: &TableEntry| if e.position.w == PATH_OUT as f32 { 1.0 } else { 0.0 };
+    let known = |e: &TableEntry| if e.position.w == PATH_LOST as f32 { 0.0 } else { 1.0 };
+    let (b00, b01, b10, b11) = ((1.0 - wk) * (1.0 - wm), (1.0 - wk) * wm, wk * (1.0 - wm), wk * wm);
+    let w00 = b00 * valid(&e00);
+    let w01 = b01 * valid(&e01);
+    let w10 = b10 * valid(&e10);
+    let w11 = b11 * valid(&e11);
+    let total = w00 + w01 + w10 + w11;
+    let weighed = b00 * known(&e00) + b01 * known(&e01) + b10 * known(&e10) + b11 * known(&e11);
+    if total <= 0.0 || total.is_nan() {
+        return invalid;
+    }
+    // Interpolation in the frame that turns with the azimuth (section 5.1
+    // interpolates the exit directions themselves; across a ring's azimuths
+    // a great-circle arc cuts inside the ring, which bends the caustic):
+    // each corner turned about the normal by minus its azimuth, where its
+    // exit direction is its sampling direction turned by a rotation (a
+    // quaternion); the corners' exit directions and their points nearest
+    // the vertex blended with the bilinear weights; the result turned back
+    // by the light's azimuth. Exact in azimuth around a surface of
+    // revolution, and exact for glass that bends nothing.
+    let pv = v.position.xyz();
+    let (q00, a00) = corner_local(params, pv, n, t, k0, m0, theta, &e00);
+    let (q01, a01) = corner_local(params, pv, n, t, k0, m1, theta, &e01);
+    let (q10, a10) = corner_local(params, pv, n, t, k0 + 1, m0, theta, &e10);
+    let (q11, a11) = corner_local(params, pv, n, t, k0 + 1, m1, theta, &e11);
+    // A corner whose path was lost (a ray slipping between triangles, a
+    // grazing ray that leaves the mesh at once) takes the rotation of the
+    // heaviest corner whose path left the glass; a corner where the light
+    // is totally reflected or blocked lends no direction at all.
+    let q = heaviest(q00, w00, q01, w01, q10, w10, q11, w11);
+    let lost = |e: &TableEntry| if e.position.w == PATH_LOST as f32 { 1.0 } else { 0.0 };
+    let (g00, g01, g10, g11) =
+        (w00 + b00 * lost(&e00), w01 + b01 * lost(&e01), w10 + b10 * lost(&e10), w11 + b11 * lost(&e11));
+    let pick_q = |qj: Quat, wj: f32| if wj > 0.0 { qj } else { q };
+    let s0 = sampled_local(params, n, t, k0);
+    let s1 = sampled_local(params, n, t, k0 + 1);
+    let (ring0, h0) = blend(pick_q(q00, w00).mul_vec3(s0), g00, pick_q(q01, w01).mul_vec3(s0), g01);
+    let (ring1, h1) = blend(pick_q(q10, w10).mul_vec3(s1), g10, pick_q(q11, w11).mul_vec3(s1), g11);
+    let (local_exit, _) = blend(ring0, h0, ring1, h1);
+    let local_anchor = (a00 * w00 + a01 * w01 + a10 * w10 + a11 * w11) / total;
+    let back = Quat::from_axis_angle(n, theta);
+    let direction = back.mul_vec3(local_exit).normalize();
+    let anchor = pv + back.mul_vec3(local_anchor);
+    let s_exit =
+        (e00.direction.w * w00 + e01.direction.w * w01 + e10.direction.w * w10 + e11.direction.w * w11) / total;
+    let inner = (e00.transmittance * w00 + e01.transmittance * w01 + e10.transmittance * w10 + e11.transmittance * w11)
+        / weighed;
+    // The entry's Fresnel transmittance at the light's own angle.
+    let entry = fresnel_transmittance(-l.dot(n), 1.0 / pick(materials[v.material as usize].ior, c));
+    ExitRay {
+        position: (anchor + direction * s_exit).extend(1.0),
+        direction: direction.extend(0.0),
+        transmittance: inner * entry,
+    }
+}
+
+/// Flux (W per channel, w = 0) entering the glass through triangle `tri`
+/// from `light` and leaving it, before the flux ratio: `E_perp S cos(theta)`
+/// times the mean transmittance of the vertices' exit rays.
+pub fn triangle_flux(
+    params: &CommonParams,
+    light: &GpuLight,
+    light_map: &[Vec4],
+    a: Vec3,
+    b: Vec3,
+    c: Vec3,
+    transmitted: Vec4,
+) -> Vec4 {
+    let g = (a + b + c) / 3.0;
+    let local = light_local(light, g);
+    let (dir, e_perp) = if light.kind == LIGHT_DIRECTIONAL {
+        (light.axis_z.xyz(), emitted(light, light_map, local) * transmittance(params.sigma_t, local.z))
+    } else {
+        let d = g - light.position.xyz();
+        let s2 = d.length_squared().max(1e-30);
+        let s = s2.sqrt();
+        (d / s, emitted(light, light_map, local) * transmittance(params.sigma_t, s) / s2)
+    };
+    let area_normal = (b - a).cross(c - a) * 0.5;
+    let projected = area_normal.dot(dir).abs();
+    let f = e_perp * transmitted * projected;
+    Vec4::new(f.x, f.y, f.z, 0.0)
+}
+
+/// Words of the caustics maps: `MAP_BINS` bins per texel of every plane.
+pub fn map_bins(params: &CausticsParams) -> u32 {
+    params.planes * params.map_width * params.map_height * MAP_BINS
+}
+
+/// Map invocation `index` = `((light * triangle_count + triangle) *
+/// channels + channel) * planes + plane`: the cross-section of the triangle's
+/// illumination volume with the plane, rasterised into its map.
+#[allow(clippy::too_many_arguments)]
+pub fn rasterize<A: AtomicWords + ?Sized>(
+    index: u32,
+    common: &CommonParams,
+    params: &CausticsParams,
+    lights: &[GpuLight],
+    light_map: &[Vec4],
+    glass: &Glass,
+    rays: &[ExitRay],
+    words: &mut A,
+) {
+    let k = index % params.planes;
+    let c = (index / params.planes) % params.channels;
+    let ti = (index / (params.planes * params.channels)) % params.triangle_count;
+    let li = index / (params.planes * params.channels * params.triangle_count);
+    let tri = glass.triangles[ti as usize];
+    let first = li * params.vertex_count;
+    let r0 = rays[((first + tri.vertices[0]) * params.channels + c) as usize];
+    let r1 = rays[((first + tri.vertices[1]) * params.channels + c) as usize];
+    let r2 = rays[((first + tri.vertices[2]) * params.channels + c) as usize];
+    if r0.position.w == 0.0 || r1.position.w == 0.0 || r2.position.w == 0.0 {
+        return;
+    }
+    let (d0, d1, d2) = (r0.direction.xyz(), r1.direction.xyz(), r2.direction.xyz());
+    if !(d0.y < 0.0 && d1.y < 0.0 && d2.y < 0.0) {
+        return;
+    }
+    let y = params.map_origin.y + k as f32 * params.plane_spacing;
+    let t0 = (y - r0.position.y) / d0.y;
+    let t1 = (y - r1.position.y) / d1.y;
+    let t2 = (y - r2.position.y) / d2.y;
+    if !(t0 >= 0.0 && t1 >= 0.0 && t2 >= 0.0) {
+        return;
+    }
+    let va = glass.vertices[tri.vertices[0] as usize].position.xyz();
+    let vb = glass.vertices[tri.vertices[1] as usize].position.xyz();
+    let vc = glass.vertices[tri.vertices[2] as usize].position.xyz();
+    let transmitted = (r0.transmittance + r1.transmittance + r2.transmittance) / 3.0;
+    let mut flux = triangle_flux(common, &lights[li as usize], light_map, va, vb, vc, transmitted)
+        * transmittance(common.sigma_t, (t0 + t1 + t2) / 3.0);
+    if params.channels == 3 {
+        flux = channel_part(flux, c, 3);
+    }
+    if !(flux.x > 0.0 || flux.y > 0.0 || flux.z > 0.0) {
+        return;
+    }
+    // The cross-section in texel coordinates (texel centres at integers).
+    let texel = params.map_origin.w;
+    let origin = params.map_origin.xyz();
+    let (ax, az) = to_texel(r0.position.xyz() + d0 * t0, origin, texel);
+    let (bx, bz) = to_texel(r1.position.xyz() + d1 * t1, origin, texel);
+    let (cx, cz) = to_texel(r2.position.xyz() + d2 * t2, origin, texel);
+    let w = (d0 + d1 + d2).normalize();
+    let slope_x = (w.x / -w.y).clamp(-MAX_SLOPE, MAX_SLOPE);
+    let slope_z = (w.z / -w.y).clamp(-MAX_SLOPE, MAX_SLOPE);
+    // Oriented so that the edge functions are non-negative inside.
+    let area2 = (bx - ax) * (cz - az) - (bz - az) * (cx - ax);
+    let tri = Triangle2 { ax, az, bx, bz, cx, cz, sign: if area2 < 0.0 { -1.0 } else { 1.0 } };
+    let (wmax, hmax) = (params.map_width as f32 - 1.0, params.map_height as f32 - 1.0);
+    // Texels whose squares [i - 1/2, i + 1/2] the cross-section's box meets.
+    let i0 = (ax.min(bx).min(cx) - 0.5).ceil().max(0.0);
+    let i1 = (ax.max(bx).max(cx) + 0.5).floor().min(wmax);
+    let j0 = (az.min(bz).min(cz) - 0.5).ceil().max(0.0);
+    let j1 = (az.max(bz).max(cz) + 0.5).floor().min(hmax);
+    // First pass: the sub-samples covered in all (4 x 4 per texel).
+    let mut count = 0u32;
+    if i0 <= i1 && j0 <= j1 && area2 != 0.0 {
+        let mut j = j0;
+        while j <= j1 {
+            let mut i = i0;
+            while i <= i1 {
+                count += texel_coverage(&tri, i, j);
+                i += 1.0;
+            }
+            j += 1.0;
+        }
+    }
+    let plane_base = k * params.map_width * params.map_height;
+    if count == 0 {
+        // Smaller than a sub-sample's spacing, or a focal line: all of it
+        // in the texel under the centroid.
+        let gx = ((ax + bx + cx) / 3.0).round();
+        let gz = ((az + bz + cz) / 3.0).round();
+        if gx >= 0.0 && gx <= wmax && gz >= 0.0 && gz <= hmax {
+            let density = flux / (texel * texel);
+            deposit(words, params, plane_base + gz as u32 * params.map_width + gx as u32, density, slope_x, slope_z);
+        }
+        return;
+    }
+    // Second pass: each texel its share of the flux, by its sub-samples.
+    let per_sample = flux * (SUBSAMPLES as f32 / (count as f32 * texel * texel));
+    let mut j = j0;
+    while j <= j1 {
+        let mut i = i0;
+        while i <= i1 {
+            let covered = texel_coverage(&tri, i, j);
+            if covered > 0 {
+                let density = per_sample * (covered as f32 / SUBSAMPLES as f32);
+                deposit(words, params, plane_base + j as u32 * params.map_width + i as u32, density, slope_x, slope_z);
+            }
+            i += 1.0;
+        }
+        j += 1.0;
+    }
+}
+
+/// Coverage samples per texel (a 4 x 4 grid).
+pub const SUBSAMPLES: u32 = 16;
+
+/// A cross-section in texel coordinates, `sign` orienting its edge
+/// functions to be non-negative inside.
+pub struct Triangle2 {
+    pub ax: f32,
+    pub az: f32,
+    pub bx: f32,
+    pub bz: f32,
+    pub cx: f32,
+    pub cz: f32,
+    pub sign: f32,
+}
+
+fn inside(t: &Triangle2, px: f32, pz: f32) -> bool {
+    let e0 = (t.bx - t.ax) * (pz - t.az) - (t.bz - t.az) * (px - t.ax);
+    let e1 = (t.cx - t.bx) * (pz - t.bz) - (t.cz - t.bz) * (px - t.bx);
+    let e2 = (t.ax - t.cx) * (pz - t.cz) - (t.az - t.cz) * (px - t.cx);
+    t.sign * e0 >= 0.0 && t.sign * e1 >= 0.0 && t.sign * e2 >= 0.0
+}
+
+/// How many of texel `(i, j)`'s 4 x 4 sub-samples the triangle covers: 16
+/// at once when its four corners are inside (the triangle is convex).
+pub fn texel_coverage(t: &Triangle2, i: f32, j: f32) -> u32 {
+    if inside(t, i - 0.5, j - 0.5)
+        && inside(t, i + 0.5, j - 0.5)
+        && inside(t, i - 0.5, j + 0.5)
+        && inside(t, i + 0.5, j + 0.5)
+    {
+        return SUBSAMPLES;
+    }
+    let mut n = 0;
+    let mut s = 0;
+    while s < SUBSAMPLES {
+        let px = i - 0.5 + ((s % 4) as f32 + 0.5) * 0.25;
+        let pz = j - 0.5 + ((s / 4) as f32 + 0.5) * 0.25;
+        if inside(t, px, pz) {
+            n += 1;
+        }
+        s += 1;
+    }
+    n
+}
+
+/// Texel coordinates (centres at integers) of a point on a sample plane.
+fn to_texel(q: Vec3, origin: Vec3, texel: f32) -> (f32, f32) {
+    ((q.x - origin.x) / texel - 0.5, (q.z - origin.z) / texel - 0.5)
+}
+
+/// Adds a density (W/m^2 per channel) and its direction to a texel's bins.
+fn deposit<A: AtomicWords + ?Sized>(
+    words: &mut A,
+    params: &CausticsParams,
+    texel: u32,
+    density: Vec4,
+    slope_x: f32,
+    slope_z: f32,
+) {
+    let bin = texel * MAP_BINS;
+    let s = params.scale;
+    if density.x > 0.0 {
+        scatter_add(words, bin, density.x, s);
+    }
+    if density.y > 0.0 {
+        scatter_add(words, bin + 1, density.y, s);
+    }
+    if density.z > 0.0 {
+        scatter_add(words, bin + 2, density.z, s);
+    }
+    let weight = density.x + density.y + density.z;
+    if slope_x > 0.0 {
+        scatter_add(words, bin + 3, weight * slope_x, s);
+    } else if slope_x < 0.0 {
+        scatter_add(words, bin + 4, -weight * slope_x, s);
+    }
+    if slope_z > 0.0 {
+        scatter_add(words, bin + 5, weight * slope_z, s);
+    } else if slope_z < 0.0 {
+        scatter_add(words, bin + 6, -weight * slope_z, s);
+    }
+}
+
+/// A bin's value from its words, in the map's units (f32).
+pub fn read_bin(words: &[u32], params: &CausticsParams, bin: u32) -> f32 {
+    let low = words[(1 + 2 * bin) as usize];
+    let high = words[(2 + 2 * bin) as usize];
+    (high as f32 * 4_294_967_296.0 + low as f32) / params.scale
+}
+
+/// Density (rgb) and slopes (w: unused) of one plane at texel coordinates
+/// `(u, v)` (centres at integers), bilinear; zero outside the map.
+fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f32) -> (Vec4, f32, f32) {
+    let mut density = Vec4::ZERO;
+    let mut sx = 0.0;
+    let mut sz = 0.0;
+    let i0 = u.floor();
+    let j0 = v.floor();
+    let fu = u - i0;
+    let fv = v - j0;
+    let mut corner = 0;
+    while corner < 4 {
+        let i = i0 + (corner % 2) as f32;
+        let j = j0 + (corner / 2) as f32;
+        let w = if corner % 2 == 1 { fu } else { 1.0 - fu } * if corner / 2 == 1 { fv } else { 1.0 - fv };
+        if w > 0.0 && i >= 0.0 && j >= 0.0 && i < params.map_width as f32 && j < params.map_height as f32 {
+            let bin = ((plane * params.map_height + j as u32) * params.map_width + i as u32) * MAP_BINS;
+            density += Vec4::new(
+                read_bin(words, params, bin),
+                read_bin(words, params, bin + 1),
+                read_bin(words, params, bin + 2),
+                0.0,
+            ) * w;
+            sx += (read_bin(words, params, bin + 3) - read_bin(words, params, bin + 4)) * w;
+            sz += (read_bin(words, params, bin + 5) - read_bin(words, params, bin + 6)) * w;
+        }
+        corner += 1;
+    }
+    (density, sx, sz)
+}
+
+/// Caustic irradiance (W/m^2 per channel, w = 0) on a surface at `p` with
+/// unit normal `n` facing the side the light arrives from: the two sample
+/// planes around `p`'s height, interpolated linearly in height (below the
+/// lowest plane and above the highest, the nearest one), each
+/// `density |n . w| / |w_y|` (see the module docs).
+pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Vec3) -> Vec4 {
+    let u = (p.x - params.map_origin.x) / params.map_origin.w - 0.5;
+    let v = (p.z - params.map_origin.z) / params.map_origin.w - 0.5;
+    let (k0, k1, w) = if params.planes < 2 {
+        (0, 0, 0.0)
+    } else {
+        let s = ((p.y - params.map_origin.y) / params.plane_spacing).clamp(0.0, (params.planes - 1) as f32);
+        let k0 = (s.floor() as u32).min(params.planes - 2);
+        (k0, k0 + 1, s - k0 as f32)
+    };
+    let (d0, sx0, sz0) = sample_plane(words, params, k0, u, v);
+    let (d1, sx1, sz1) = sample_plane(words, params, k1, u, v);
+    let density = d0 * (1.0 - w) + d1 * w;
+    let weight = density.x + density.y + density.z;
+    if weight <= 0.0 || weight.is_nan() {
+        return Vec4::ZERO;
+    }
+    let sx = (sx0 * (1.0 - w) + sx1 * w) / weight;
+    let sz = (sz0 * (1.0 - w) + sz1 * w) / weight;
+    // The mean ray direction (sx, -1, sz), normalised: |w_y| = 1 / len.
+    let dir = Vec3::new(sx, -1.0, sz);
+    let len = dir.length();
+    let cos = (-n.dot(dir) / len).max(0.0);
+    density * (cos * len)
+}
+
+/// Per-pixel kernel: the caustic light the surface seen at pixel `index`
+/// reflects toward the eye, W/(m^2 sr) per channel (w = 0):
+/// `albedo / pi * E_caustic` times the transmittance along the view ray
+/// (and through glass, for a surface seen through it).
+#[allow(clippy::too_many_arguments)]
+pub fn caustics_pixel(
+    index: u32,
+    common: &CommonParams,
+    params: &CausticsParams,
+    geometry: &Geometry,
+    glass: &Glass,
+    materials: &[GpuMaterial],
+    words: &[u32],
+    texel: &GBufferTexel,
+) -> Vec4 {
+    let x = index % common.width;
+    let y = index / common.width;
+    if texel.object == NO_OBJECT || !in_image(common, x, y) {
+        return Vec4::ZERO;
+    }
+    let (origin, dir) = camera_ray(common, x, y);
+    if materials[texel.material as usize].kind != MATERIAL_GLASS {
+        // Seen directly: the G-buffer has the point and its normal.
+        let distance = texel.normal_distance.w;
+        let p = origin + dir * distance;
+        let e = caustic_irradiance(words, params, p, texel.normal_distance.xyz());
+        let l = materials[texel.material as usize].albedo * e * transmittance(common.sigma_t, distance) * FRAC_1_PI;
+        return Vec4::new(l.x, l.y, l.z, 0.0);
+    }
+    let hit = trace_nearest(origin, dir, 0.0, NO_HIT, geometry);
+    let channels = view_channels(materials, &hit);
+    let mut radiance = Vec4::ZERO;
+    let mut c = 0;
+    while c < channels {
+        let r = receiver(common, geometry, glass, materials, origin, dir, &hit, c);
+        if r.found {
+            let e = caustic_irradiance(words, params, r.point, r.normal);
+            let l = materials[r.material as usize].albedo * e * r.weight * FRAC_1_PI;
+            radiance += channel_part(l, c, channels);
+        }
+        c += 1;
+    }
+    Vec4::new(radiance.x, radiance.y, radiance.z, 0.0)
+}
+
+/// Channel `c`'s value of a table entry's transmittance (tests, host).
+pub fn entry_transmittance(e: &TableEntry, c: u32) -> f32 {
+    pick(e.transmittance, c)
+}
+
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn caustics_table_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] params: &[CausticsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 32)] table: &mut [TableEntry],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index < p.vertex_count * p.directions * p.channels {
+        let geometry = crate::scene_geometry(&common[0], spheres, triangles, nodes);
+        let slot = table_slot(index, p, glass_vertices);
+        if slot != u32::MAX {
+            let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
+            table[slot as usize] = table_entry(index, p, &geometry, &glass, materials);
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn caustics_lookup_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] params: &[CausticsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 32)] table: &[TableEntry],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 33)] rays: &mut [ExitRay],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index < p.light_count * p.vertex_count * p.channels {
+        let geometry = crate::scene_geometry(&common[0], spheres, triangles, nodes);
+
+        rays[index as usize] = lookup(index, p, lights, &geometry, glass_vertices, materials, table);
+    }
+}
+
+/// GPU only: on the host the words are `AtomicU32`s (`scatter::CpuAtomics`).
+#[cfg(target_arch = "spirv")]
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn caustics_maps_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] params: &[CausticsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 33)] rays: &[ExitRay],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 34)] words: &mut [u32],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index < p.light_count * p.triangle_count * p.channels * p.planes {
+        let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
+        rasterize(index, &common[0], p, lights, light_map, &glass, rays, words);
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn caustics_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] params: &[CausticsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 34)] words: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 35)] radiance: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let c = &common[0];
+    if index < c.band_pixels {
+        let geometry = crate::scene_geometry(c, spheres, triangles, nodes);
+        let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
+        radiance[index as usize] = caustics_pixel(
+            c.band_start + index,
+            c,
+            &params[0],
+            &geometry,
+            &glass,
+            materials,
+            words,
+            &gbuffer[index as usize],
+        );
+    }
+}

@@ -1,0 +1,325 @@
+//! Refractive caustics against the f64 light tracer, energy, stress.
+
+mod common;
+
+use glam::{DVec3, Vec4};
+use slicelight::caustics_reference::caustic_image;
+use slicelight::metrics::{difference, to_f64};
+use slicelight::scene::SceneData;
+use slicelight_shaders::geometry::{trace_nearest, NO_HIT};
+use slicelight_shaders::types::MATERIAL_GLASS;
+
+fn layer<'a>(r: &'a slicelight::render::Rendered, name: &str) -> &'a [Vec4] {
+    r.layers.iter().find(|(n, _)| *n == name).map(|(_, b)| b.as_slice()).unwrap_or(&[])
+}
+
+/// Renders on the CPU; every value of the image and its layers finite and not negative.
+fn render_checked(data: &SceneData, what: &str) -> slicelight::render::Rendered {
+    let r = slicelight::render::render_layers(data, &slicelight::render::Backend::Cpu, false).unwrap();
+    for (name, values) in
+        std::iter::once(("image", &r.image[..])).chain(r.layers.iter().map(|(n, b)| (*n, b.as_slice::<Vec4>())))
+    {
+        for v in values {
+            assert!(v.is_finite() && v.min_element() >= 0.0, "{what}: {name} holds {v}");
+        }
+    }
+    r
+}
+
+/// Pixels none of whose sub-pixel samples sees glass first.
+fn not_glass(data: &SceneData) -> Vec<bool> {
+    let geometry = data.geometry();
+    let mut keep = vec![true; data.pixel_count() as usize];
+    for s in 0..data.samples_per_pixel() {
+        let mut common = data.common;
+        common.sample_index = s;
+        for (i, k) in keep.iter_mut().enumerate() {
+            let (x, y) = (i as u32 % data.width(), i as u32 / data.width());
+            let (o, d) = slicelight_shaders::camera::camera_ray(&common, x, y);
+            let hit = trace_nearest(o, d, 0.0, NO_HIT, &geometry);
+            if hit.distance != NO_HIT && data.materials[hit.material as usize].kind == MATERIAL_GLASS {
+                *k = false;
+            }
+        }
+    }
+    keep
+}
+
+fn shrink(name: &str, w: u32, h: u32, spp: u32, extra: &str) -> SceneData {
+    let text = std::fs::read_to_string(common::root().join("scenes").join(name)).unwrap();
+    let text = regex_free_resolution(&text, w, h);
+    let mut data = common::scene_from_str(&format!("{text}\n{extra}"));
+    data.set_samples_per_pixel(spp).unwrap();
+    data
+}
+
+/// The scene text with its camera resolution replaced.
+fn regex_free_resolution(text: &str, w: u32, h: u32) -> String {
+    text.lines()
+        .map(|l| if l.trim_start().starts_with("resolution") { format!("resolution = [{w}, {h}]") } else { l.into() })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn select(v: &[DVec3], keep: &[bool]) -> Vec<DVec3> {
+    v.iter().zip(keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect()
+}
+
+#[test]
+fn glass_ball_floor_within_two_percent_of_the_light_tracer() {
+    // Fig. 8(a) at 160x120, 16 samples per pixel (the issue's measure):
+    // the method's surface + caustics layers against the reference's direct
+    // light + the light tracer's caustics (transmission only: the paths the
+    // method models; 4 million paths, whose noise is well below the
+    // tolerance: two independent runs differ by the figure printed).
+    let data = shrink("caustics_ball.toml", 160, 120, 16, "");
+    let r = render_checked(&data, "caustics_ball");
+    let keep = not_glass(&data);
+    let direct = slicelight::reference::render_surfaces(&data);
+    let traced = caustic_image(&data, 4 << 20, 1, true);
+    let traced2 = caustic_image(&data, 4 << 20, 2, true);
+    let reference: Vec<DVec3> = direct.iter().zip(&traced).map(|(a, b)| *a + *b).collect();
+    let reference2: Vec<DVec3> = direct.iter().zip(&traced2).map(|(a, b)| *a + *b).collect();
+    let image = to_f64(&r.image);
+    let noise = difference(&select(&reference2, &keep), &select(&reference, &keep), 1.0);
+    let d = difference(&select(&image, &keep), &select(&reference, &keep), 1.0);
+    let caustic = to_f64(layer(&r, "caustics"));
+    let dc = difference(&select(&caustic, &keep), &select(&traced, &keep), 1.0);
+    println!(
+        "floor (not glass, {} px): method vs reference {:.3} % RMS / {:.2} % max of 8 bit; reference noise {:.3} % RMS; caustic layer alone {:.3} % RMS",
+        keep.iter().filter(|k| **k).count(),
+        d.rms_8bit_percent,
+        d.max_8bit_percent,
+        noise.rms_8bit_percent,
+        dc.rms_8bit_percent
+    );
+    // Flux landing on the floor's visible part: method and tracer.
+    let sum = |v: &[DVec3]| v.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| p.x).sum::<f64>();
+    println!("caustic radiance summed over the floor: method {:.4e}, tracer {:.4e}", sum(&caustic), sum(&traced));
+    assert!(d.rms_8bit_percent < 2.0, "floor radiance {d:?}");
+}
+
+fn ball_scene(extra_object: &str, light: &str, camera: &str, glass: &str) -> String {
+    format!(
+        r#"
+        [camera]
+        {camera}
+        vfov_deg = 40.0
+        resolution = [64, 48]
+        {light}
+        [[object]]
+        type = "sphere"
+        center = [0.0, 0.5, 0.0]
+        radius = 0.5
+        segments = [48, 32]
+        material = {{ kind = "glass", {glass} }}
+        [[object]]
+        type = "quad"
+        center = [0.0, 0.0, 0.0]
+        u = [8.0, 0.0, 0.0]
+        v = [0.0, 0.0, 8.0]
+        albedo = [0.75, 0.75, 0.75]
+        {extra_object}
+        "#
+    )
+}
+
+const CAMERA: &str = "position = [0.0, 2.6, 4.2]\nlook_at = [0.0, 0.4, 0.0]";
+const LIGHT: &str = "[[point_light]]\nposition = [1.5, 4.0, -1.0]\nintensity = [30.0, 30.0, 30.0]";
+
+/// The flux on each sample plane (W, summed over channels) and the flux
+/// that falls on the glass's lit triangles (an upper bound: transmittance 1).
+fn flux_check(data: &SceneData, r: &slicelight::render::Rendered, what: &str) {
+    if !data.caustics.enabled {
+        return;
+    }
+    let report = r.stats.passes.iter().find(|p| p.name == "caustics.maps").and_then(|p| p.report.clone());
+    let report = report.unwrap_or_default();
+    let p = &data.caustics.params;
+    let mut entering = 0.0f64;
+    for light in &data.lights {
+        for t in &data.glass_triangles {
+            let [a, b, c] = t.vertices.map(|i| data.glass_vertices[i as usize].position.truncate());
+            let f =
+                slicelight_shaders::caustics::triangle_flux(&data.common, light, &data.light_map, a, b, c, Vec4::ONE);
+            entering += (f.x + f.y + f.z) as f64;
+        }
+    }
+    // Parse "[r, g, b]" groups from the report.
+    for group in report.split('[').skip(1) {
+        let values: Vec<f64> = group.split(']').next().unwrap().split(',').map(|v| v.trim().parse().unwrap()).collect();
+        let on_plane: f64 = values.iter().sum();
+        assert!(
+            on_plane <= entering * (1.0 + 1e-4),
+            "{what}: {on_plane} W on a plane, more than the {entering} W falling on the glass"
+        );
+    }
+    assert!(p.planes >= 1);
+}
+
+#[test]
+fn stress_indices_lights_and_cameras_at_their_edges() {
+    let cases = [
+        ("index 1.0001", ball_scene("", LIGHT, CAMERA, "ior = 1.0001")),
+        ("index 2.4", ball_scene("", LIGHT, CAMERA, "ior = 2.4")),
+        ("dispersion 1.3 to 2.4", ball_scene("", LIGHT, CAMERA, "ior = [1.3, 1.8, 2.4], absorption = [0.0, 1.0, 50.0]")),
+        (
+            "grazing light",
+            ball_scene("", "[[point_light]]\nposition = [30.0, 0.55, 0.0]\nintensity = [900.0, 900.0, 900.0]", CAMERA, "ior = 1.5"),
+        ),
+        (
+            "grazing directional light",
+            ball_scene("", "[[directional_light]]\ndirection = [1.0, -0.02, 0.0]\nirradiance = [2.0, 2.0, 2.0]", CAMERA, "ior = 1.5"),
+        ),
+        (
+            "light inside the glass",
+            ball_scene("", "[[point_light]]\nposition = [0.0, 0.5, 0.0]\nintensity = [5.0, 5.0, 5.0]", CAMERA, "ior = 1.5"),
+        ),
+        (
+            "camera inside the glass",
+            ball_scene("", LIGHT, "position = [0.0, 0.5, 0.1]\nlook_at = [0.0, 0.0, 1.0]", "ior = 1.5"),
+        ),
+        (
+            "no lit vertex (the ball under a box)",
+            ball_scene(
+                "[[object]]\ntype = \"box\"\nmin = [-2.0, 1.2, -2.0]\nmax = [2.0, 1.3, 2.0]",
+                "[[point_light]]\nposition = [0.0, 4.0, 0.0]\nintensity = [30.0, 30.0, 30.0]",
+                CAMERA,
+                "ior = 1.5",
+            ),
+        ),
+        (
+            "spotlight and line light",
+            ball_scene(
+                "",
+                "[[spotlight]]\nposition = [0.0, 3.0, 0.0]\ndirection = [0.0, -1.0, 0.0]\ncutoff_deg = 20.0\nintensity = [9.0, 9.0, 9.0]\n[[line_light]]\nfrom = [-1.0, 3.0, 0.0]\nto = [1.0, 3.0, 0.0]\nintensity = [3.0, 3.0, 3.0]",
+                CAMERA,
+                "ior = 1.5",
+            ),
+        ),
+    ];
+    for (what, toml) in cases {
+        let data = common::scene_from_str(&toml);
+        let r = render_checked(&data, what);
+        flux_check(&data, &r, what);
+        let plan: Vec<String> = r
+            .stats
+            .passes
+            .iter()
+            .filter(|p| p.name.starts_with("caustics"))
+            .map(|p| format!("{} {}", p.name, p.ran))
+            .collect();
+        println!("{what}: {}; {}", plan.join(", "), data.caustics.reason);
+    }
+    // The light inside the glass meets every vertex from inside: no caustics.
+    let data = common::scene_from_str(&ball_scene(
+        "",
+        "[[point_light]]\nposition = [0.0, 0.5, 0.0]\nintensity = [5.0, 5.0, 5.0]",
+        CAMERA,
+        "ior = 1.5",
+    ));
+    let r = render_checked(&data, "light inside");
+    assert!(
+        layer(&r, "caustics").iter().all(|v| v.truncate() == glam::Vec3::ZERO),
+        "light inside the glass: no lit vertex, no caustic"
+    );
+}
+
+#[test]
+fn nearly_invisible_glass_casts_no_shadow() {
+    // Glass of index 1.0001 bends nothing and transmits 99.99 %: the floor
+    // with it (direct light around the ball, caustic light in its shadow)
+    // must look like the floor without it. What separates them: the map's
+    // texels (5 mm) blur the shadow's outline, and the tessellated ball's
+    // silhouette differs from the true sphere's; so the tolerance is on the
+    // RMS over the floor, not every pixel.
+    let with = common::scene_from_str(&ball_scene("", LIGHT, CAMERA, "ior = 1.0001"));
+    let without = common::scene_from_str(
+        &ball_scene("", LIGHT, CAMERA, "ior = 1.0001").replace("radius = 0.5\n", "radius = 0.001\n"),
+    );
+    let a = render_checked(&with, "with");
+    let b = render_checked(&without, "without");
+    let keep = not_glass(&with);
+    let d = difference(&select(&to_f64(&a.image), &keep), &select(&to_f64(&b.image), &keep), 1.0);
+    println!(
+        "index 1.0001 against no ball: {:.3} % RMS, {:.2} % max of 8 bit over the floor",
+        d.rms_8bit_percent, d.max_8bit_percent
+    );
+    assert!(d.rms_8bit_percent < 1.0, "{d:?}");
+}
+
+#[test]
+fn lookup_against_exact_traces() {
+    // Every lit vertex's interpolated exit ray against the ray traced exactly
+    // for the light's own direction: the distance between the two lines
+    // where they reach the floor, and the transmittance.
+    for glass in ["ior = 1.0001", "ior = 1.5"] {
+        let data = common::scene_from_str(&ball_scene("", LIGHT, CAMERA, glass));
+        let p = data.caustics.params;
+        let geometry = data.geometry();
+        let g = slicelight_shaders::glass::Glass { vertices: &data.glass_vertices, triangles: &data.glass_triangles };
+        let mut table = vec![slicelight_shaders::caustics::TableEntry::default(); data.caustics.table_len() as usize];
+        for i in 0..data.caustics.table_invocations() as u32 {
+            let slot = slicelight_shaders::caustics::table_slot(i, &p, &data.glass_vertices);
+            if slot != u32::MAX {
+                table[slot as usize] = slicelight_shaders::caustics::table_entry(i, &p, &geometry, &g, &data.materials);
+            }
+        }
+        let (mut worst, mut worst_t, mut sum, mut n) = (0.0f32, 0.0f32, 0.0f32, 0);
+        let mut misses = Vec::new();
+        // Path statuses per ring of the table.
+        let mut statuses = vec![[0u32; 4]; p.rings as usize + 1];
+        for (i, e) in table.iter().enumerate() {
+            let j = (i as u32 % p.directions) as usize;
+            let ring = if j == 0 { 0 } else { (j - 1) / p.azimuths as usize + 1 };
+            statuses[ring][e.position.w as usize] += 1;
+        }
+        println!("{glass}: statuses (out, total reflection, occluded, lost) per ring: {statuses:?}");
+        let mut worst_at = (0, 0.0f32);
+        for (vi, v) in data.glass_vertices.iter().enumerate() {
+            let r = slicelight_shaders::caustics::lookup(
+                vi as u32,
+                &p,
+                &data.lights,
+                &geometry,
+                &data.glass_vertices,
+                &data.materials,
+                &table,
+            );
+            let (lit, l) = slicelight_shaders::caustics::light_at_vertex(&data.lights[0], &geometry, v);
+            if !lit || r.position.w == 0.0 {
+                continue;
+            }
+            let exact = slicelight_shaders::glass::trace_through(
+                &geometry,
+                &g,
+                &data.materials,
+                v.position.truncate(),
+                v.normal.truncate(),
+                v.material,
+                l,
+                0,
+                v.object,
+                false,
+            );
+            if exact.status != slicelight_shaders::glass::PATH_OUT || exact.direction.y >= 0.0 || r.direction.y >= 0.0 {
+                continue;
+            }
+            let floor = |o: glam::Vec3, d: glam::Vec3| o + d * (-o.y / d.y);
+            let miss = (floor(r.position.truncate(), r.direction.truncate()) - floor(exact.position, exact.direction))
+                .length();
+            let dt = (r.transmittance.x - exact.transmittance().x).abs();
+            sum += miss;
+            n += 1;
+            misses.push(miss);
+            if miss > worst {
+                worst = miss;
+                worst_at = (vi, (-l.dot(v.normal.truncate())).acos().to_degrees());
+            }
+            worst_t = worst_t.max(dt);
+        }
+        misses.sort_by(f32::total_cmp);
+        println!("{glass}: floor miss median {:.2e} m, 90th percentile {:.2e} m", misses[n / 2], misses[n * 9 / 10]);
+        println!("{glass}: {n} lit vertices; floor miss mean {:.2e} m, worst {:.2e} m (vertex {}, light {:.1} deg from its normal); transmittance worst {:.2e}", sum / n as f32, worst, worst_at.0, worst_at.1, worst_t);
+    }
+}

@@ -202,8 +202,8 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     // Outputs known before the frame (a cached table).
     let mut known = Frame::default();
     for pass in PASSES {
-        if let Some((r, bytes)) = pass.cached(data) {
-            known.insert(r, Buffer::from_bytes(bytes));
+        if let Some((r, buffer)) = pass.cached(data) {
+            known.insert(r, buffer);
         }
     }
     let pass_timing = match backend {

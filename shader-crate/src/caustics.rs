@@ -510,6 +510,12 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
     let ti = (index / (params.planes * params.channels)) % params.triangle_count;
     let li = index / (params.planes * params.channels * params.triangle_count);
     let tri = glass.triangles[ti as usize];
+    // Glass that does not disperse sends all three channels one way: its
+    // channel-0 invocation draws them all, the others nothing.
+    let own_channels = glass.vertices[tri.vertices[0] as usize].channels;
+    if c >= own_channels {
+        return;
+    }
     let first = li * params.vertex_count;
     let r0 = rays[((first + tri.vertices[0]) * params.channels + c) as usize];
     let r1 = rays[((first + tri.vertices[1]) * params.channels + c) as usize];
@@ -534,7 +540,7 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
     let transmitted = (r0.transmittance + r1.transmittance + r2.transmittance) / 3.0;
     let mut flux = triangle_flux(common, &lights[li as usize], light_map, va, vb, vc, transmitted)
         * transmittance(common.sigma_t, (t0 + t1 + t2) / 3.0);
-    if params.channels == 3 {
+    if own_channels == 3 {
         flux = channel_part(flux, c, 3);
     }
     if !(flux.x > 0.0 || flux.y > 0.0 || flux.z > 0.0) {
@@ -729,6 +735,10 @@ fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f
 pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Vec3) -> Vec4 {
     let u = (p.x - params.map_origin.x) / params.map_origin.w - 0.5;
     let v = (p.z - params.map_origin.z) / params.map_origin.w - 0.5;
+    // Off the maps (most of a large floor): no caustic.
+    if !(u > -1.0 && v > -1.0 && u < params.map_width as f32 && v < params.map_height as f32) {
+        return Vec4::ZERO;
+    }
     let (k0, k1, w) = if params.planes < 2 {
         (0, 0, 0.0)
     } else {
@@ -737,7 +747,7 @@ pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Ve
         (k0, k0 + 1, s - k0 as f32)
     };
     let (d0, sx0, sz0) = sample_plane(words, params, k0, u, v);
-    let (d1, sx1, sz1) = sample_plane(words, params, k1, u, v);
+    let (d1, sx1, sz1) = if w > 0.0 { sample_plane(words, params, k1, u, v) } else { (Vec4::ZERO, 0.0, 0.0) };
     let density = d0 * (1.0 - w) + d1 * w;
     let weight = density.x + density.y + density.z;
     if weight <= 0.0 || weight.is_nan() {

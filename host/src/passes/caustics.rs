@@ -50,7 +50,7 @@ impl Default for Settings {
 pub struct Setup {
     pub enabled: bool,
     /// The whole light transport table, when every glass object's is in the cache.
-    pub cached_table: Option<std::sync::Arc<Vec<TableEntry>>>,
+    pub cached_table: Option<Buffer>,
     /// Where each glass object's table is kept, and its entries in the table.
     pub cache_files: Vec<CacheFile>,
     /// Vertex-channels the table holds (`GlassVertex::table_block` of the end).
@@ -312,13 +312,20 @@ pub mod cache {
             first = end;
         }
         if tables.iter().all(Option::is_some) {
-            let table: Vec<TableEntry> = tables.into_iter().flatten().flatten().collect();
-            setup.cached_table = Some(std::sync::Arc::new(table));
+            // One buffer, filled from each file's payload in place.
+            let size = std::mem::size_of::<TableEntry>();
+            let mut table = Buffer::zeroed::<TableEntry>(setup.table_blocks as usize * d);
+            let out = table.as_mut_slice::<TableEntry>();
+            for (bytes, f) in tables.into_iter().flatten().zip(&setup.cache_files) {
+                let payload = &bytes[HEADER..HEADER + f.entries.len() * size];
+                bytemuck::cast_slice_mut::<TableEntry, u8>(&mut out[f.entries.clone()]).copy_from_slice(payload);
+            }
+            setup.cached_table = Some(table);
         }
     }
 
-    /// The entries of a cache file, if it is sound and has `key` and `count` entries.
-    fn read(path: &Path, key: &[u8; 16], count: usize) -> Option<Vec<TableEntry>> {
+    /// A cache file's bytes, if it is sound and has `key` and `count` entries.
+    fn read(path: &Path, key: &[u8; 16], count: usize) -> Option<Vec<u8>> {
         let bytes = std::fs::read(path).ok()?;
         let size = std::mem::size_of::<TableEntry>();
         let sound = bytes.len() == HEADER + count * size + 8
@@ -332,7 +339,7 @@ pub mod cache {
             eprintln!("{}: a stale or corrupt light transport table; tracing it again", path.display());
             return None;
         }
-        Some(bytemuck::pod_collect_to_vec(&bytes[HEADER..HEADER + count * size]))
+        Some(bytes)
     }
 
     /// Writes each object's part of `table` to its file (whole or not at all).
@@ -511,9 +518,8 @@ impl Pass for CausticsTable {
             }
         });
     }
-    fn cached<'a>(&self, scene: &'a SceneData) -> Option<(&'static Resource, &'a [u8])> {
-        let table = scene.caustics.cached_table.as_ref()?;
-        Some((&CAUSTICS_TABLE, bytemuck::cast_slice(table.as_slice())))
+    fn cached(&self, scene: &SceneData) -> Option<(&'static Resource, Buffer)> {
+        Some((&CAUSTICS_TABLE, scene.caustics.cached_table.clone()?))
     }
     fn keeps(&self) -> &'static [&'static Resource] {
         resources![CAUSTICS_TABLE]

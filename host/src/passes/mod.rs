@@ -206,7 +206,7 @@ pub trait Pass: Sync {
     /// light transport table from the disk cache): the renderer puts these
     /// bytes in the frame (uploads them on the GPU) and the pass's plan
     /// skips it.
-    fn cached<'a>(&self, _scene: &'a SceneData) -> Option<(&'static Resource, &'a [u8])> {
+    fn cached(&self, _scene: &SceneData) -> Option<(&'static Resource, Buffer)> {
         None
     }
     /// Outputs that later passes consume but that stay in the frame's
@@ -232,37 +232,45 @@ unsafe impl bytemuck::Zeroable for Block {}
 unsafe impl bytemuck::Pod for Block {}
 
 /// A buffer's contents on the CPU, 16-aligned so that it can be viewed as
-/// a slice of `Vec4` or of the kernels' structs.
+/// a slice of `Vec4` or of the kernels' structs. Clones share the bytes
+/// until one is written (a cached table goes into each frame uncopied).
 #[derive(Clone, Default)]
 pub struct Buffer {
-    blocks: Vec<Block>,
+    /// Shared between clones; copied on the first write to a shared one.
+    blocks: std::sync::Arc<Vec<Block>>,
     bytes: usize,
+}
+
+impl std::fmt::Debug for Buffer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Buffer({} bytes)", self.bytes)
+    }
 }
 
 impl Buffer {
     /// `len` zeroed `T`s.
     pub fn zeroed<T: Pod>(len: usize) -> Buffer {
         let bytes = len * std::mem::size_of::<T>();
-        Buffer { blocks: vec![Block::default(); bytes.div_ceil(16)], bytes }
+        Buffer { blocks: std::sync::Arc::new(vec![Block::default(); bytes.div_ceil(16)]), bytes }
     }
 
     pub fn from_bytes(bytes: &[u8]) -> Buffer {
-        let mut b = Buffer { blocks: vec![Block::default(); bytes.len().div_ceil(16)], bytes: bytes.len() };
-        bytemuck::cast_slice_mut::<Block, u8>(&mut b.blocks)[..bytes.len()].copy_from_slice(bytes);
+        let mut b = Buffer::zeroed::<u8>(bytes.len());
+        b.as_mut_slice::<u8>().copy_from_slice(bytes);
         b
     }
 
     pub fn as_slice<T: Pod>(&self) -> &[T] {
-        &bytemuck::cast_slice(&self.blocks)[..self.bytes / std::mem::size_of::<T>()]
+        &bytemuck::cast_slice(self.blocks.as_slice())[..self.bytes / std::mem::size_of::<T>()]
     }
 
     pub fn as_mut_slice<T: Pod>(&mut self) -> &mut [T] {
         let len = self.bytes / std::mem::size_of::<T>();
-        &mut bytemuck::cast_slice_mut(&mut self.blocks)[..len]
+        &mut bytemuck::cast_slice_mut(std::sync::Arc::make_mut(&mut self.blocks).as_mut_slice())[..len]
     }
 
     pub fn as_bytes(&self) -> &[u8] {
-        &bytemuck::cast_slice(&self.blocks)[..self.bytes]
+        &bytemuck::cast_slice(self.blocks.as_slice())[..self.bytes]
     }
 }
 

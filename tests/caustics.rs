@@ -97,6 +97,16 @@ fn glass_ball_floor_within_two_percent_of_the_light_tracer() {
     let sum = |v: &[DVec3]| v.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| p.x).sum::<f64>();
     println!("caustic radiance summed over the floor: method {:.4e}, tracer {:.4e}", sum(&caustic), sum(&traced));
     assert!(d.rms_8bit_percent < 2.0, "floor radiance {d:?}");
+    // The same without compression: what the 16-bit table costs.
+    let full = shrink("caustics_ball.toml", 160, 120, 16, "[caustics]\ncompression = false");
+    let rf = render_checked(&full, "caustics_ball, uncompressed");
+    let df = difference(&select(&to_f64(&rf.image), &keep), &select(&reference, &keep), 1.0);
+    println!(
+        "uncompressed table: {:.3} % RMS; compression adds {:+.4} %",
+        df.rms_8bit_percent,
+        d.rms_8bit_percent - df.rms_8bit_percent
+    );
+    assert!(d.rms_8bit_percent - df.rms_8bit_percent <= 0.1, "compression costs more than 0.1 %: {d:?} vs {df:?}");
 }
 
 fn ball_scene(extra_object: &str, light: &str, camera: &str, glass: &str) -> String {
@@ -258,13 +268,16 @@ fn lookup_against_exact_traces() {
         let p = data.caustics.params;
         let geometry = data.geometry();
         let g = slicelight_shaders::glass::Glass { vertices: &data.glass_vertices, triangles: &data.glass_triangles };
-        let mut table = vec![slicelight_shaders::caustics::TableEntry::default(); data.caustics.table_len() as usize];
+        let mut words = vec![0u32; data.caustics.table_words() as usize];
         for i in 0..data.caustics.table_invocations() as u32 {
             let slot = slicelight_shaders::caustics::table_slot(i, &p, &data.glass_vertices);
             if slot != u32::MAX {
-                table[slot as usize] = slicelight_shaders::caustics::table_entry(i, &p, &geometry, &g, &data.materials);
+                let e = slicelight_shaders::caustics::table_entry(i, &p, &geometry, &g, &data.materials);
+                let v = &data.glass_vertices[(i / (p.channels * p.directions)) as usize];
+                slicelight_shaders::caustics::store_entry(&mut words, &p, slot, &e, v);
             }
         }
+        let table = data.caustics.decode_table(&data, &words);
         let (mut worst, mut worst_t, mut sum, mut n) = (0.0f32, 0.0f32, 0.0f32, 0);
         let mut misses = Vec::new();
         // Path statuses per ring of the table.
@@ -284,7 +297,7 @@ fn lookup_against_exact_traces() {
                 &geometry,
                 &data.glass_vertices,
                 &data.materials,
-                &table,
+                &words,
             );
             let (lit, l) = slicelight_shaders::caustics::light_at_vertex(&data.lights[0], &geometry, v);
             if !lit || r.position.w == 0.0 {

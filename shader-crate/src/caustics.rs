@@ -98,6 +98,99 @@ pub struct CausticsParams {
     pub plane_spacing: f32,
     /// Fixed-point units per W/m^2 of the maps' bins (see `scatter.rs`).
     pub scale: f32,
+    /// 1: table entries packed into `PACKED_WORDS` 32-bit words of 16-bit
+    /// fields (section 6); 0: `ENTRY_WORDS` words of f32.
+    pub compressed: u32,
+    /// Words per table entry (`PACKED_WORDS` or `ENTRY_WORDS`).
+    pub entry_words: u32,
+    pub _pad: [u32; 2],
+}
+
+/// Words of an uncompressed table entry (a `TableEntry`'s twelve f32s).
+pub const ENTRY_WORDS: u32 = 12;
+/// Words of a compressed entry (section 6): the point nearest the vertex
+/// and the exit distance as 16-bit fractions of the object's size around
+/// the vertex, the exit direction as two 16-bit angles, the transmittance
+/// as three 16-bit fractions, the status.
+pub const PACKED_WORDS: u32 = 5;
+
+fn unit16(x: f32) -> u32 {
+    (x.clamp(0.0, 1.0) * 65535.0 + 0.5) as u32
+}
+
+fn from16(w: u32) -> f32 {
+    (w & 0xffff) as f32 / 65535.0
+}
+
+/// Writes entry `e` of `vertex` into table slot `slot` (section 6 when
+/// compressed: 16 bits per coordinate of the point nearest the vertex and
+/// the exit distance, relative to the vertex within +- the object's
+/// diagonal `vertex.normal.w`; 16 bits per angle of the exit direction,
+/// azimuth around +y and polar angle from it; 16 bits per channel of
+/// transmittance).
+pub fn store_entry(table: &mut [u32], params: &CausticsParams, slot: u32, e: &TableEntry, vertex: &GlassVertex) {
+    let base = (slot * params.entry_words) as usize;
+    if params.compressed == 0 {
+        store4(table, base, e.position);
+        store4(table, base + 4, e.direction);
+        store4(table, base + 8, e.transmittance);
+        return;
+    }
+    let size = vertex.normal.w;
+    let a = (e.position.xyz() - vertex.position.xyz()) / size * 0.5 + 0.5;
+    let s = e.direction.w / size * 0.5 + 0.5;
+    let d = e.direction.xyz();
+    let mut azimuth = d.z.atan2(d.x);
+    if azimuth < 0.0 {
+        azimuth += TAU;
+    }
+    let polar = d.y.clamp(-1.0, 1.0).acos();
+    table[base] = unit16(a.x) | unit16(a.y) << 16;
+    table[base + 1] = unit16(a.z) | unit16(s) << 16;
+    table[base + 2] = unit16(azimuth / TAU) | unit16(polar / core::f32::consts::PI) << 16;
+    table[base + 3] = unit16(e.transmittance.x) | unit16(e.transmittance.y) << 16;
+    table[base + 4] = unit16(e.transmittance.z) | (e.position.w as u32) << 16;
+}
+
+fn store4(table: &mut [u32], at: usize, v: Vec4) {
+    table[at] = v.x.to_bits();
+    table[at + 1] = v.y.to_bits();
+    table[at + 2] = v.z.to_bits();
+    table[at + 3] = v.w.to_bits();
+}
+
+fn load4(table: &[u32], at: usize) -> Vec4 {
+    Vec4::new(
+        f32::from_bits(table[at]),
+        f32::from_bits(table[at + 1]),
+        f32::from_bits(table[at + 2]),
+        f32::from_bits(table[at + 3]),
+    )
+}
+
+/// Reads table slot `slot` of `vertex` (see `store_entry`).
+pub fn load_entry(table: &[u32], params: &CausticsParams, slot: u32, vertex: &GlassVertex) -> TableEntry {
+    let base = (slot * params.entry_words) as usize;
+    if params.compressed == 0 {
+        return TableEntry {
+            position: load4(table, base),
+            direction: load4(table, base + 4),
+            transmittance: load4(table, base + 8),
+        };
+    }
+    let size = vertex.normal.w;
+    let (w0, w1, w2, w3, w4) = (table[base], table[base + 1], table[base + 2], table[base + 3], table[base + 4]);
+    let a = (Vec3::new(from16(w0), from16(w0 >> 16), from16(w1)) * 2.0 - 1.0) * size;
+    let s = (from16(w1 >> 16) * 2.0 - 1.0) * size;
+    let azimuth = from16(w2) * TAU;
+    let polar = from16(w2 >> 16) * core::f32::consts::PI;
+    let (sp, cp) = polar.sin_cos();
+    let (sa, ca) = azimuth.sin_cos();
+    TableEntry {
+        position: (vertex.position.xyz() + a).extend((w4 >> 16) as f32),
+        direction: Vec3::new(sp * ca, cp, sp * sa).extend(s),
+        transmittance: Vec4::new(from16(w3), from16(w3 >> 16), from16(w4), 0.0),
+    }
 }
 
 /// One entry of the light transport table: the exit ray's point nearest
@@ -125,7 +218,7 @@ mod pod {
     unsafe impl bytemuck::Pod for super::CausticsParams {}
     unsafe impl bytemuck::Zeroable for super::TableEntry {}
     unsafe impl bytemuck::Pod for super::TableEntry {}
-    const _: () = assert!(core::mem::size_of::<super::CausticsParams>() == 64);
+    const _: () = assert!(core::mem::size_of::<super::CausticsParams>() == 80);
     const _: () = assert!(core::mem::size_of::<super::TableEntry>() == 48);
 }
 
@@ -361,7 +454,7 @@ pub fn lookup(
     geometry: &Geometry,
     vertices: &[GlassVertex],
     materials: &[GpuMaterial],
-    table: &[TableEntry],
+    table: &[u32],
 ) -> ExitRay {
     let invalid = ExitRay { position: Vec4::ZERO, direction: Vec4::ZERO, transmittance: Vec4::ZERO };
     let c = index % params.channels;
@@ -392,10 +485,10 @@ pub fn lookup(
     let m1 = (m0 + 1) % params.azimuths;
     let base = v.table_block * params.directions;
     let (vc, c) = (v.channels, c.min(v.channels - 1));
-    let e00 = table[(base + ring_index(params, k0, m0) * vc + c) as usize];
-    let e01 = table[(base + ring_index(params, k0, m1) * vc + c) as usize];
-    let e10 = table[(base + ring_index(params, k0 + 1, m0) * vc + c) as usize];
-    let e11 = table[(base + ring_index(params, k0 + 1, m1) * vc + c) as usize];
+    let e00 = load_entry(table, params, base + ring_index(params, k0, m0) * vc + c, &v);
+    let e01 = load_entry(table, params, base + ring_index(params, k0, m1) * vc + c, &v);
+    let e10 = load_entry(table, params, base + ring_index(params, k0 + 1, m0) * vc + c, &v);
+    let e11 = load_entry(table, params, base + ring_index(params, k0 + 1, m1) * vc + c, &v);
     // Corners whose paths leave the glass give the exit ray. Those that
     // meet total internal reflection or the object itself transmit
     // nothing, so they count toward the transmittance as 0; a lost path (a
@@ -825,7 +918,7 @@ pub fn caustics_table_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] params: &[CausticsParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 32)] table: &mut [TableEntry],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 32)] table: &mut [u32],
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
@@ -834,7 +927,9 @@ pub fn caustics_table_kernel(
         let slot = table_slot(index, p, glass_vertices);
         if slot != u32::MAX {
             let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
-            table[slot as usize] = table_entry(index, p, &geometry, &glass, materials);
+            let e = table_entry(index, p, &geometry, &glass, materials);
+            let vertex = glass_vertices[(index / (p.channels * p.directions)) as usize];
+            store_entry(table, p, slot, &e, &vertex);
         }
     }
 }
@@ -852,7 +947,7 @@ pub fn caustics_lookup_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] params: &[CausticsParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 32)] table: &[TableEntry],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 32)] table: &[u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 33)] rays: &mut [ExitRay],
 ) {
     let index = crate::flat_index(id, groups);

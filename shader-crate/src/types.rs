@@ -177,7 +177,8 @@ pub struct GpuMaterial {
 }
 
 /// A vertex of a glass mesh: position (metres; w = 1) and the unit
-/// outward normal refraction uses there (w = 0), shared by the triangles
+/// outward normal refraction uses there (w: the object's diagonal, metres,
+/// the range of a compressed light transport table), shared by the triangles
 /// around it so that a tessellated curved surface refracts like the curve.
 #[repr(C)]
 #[derive(Copy, Clone, Debug, Default, PartialEq)]

@@ -9,8 +9,8 @@ use anyhow::{bail, ensure, Result};
 use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use slicelight_shaders::caustics::{
-    caustics_pixel, light_at_vertex, lookup, map_bins, rasterize, read_bin, table_entry, table_slot, triangle_flux,
-    CausticsParams, ExitRay, TableEntry, MAP_BINS, MAX_SLOPE,
+    caustics_pixel, light_at_vertex, load_entry, lookup, map_bins, rasterize, read_bin, store_entry, table_entry,
+    table_slot, triangle_flux, CausticsParams, ExitRay, TableEntry, ENTRY_WORDS, MAP_BINS, MAX_SLOPE, PACKED_WORDS,
 };
 use slicelight_shaders::glass::{dispersive, trace_through, Glass, PATH_OUT};
 use slicelight_shaders::scatter::{words_for, CpuAtomics};
@@ -37,11 +37,14 @@ pub struct Settings {
     pub map_resolution: u32,
     /// Keep light transport tables on disk and reuse them (true).
     pub cache: bool,
+    /// Pack table entries into 16-bit fields, 20 bytes instead of 48
+    /// (section 6; true).
+    pub compression: bool,
 }
 
 impl Default for Settings {
     fn default() -> Self {
-        Settings { enabled: true, directions: [8, 16], planes: 6, map_resolution: 512, cache: true }
+        Settings { enabled: true, directions: [8, 16], planes: 6, map_resolution: 512, cache: true, compression: true }
     }
 }
 
@@ -90,13 +93,15 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
     let directions = 1 + rings * azimuths;
     let vertex_count = scene.glass_vertices.len() as u32;
     let blocks = scene.glass_vertices.last().map_or(0, |v| v.table_block + v.channels) as u64;
-    let table_bytes = blocks * directions as u64 * 48;
+    let entry_words = if s.compression { PACKED_WORDS } else { ENTRY_WORDS };
+    let table_bytes = blocks * directions as u64 * entry_words as u64 * 4;
     if table_bytes > MAX_TABLE_BYTES {
         bail!(invalid(
             "directions",
             &format!(
-                "a light transport table of at most {} MiB: {vertex_count} glass vertices ({blocks} vertex-channels) x {directions} directions x 48 B is {} MiB",
+                "a light transport table of at most {} MiB: {vertex_count} glass vertices ({blocks} vertex-channels) x {directions} directions x {} B is {} MiB",
                 MAX_TABLE_BYTES >> 20,
+                entry_words * 4,
                 table_bytes >> 20
             ),
             s.directions
@@ -211,6 +216,9 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
         map_height,
         plane_spacing: spacing,
         scale: fixed_scale,
+        compressed: s.compression as u32,
+        entry_words,
+        _pad: [0; 2],
     };
     let mut setup = Setup { enabled: true, table_blocks: blocks as u32, params, ..Default::default() };
     if s.cache {
@@ -243,7 +251,7 @@ pub mod cache {
 
     const MAGIC: &[u8; 8] = b"SLCTABLE";
     /// Bump when the table's contents change for the same inputs.
-    const VERSION: u32 = 2;
+    const VERSION: u32 = 3;
     const HEADER: usize = 8 + 4 + 16 + 8;
 
     /// `SLICELIGHT_CACHE_DIR` (`off`: no cache), else
@@ -275,6 +283,7 @@ pub mod cache {
         bytes.extend(env!("CARGO_PKG_VERSION").as_bytes());
         bytes.extend(params.rings.to_le_bytes());
         bytes.extend(params.azimuths.to_le_bytes());
+        bytes.extend(params.compressed.to_le_bytes());
         for v in verts {
             bytes.extend(bytemuck::bytes_of(&v.position));
             bytes.extend(bytemuck::bytes_of(&v.normal));
@@ -307,32 +316,32 @@ pub mod cache {
             let key = key(scene, &setup.params, first, &verts[first..end]);
             let hex: String = key.iter().map(|b| format!("{b:02x}")).collect();
             let path = dir.join(format!("{hex}.table"));
-            tables.push(read(&path, &key, entries.len()));
+            tables.push(read(&path, &key, entries.len() * setup.params.entry_words as usize * 4));
             setup.cache_files.push(CacheFile { path, key, entries });
             first = end;
         }
         if tables.iter().all(Option::is_some) {
             // One buffer, filled from each file's payload in place.
-            let size = std::mem::size_of::<TableEntry>();
-            let mut table = Buffer::zeroed::<TableEntry>(setup.table_blocks as usize * d);
-            let out = table.as_mut_slice::<TableEntry>();
+            let size = setup.params.entry_words as usize * 4;
+            let mut table = Buffer::zeroed::<u8>(setup.table_blocks as usize * d * size);
+            let out = table.as_mut_slice::<u8>();
             for (bytes, f) in tables.into_iter().flatten().zip(&setup.cache_files) {
                 let payload = &bytes[HEADER..HEADER + f.entries.len() * size];
-                bytemuck::cast_slice_mut::<TableEntry, u8>(&mut out[f.entries.clone()]).copy_from_slice(payload);
+                out[f.entries.start * size..f.entries.end * size].copy_from_slice(payload);
             }
             setup.cached_table = Some(table);
         }
     }
 
-    /// A cache file's bytes, if it is sound and has `key` and `count` entries.
-    fn read(path: &Path, key: &[u8; 16], count: usize) -> Option<Vec<u8>> {
+    /// A cache file's bytes, if it is sound and has `key` and a payload of `len` bytes.
+    fn read(path: &Path, key: &[u8; 16], len: usize) -> Option<Vec<u8>> {
         let bytes = std::fs::read(path).ok()?;
-        let size = std::mem::size_of::<TableEntry>();
+        let (count, size) = (len, 1);
         let sound = bytes.len() == HEADER + count * size + 8
             && &bytes[..8] == MAGIC
             && bytes[8..12] == VERSION.to_le_bytes()
             && &bytes[12..28] == key
-            && bytes[28..36] == (count as u64).to_le_bytes()
+            && bytes[28..36] == (len as u64).to_le_bytes()
             && bytes[HEADER + count * size..]
                 == XxHash3_64::oneshot(&bytes[HEADER..HEADER + count * size]).to_le_bytes();
         if !sound {
@@ -342,18 +351,19 @@ pub mod cache {
         Some(bytes)
     }
 
-    /// Writes each object's part of `table` to its file (whole or not at all).
-    pub fn save(setup: &Setup, table: &[TableEntry]) {
+    /// Writes each object's part of `table` (words) to its file (whole or not at all).
+    pub fn save(setup: &Setup, table: &[u32]) {
+        let words = setup.params.entry_words as usize;
         for f in &setup.cache_files {
-            let Some(entries) = table.get(f.entries.clone()) else {
+            let Some(part) = table.get(f.entries.start * words..f.entries.end * words) else {
                 return;
             };
-            let payload: &[u8] = bytemuck::cast_slice(entries);
+            let payload: &[u8] = bytemuck::cast_slice(part);
             let mut bytes = Vec::with_capacity(HEADER + payload.len() + 8);
             bytes.extend(MAGIC);
             bytes.extend(VERSION.to_le_bytes());
             bytes.extend(f.key);
-            bytes.extend((entries.len() as u64).to_le_bytes());
+            bytes.extend((payload.len() as u64).to_le_bytes());
             bytes.extend(payload);
             bytes.extend(XxHash3_64::oneshot(payload).to_le_bytes());
             let written = f
@@ -373,6 +383,24 @@ impl Setup {
     /// Entries of the table: `directions` per vertex and channel it traces.
     pub fn table_len(&self) -> u64 {
         self.table_blocks as u64 * self.params.directions as u64
+    }
+    /// 32-bit words of the table.
+    pub fn table_words(&self) -> u64 {
+        self.table_len() * self.params.entry_words as u64
+    }
+    /// Every entry of a table, decoded, in slot order.
+    pub fn decode_table(&self, scene: &SceneData, words: &[u32]) -> Vec<TableEntry> {
+        let d = self.params.directions;
+        let mut out = Vec::with_capacity(self.table_len() as usize);
+        if words.len() as u64 != self.table_words() {
+            return out;
+        }
+        for v in &scene.glass_vertices {
+            for slot in v.table_block * d..(v.table_block + v.channels) * d {
+                out.push(load_entry(words, &self.params, slot, v));
+            }
+        }
+        out
     }
     /// Invocations of the table kernel: every vertex, direction and channel.
     pub fn table_invocations(&self) -> u64 {
@@ -401,11 +429,11 @@ pub static CAUSTICS_PARAMS: Resource = Resource {
     name: "caustics parameters",
     kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.caustics.params)),
 };
-/// The light transport table (section 4): `TableEntry` per vertex, direction and channel.
+/// The light transport table (section 4): an entry (`store_entry`) per vertex, direction and channel.
 pub static CAUSTICS_TABLE: Resource = Resource {
     binding: 32,
     name: "light transport table",
-    kind: ResourceKind::Frame(|s| s.caustics.table_len() * std::mem::size_of::<TableEntry>() as u64),
+    kind: ResourceKind::Frame(|s| s.caustics.table_words() * 4),
 };
 /// Exit rays per light, vertex and channel.
 pub static CAUSTICS_RAYS: Resource = Resource {
@@ -509,12 +537,13 @@ impl Pass for CausticsTable {
                     progress.inc(4096.min(invocations - i) as u64);
                 }
                 let slot = table_slot(i, p, verts);
-                (slot != u32::MAX).then(|| (slot, table_entry(i, p, &geometry, &glass, &scene.materials)))
+                (slot != u32::MAX).then(|| (i, table_entry(i, p, &geometry, &glass, &scene.materials)))
             })
             .collect();
-        frame.write::<TableEntry>(&CAUSTICS_TABLE, scene.caustics.table_len() as usize, |_, out| {
-            for (slot, e) in entries {
-                out[slot as usize] = e;
+        frame.write::<u32>(&CAUSTICS_TABLE, scene.caustics.table_words() as usize, |_, out| {
+            for (i, e) in entries {
+                let vertex = &verts[(i / (p.channels * p.directions)) as usize];
+                store_entry(out, p, table_slot(i, p, verts), &e, vertex);
             }
         });
     }
@@ -525,10 +554,10 @@ impl Pass for CausticsTable {
         resources![CAUSTICS_TABLE]
     }
     fn persist(&self, scene: &SceneData, results: &Frame) {
-        cache::save(&scene.caustics, results.get::<TableEntry>(&CAUSTICS_TABLE));
+        cache::save(&scene.caustics, results.get::<u32>(&CAUSTICS_TABLE));
     }
-    fn counters(&self, _scene: &SceneData, frame: &Frame) -> Vec<(&'static str, u64)> {
-        let table = frame.get::<TableEntry>(&CAUSTICS_TABLE);
+    fn counters(&self, scene: &SceneData, frame: &Frame) -> Vec<(&'static str, u64)> {
+        let table = scene.caustics.decode_table(scene, frame.get::<u32>(&CAUSTICS_TABLE));
         let count = |s: u32| table.iter().filter(|e| e.position.w == s as f32).count() as u64;
         vec![
             ("table entries leaving the glass", count(PATH_OUT)),
@@ -537,13 +566,15 @@ impl Pass for CausticsTable {
             ("table entries lost", count(slicelight_shaders::glass::PATH_LOST)),
         ]
     }
-    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+    fn compare(&self, scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         // Positions and directions come from a chain of refractions (sqrt,
-        // divisions) over up to 16 interfaces: 1e-3 relative.
+        // divisions) over up to 16 interfaces: 1e-3 relative (far above
+        // the 16-bit fields' steps of 1.5e-5).
+        let c = &scene.caustics;
         compare_entries(
             "light transport table",
-            gpu.get::<TableEntry>(&CAUSTICS_TABLE),
-            cpu.get::<TableEntry>(&CAUSTICS_TABLE),
+            &c.decode_table(scene, gpu.get::<u32>(&CAUSTICS_TABLE)),
+            &c.decode_table(scene, cpu.get::<u32>(&CAUSTICS_TABLE)),
             1e-3,
         )
     }
@@ -592,7 +623,7 @@ impl Pass for CausticsLookup {
     fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (geometry, p) = (scene.geometry(), &scene.caustics.params);
         frame.write::<ExitRay>(&CAUSTICS_RAYS, scene.caustics.rays_len() as usize, |f, out| {
-            let table = f.get::<TableEntry>(&CAUSTICS_TABLE);
+            let table = f.get::<u32>(&CAUSTICS_TABLE);
             for_each_invocation(out, 0, progress, |i, r| {
                 *r = lookup(i, p, &scene.lights, &geometry, &scene.glass_vertices, &scene.materials, table)
             });

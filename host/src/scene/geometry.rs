@@ -149,11 +149,18 @@ fn push_mesh(out: &mut Objects, mesh: &IndexedMesh, object: u32, glass: bool) {
     let first_vertex = out.glass_vertices.len() as u32;
     if glass {
         let channels = if slicelight_shaders::glass::dispersive(&out.materials[object as usize]) { 3 } else { 1 };
+        // The object's diagonal, in the normals' w: the range of a compressed
+        // table's positions around each vertex.
+        let (lo, hi) = mesh
+            .positions
+            .iter()
+            .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let diagonal = (hi - lo).length().max(1e-6);
         let mut block = out.glass_vertices.last().map_or(0, |v| v.table_block + v.channels);
         for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
             out.glass_vertices.push(GlassVertex {
                 position: p.extend(1.0),
-                normal: n.extend(0.0),
+                normal: n.extend(diagonal),
                 object,
                 material: object,
                 channels,

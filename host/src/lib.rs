@@ -3,6 +3,7 @@
 //! top-level `tests/` folder use it.
 
 pub mod bench;
+pub mod bench_caustics;
 pub mod bench_sea;
 pub mod bench_sky;
 pub mod bvh;

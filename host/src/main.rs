@@ -81,6 +81,9 @@ enum Command {
         /// Benchmark the sea scenes (scenes/sea_open, sea_calm_noon) by default.
         #[arg(long, conflicts_with = "sky")]
         sea: bool,
+        /// Benchmark the caustics scenes (scenes/caustics_ball, caustics_knot) by default.
+        #[arg(long, conflicts_with_all = ["sky", "sea"])]
+        caustics: bool,
         /// Backends to time (give it more than once).
         #[arg(long, value_enum, default_values = ["cpu"])]
         backend: Vec<BackendChoice>,
@@ -283,9 +286,11 @@ fn run(cli: Cli) -> Result<()> {
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
             write_outputs(&output, &pixels, &[], &data)
         }
-        Command::Bench { scenes, sky, sea, backend, repeats, stride, quick, out_dir } => {
+        Command::Bench { scenes, sky, sea, caustics, backend, repeats, stride, quick, out_dir } => {
             let scenes: Vec<PathBuf> = if scenes.is_empty() {
-                let names: &[&str] = if sea {
+                let names: &[&str] = if caustics {
+                    &["caustics_ball", "caustics_knot"]
+                } else if sea {
                     &["sea_open", "sea_calm_noon"]
                 } else if sky {
                     &["sky_noon", "sky_sunset", "sky_twilight"]
@@ -301,9 +306,12 @@ fn run(cli: Cli) -> Result<()> {
             let mut sky_scenes = Vec::new();
             let mut sea_scenes = Vec::new();
             let mut shaft_scenes = Vec::new();
+            let mut caustic_scenes = Vec::new();
             for s in scenes {
                 let data = scene::load(&s)?;
-                if data.sea.enabled {
+                if !data.glass_vertices.is_empty() {
+                    caustic_scenes.push(s);
+                } else if data.sea.enabled {
                     sea_scenes.push(s);
                 } else if data.sky.enabled && !data.scatters() {
                     sky_scenes.push(s);
@@ -331,6 +339,15 @@ fn run(cli: Cli) -> Result<()> {
                     backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
                 slicelight::bench_sky::run(&sky_scenes, &backends, repeats, stride, quick, &out_dir)?;
                 eprintln!("wrote {0}/sky_bench.csv, {0}/sky_time_vs_error.png", out_dir.display());
+            }
+            if !caustic_scenes.is_empty() {
+                let backends: Vec<render::Backend> =
+                    backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
+                slicelight::bench_caustics::run(&caustic_scenes, &backends, repeats, stride, quick, &out_dir)?;
+                eprintln!(
+                    "wrote {0}/caustics_bench.csv, {0}/caustics_time_vs_error.png, {0}/caustics_precompute.png",
+                    out_dir.display()
+                );
             }
             if !sea_scenes.is_empty() {
                 let backends: Vec<render::Backend> =

@@ -1,0 +1,306 @@
+//! `slicelight bench --caustics`: time against error of the caustics
+//! passes over their settings: the table's directions, the glass mesh's
+//! vertices (a glass sphere's tessellation), the table's compression, the
+//! sample planes and the caustics maps' resolution; on each scene and
+//! backend, a CSV and PNG plots.
+//!
+//! Times are medians over repeats at the scene's own resolution: the
+//! precompute (the `caustics.table` pass, traced anew: no cache) and the
+//! frame without it (the table cached). Error is the RMS difference of the
+//! 8-bit images, % of 255, from the reference over the pixels that see no
+//! glass, both at `width/stride x height/stride` with 16 samples per pixel
+//! (the light tracer's pixels are box-filtered means): the reference's
+//! direct light (`reference::render_surfaces`) plus the f64 light tracer's
+//! caustics, transmission only (the paths the method models). For the
+//! vertex sweep, the reference's sphere is the finest tessellation swept.
+
+use anyhow::{Context, Result};
+use glam::DVec3;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::bench::median;
+use crate::metrics::{difference, to_f64};
+use crate::render::{self, Backend};
+use crate::scene::{self, SceneData};
+
+/// One configuration of the sweep.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Config {
+    /// `directions`, `vertices`, `compression`, `planes`, `map`.
+    pub series: &'static str,
+    pub directions: [u32; 2],
+    /// A glass sphere's `segments` (None: the scene's own mesh).
+    pub segments: Option<[u32; 2]>,
+    pub compression: bool,
+    pub planes: u32,
+    pub map_resolution: u32,
+}
+
+const BASE: Config =
+    Config { series: "", directions: [8, 16], segments: None, compression: true, planes: 6, map_resolution: 512 };
+
+pub fn sweep(quick: bool, sphere: bool) -> Vec<Config> {
+    let dirs: &[[u32; 2]] =
+        if quick { &[[2, 4], [8, 16], [16, 32]] } else { &[[2, 4], [4, 8], [6, 12], [8, 16], [12, 24], [16, 32]] };
+    let segs: &[[u32; 2]] = if quick { &[[24, 16], [96, 64]] } else { &[[24, 16], [48, 32], [96, 64], [144, 96]] };
+    let planes: &[u32] = if quick { &[1, 6] } else { &[1, 2, 4, 6, 12] };
+    let maps: &[u32] = if quick { &[128, 512] } else { &[128, 256, 512, 1024] };
+    let mut v = Vec::new();
+    for &d in dirs {
+        v.push(Config { series: "directions", directions: d, ..BASE });
+    }
+    if sphere {
+        for &s in segs {
+            v.push(Config { series: "vertices", segments: Some(s), ..BASE });
+        }
+    }
+    for c in [true, false] {
+        v.push(Config { series: "compression", compression: c, ..BASE });
+    }
+    for &p in planes {
+        v.push(Config { series: "planes", planes: p, ..BASE });
+    }
+    for &m in maps {
+        v.push(Config { series: "map", map_resolution: m, ..BASE });
+    }
+    v
+}
+
+/// The finest tessellation of the vertex sweep (the reference's sphere).
+const FINEST: [u32; 2] = [144, 96];
+
+#[derive(Debug, Clone)]
+pub struct Row {
+    pub scene: String,
+    pub backend: &'static str,
+    pub config: Config,
+    pub vertices: u32,
+    pub table_median_seconds: f64,
+    pub frame_median_seconds: f64,
+    pub rms_8bit_percent: f64,
+    pub max_8bit_percent: f64,
+}
+
+/// The scene's text with a configuration's settings.
+fn configured(text: &str, c: &Config) -> String {
+    let mut t = text.to_string();
+    if let Some([a, b]) = c.segments {
+        t = t.replacen(
+            "material = { kind = \"glass\"",
+            &format!("segments = [{a}, {b}]\nmaterial = {{ kind = \"glass\""),
+            1,
+        );
+    }
+    format!(
+        "{t}\n[caustics]\ndirections = [{}, {}]\ncompression = {}\nplanes = {}\nmap_resolution = {}\ncache = false\n",
+        c.directions[0], c.directions[1], c.compression, c.planes, c.map_resolution
+    )
+}
+
+fn load_text(text: &str, base: &Path, name: &str) -> Result<SceneData> {
+    let path = base.join(format!(".bench_{name}.toml"));
+    std::fs::write(&path, text)?;
+    let data = scene::load(&path);
+    let _ = std::fs::remove_file(&path);
+    data
+}
+
+/// The image at reduced size with 16 samples per pixel.
+fn small(mut data: SceneData, stride: u32) -> Result<SceneData> {
+    let (w, h) = ((data.width() / stride).max(8), (data.height() / stride).max(6));
+    data.common.width = w;
+    data.common.height = h;
+    data.common.band_pixels = w * h;
+    data.set_samples_per_pixel(16)?;
+    Ok(data)
+}
+
+/// Pixels none of whose sub-pixel samples sees glass first.
+fn not_glass(data: &SceneData) -> Vec<bool> {
+    use slicelight_shaders::geometry::{trace_nearest, NO_HIT};
+    let geometry = data.geometry();
+    let mut keep = vec![true; data.pixel_count() as usize];
+    for s in 0..data.samples_per_pixel() {
+        let mut common = data.common;
+        common.sample_index = s;
+        for (i, k) in keep.iter_mut().enumerate() {
+            let (x, y) = (i as u32 % data.width(), i as u32 / data.width());
+            let (o, d) = slicelight_shaders::camera::camera_ray(&common, x, y);
+            let hit = trace_nearest(o, d, 0.0, NO_HIT, &geometry);
+            if hit.distance != NO_HIT
+                && data.materials[hit.material as usize].kind == slicelight_shaders::types::MATERIAL_GLASS
+            {
+                *k = false;
+            }
+        }
+    }
+    keep
+}
+
+fn select(v: &[DVec3], keep: &[bool]) -> Vec<DVec3> {
+    v.iter().zip(keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect()
+}
+
+/// Runs the sweep on every scene and backend; writes `caustics_bench.csv`
+/// and the plots into `out_dir`.
+pub fn run(
+    scenes: &[PathBuf],
+    backends: &[Backend],
+    repeats: usize,
+    stride: u32,
+    quick: bool,
+    out_dir: &Path,
+) -> Result<Vec<Row>> {
+    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let mut rows = Vec::new();
+    for path in scenes {
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let sphere = text.contains("type = \"sphere\"") && text.contains("kind = \"glass\"");
+        let configs = sweep(quick, sphere);
+        // References: the scene as it is, and (sphere scenes) the finest sphere.
+        let reference_of = |segments: Option<[u32; 2]>| -> Result<(Vec<DVec3>, Vec<bool>)> {
+            let c = Config { segments, ..BASE };
+            let data = small(load_text(&configured(&text, &c), base, &name)?, stride)?;
+            let direct = crate::reference::render_surfaces(&data);
+            let (traced, paths) =
+                crate::caustics_reference::caustic_image_converged(&data, 1 << 21, 1 << 24, 2e-3, true);
+            eprintln!("{name}: reference with {paths} light paths per light and object");
+            let image = direct.iter().zip(&traced).map(|(a, b)| *a + *b).collect();
+            Ok((image, not_glass(&data)))
+        };
+        let reference = reference_of(None)?;
+        let finest = if sphere { Some(reference_of(Some(FINEST))?) } else { None };
+        for backend in backends {
+            for c in &configs {
+                let data = match load_text(&configured(&text, c), base, &name) {
+                    Ok(d) => d,
+                    Err(e) => {
+                        eprintln!("{name}: skipped {c:?}: {e:#}");
+                        continue;
+                    }
+                };
+                let (mut tables, mut frames) = (Vec::new(), Vec::new());
+                for _ in 0..repeats.max(1) {
+                    let mut fresh = data.clone();
+                    fresh.caustics.cached_table = None;
+                    let (_, st) = render::render(&fresh, backend, false)?;
+                    let table = st.passes.iter().find(|p| p.name == "caustics.table").map_or(0.0, |p| p.seconds);
+                    tables.push(table);
+                    frames.push(st.total_seconds - table);
+                }
+                let s = small(data.clone(), stride)?;
+                let r = render::render_layers(&s, backend, false)?;
+                let (image, keep) =
+                    if c.segments.is_some() { finest.as_ref().unwrap_or(&reference) } else { &reference };
+                let keep: Vec<bool> = keep.iter().zip(not_glass(&s)).map(|(a, b)| *a && b).collect();
+                let d = difference(&select(&to_f64(&r.image), &keep), &select(image, &keep), data.exposure);
+                let row = Row {
+                    scene: name.clone(),
+                    backend: backend.name(),
+                    config: *c,
+                    vertices: data.glass_vertices.len() as u32,
+                    table_median_seconds: median(tables),
+                    frame_median_seconds: median(frames),
+                    rms_8bit_percent: d.rms_8bit_percent,
+                    max_8bit_percent: d.max_8bit_percent,
+                };
+                eprintln!(
+                    "{name:>20} {:>4} {:<12} dirs={:?} verts={:<6} compress={:<5} planes={:<2} map={:<4} table {:.3} s frame {:.4} s  rms {:.3}%  max {:.1}%",
+                    row.backend,
+                    c.series,
+                    c.directions,
+                    row.vertices,
+                    c.compression,
+                    c.planes,
+                    c.map_resolution,
+                    row.table_median_seconds,
+                    row.frame_median_seconds,
+                    row.rms_8bit_percent,
+                    row.max_8bit_percent
+                );
+                rows.push(row);
+            }
+        }
+    }
+    write_csv(&out_dir.join("caustics_bench.csv"), &rows)?;
+    plot(&out_dir.join("caustics_time_vs_error.png"), &rows, false)?;
+    plot(&out_dir.join("caustics_precompute.png"), &rows, true)?;
+    Ok(rows)
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
+    let mut out = Vec::new();
+    writeln!(
+        out,
+        "scene,backend,series,rings,azimuths,directions,vertices,compression,planes,map_resolution,table_median_seconds,frame_median_seconds,rms_8bit_percent,max_8bit_percent"
+    )?;
+    for r in rows {
+        let c = &r.config;
+        writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.5},{:.5}",
+            r.scene,
+            r.backend,
+            c.series,
+            c.directions[0],
+            c.directions[1],
+            1 + c.directions[0] * c.directions[1],
+            r.vertices,
+            c.compression,
+            c.planes,
+            c.map_resolution,
+            r.table_median_seconds,
+            r.frame_median_seconds,
+            r.rms_8bit_percent,
+            r.max_8bit_percent
+        )?;
+    }
+    crate::output::write_atomically(path, &out)
+}
+
+/// `precompute`: the table's time against vertices x directions; else the
+/// error against the frame time; one line per scene, backend and series.
+fn plot(path: &Path, rows: &[Row], precompute: bool) -> Result<()> {
+    let mut groups: Vec<(String, &'static str, &'static str)> = Vec::new();
+    for r in rows {
+        let g = (r.scene.clone(), r.backend, r.config.series);
+        if !groups.contains(&g) && (!precompute || matches!(r.config.series, "directions" | "vertices")) {
+            groups.push(g);
+        }
+    }
+    let series: Vec<(String, Vec<(f64, f64)>)> = groups
+        .iter()
+        .map(|(scene, backend, name)| {
+            let pts = rows
+                .iter()
+                .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *name)
+                .map(|r| {
+                    if precompute {
+                        let d = 1 + r.config.directions[0] * r.config.directions[1];
+                        (r.vertices as f64 * d as f64, r.table_median_seconds)
+                    } else {
+                        (r.frame_median_seconds, r.rms_8bit_percent)
+                    }
+                })
+                .collect();
+            (format!("{scene} ({backend}, {name})"), pts)
+        })
+        .collect();
+    let labels = if precompute {
+        crate::bench::LogLogPlot {
+            caption: "Caustics: light transport table time",
+            x_desc: "vertices x directions",
+            y_desc: "median table time, s",
+        }
+    } else {
+        crate::bench::LogLogPlot {
+            caption: "Caustics: frame time against error",
+            x_desc: "median frame time without the table, s",
+            y_desc: "RMS error, % of 8 bit (no glass)",
+        }
+    };
+    crate::bench::plot_log_log(path, &labels, &series, 1e-4)
+}

@@ -372,7 +372,7 @@ fn stress_a_million_triangle_glass_torus() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("big.toml");
     std::fs::write(&path, torus("[8, 16]")).unwrap();
-    let err = slicelight::scene::load(&path).err().expect("a 1.2 GB table is refused");
+    let err = slicelight::scene::load(&path).expect_err("a 1.2 GB table is refused");
     assert!(format!("{err:#}").contains("caustics.directions"), "{err:#}");
     let data = common::scene_from_str(&torus("[2, 4]"));
     assert_eq!(data.glass_triangles.len(), 1_000_000);

@@ -209,8 +209,9 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     let pass_timing = match backend {
         Backend::Cpu => {
             let mut frame = known;
-            // Per-pixel resources no running pass writes hold their blank.
-            for r in PASSES.iter().flat_map(|p| p.reads().iter().chain(p.writes())) {
+            // Per-pixel resources that running passes read but none writes
+            // hold their blank (the rest are never touched).
+            for r in running.iter().flat_map(|(_, p, _)| p.reads().iter()) {
                 let written = running.iter().any(|(_, p, _)| p.writes().iter().any(|w| w.binding == r.binding));
                 if !written && !frame.contains(r) {
                     if let Some(blank) = r.blank(pixels) {

@@ -380,3 +380,29 @@ fn stress_a_million_triangle_glass_torus() {
     flux_check(&data, &r, "1M-triangle torus");
     assert!(layer(&r, "caustics").iter().any(|v| v.x > 0.0), "the torus casts no caustic");
 }
+
+#[test]
+fn a_moved_object_keeps_its_table() {
+    // The table holds positions relative to each vertex and world
+    // directions, and its key is the object's shape, not its place: the
+    // same ball moved finds the table the first one left in the cache, and
+    // renders as a fresh trace of it does.
+    let at = |center: &str| {
+        ball_scene("", LIGHT, CAMERA, "ior = 1.5").replace("center = [0.0, 0.5, 0.0]", &format!("center = {center}"))
+    };
+    let first = common::scene_from_str(&at("[0.0, 0.5, 0.0]"));
+    render_checked(&first, "ball");
+    let moved = common::scene_from_str(&at("[0.37, 0.5, -0.21]"));
+    assert!(moved.caustics.cached_table.is_some(), "the moved ball did not find its table in the cache");
+    let cached = render_checked(&moved, "moved ball, cached table");
+    let mut fresh = moved.clone();
+    fresh.caustics.cached_table = None;
+    let traced = render_checked(&fresh, "moved ball, traced table");
+    let d = difference(&to_f64(layer(&cached, "caustics")), &to_f64(layer(&traced, "caustics")), 1.0);
+    println!(
+        "moved ball, cached against traced table: {:.4} % RMS, {:.2} % max of 8 bit",
+        d.rms_8bit_percent, d.max_8bit_percent
+    );
+    // The two tables differ by f32 rounding of the traces at another place.
+    assert!(d.rms_8bit_percent < 0.05, "{d:?}");
+}

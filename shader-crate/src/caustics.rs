@@ -122,7 +122,9 @@ fn from16(w: u32) -> f32 {
     (w & 0xffff) as f32 / 65535.0
 }
 
-/// Writes entry `e` of `vertex` into table slot `slot` (section 6 when
+/// Writes entry `e` of `vertex` into table slot `slot`, its point nearest
+/// the vertex relative to the vertex (so the table holds for the object
+/// wherever it stands); section 6 when
 /// compressed: 16 bits per coordinate of the point nearest the vertex and
 /// the exit distance, relative to the vertex within +- the object's
 /// diagonal `vertex.normal.w`; 16 bits per angle of the exit direction,
@@ -131,7 +133,7 @@ fn from16(w: u32) -> f32 {
 pub fn store_entry(table: &mut [u32], params: &CausticsParams, slot: u32, e: &TableEntry, vertex: &GlassVertex) {
     let base = (slot * params.entry_words) as usize;
     if params.compressed == 0 {
-        store4(table, base, e.position);
+        store4(table, base, (e.position.xyz() - vertex.position.xyz()).extend(e.position.w));
         store4(table, base + 4, e.direction);
         store4(table, base + 8, e.transmittance);
         return;
@@ -173,7 +175,10 @@ pub fn load_entry(table: &[u32], params: &CausticsParams, slot: u32, vertex: &Gl
     let base = (slot * params.entry_words) as usize;
     if params.compressed == 0 {
         return TableEntry {
-            position: load4(table, base),
+            position: {
+                let p = load4(table, base);
+                (p.xyz() + vertex.position.xyz()).extend(p.w)
+            },
             direction: load4(table, base + 4),
             transmittance: load4(table, base + 8),
         };
@@ -524,22 +529,31 @@ pub fn lookup(
     // grazing ray that leaves the mesh at once) takes the rotation of the
     // heaviest corner whose path left the glass; a corner where the light
     // is totally reflected or blocked lends no direction at all.
-    let q = heaviest(q00, w00, q01, w01, q10, w10, q11, w11);
-    let lost = |e: &TableEntry| if e.position.w == PATH_LOST as f32 { 1.0 } else { 0.0 };
+    //
+    // The exit ray's geometry weighs each corner also by the light it
+    // carries: a path that leaves at the critical angle (the last ring of a
+    // ball) grazes off along the surface with no light, and whether it
+    // leaves at all there is a matter of rounding; it must not steer the
+    // others' light.
+    let carried = |e: &TableEntry| e.transmittance.x.max(e.transmittance.y).max(e.transmittance.z).clamp(1e-4, 1.0);
+    let (t00, t01, t10, t11) = (w00 * carried(&e00), w01 * carried(&e01), w10 * carried(&e10), w11 * carried(&e11));
+    let t_total = t00 + t01 + t10 + t11;
+    let q = heaviest(q00, t00, q01, t01, q10, t10, q11, t11);
+    let lost = |e: &TableEntry| if e.position.w == PATH_LOST as f32 { t_total / total } else { 0.0 };
     let (g00, g01, g10, g11) =
-        (w00 + b00 * lost(&e00), w01 + b01 * lost(&e01), w10 + b10 * lost(&e10), w11 + b11 * lost(&e11));
+        (t00 + b00 * lost(&e00), t01 + b01 * lost(&e01), t10 + b10 * lost(&e10), t11 + b11 * lost(&e11));
     let pick_q = |qj: Quat, wj: f32| if wj > 0.0 { qj } else { q };
     let s0 = sampled_local(params, n, t, k0);
     let s1 = sampled_local(params, n, t, k0 + 1);
     let (ring0, h0) = blend(pick_q(q00, w00).mul_vec3(s0), g00, pick_q(q01, w01).mul_vec3(s0), g01);
     let (ring1, h1) = blend(pick_q(q10, w10).mul_vec3(s1), g10, pick_q(q11, w11).mul_vec3(s1), g11);
     let (local_exit, _) = blend(ring0, h0, ring1, h1);
-    let local_anchor = (a00 * w00 + a01 * w01 + a10 * w10 + a11 * w11) / total;
+    let local_anchor = (a00 * t00 + a01 * t01 + a10 * t10 + a11 * t11) / t_total;
     let back = Quat::from_axis_angle(n, theta);
     let direction = back.mul_vec3(local_exit).normalize();
     let anchor = pv + back.mul_vec3(local_anchor);
     let s_exit =
-        (e00.direction.w * w00 + e01.direction.w * w01 + e10.direction.w * w10 + e11.direction.w * w11) / total;
+        (e00.direction.w * t00 + e01.direction.w * t01 + e10.direction.w * t10 + e11.direction.w * t11) / t_total;
     let inner = (e00.transmittance * w00 + e01.transmittance * w01 + e10.transmittance * w10 + e11.transmittance * w11)
         / weighed;
     // The entry's Fresnel transmittance at the light's own angle.

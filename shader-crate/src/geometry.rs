@@ -79,6 +79,14 @@ pub fn ray_sphere(origin: Vec3, dir: Vec3, center: Vec3, radius: f32, t_min: f32
     NO_HIT
 }
 
+/// How far outside a triangle (in barycentric units) a hit still counts:
+/// a ray through a shared edge or vertex of a mesh meets at least one of
+/// the triangles around it, instead of slipping between them when the
+/// rounding of each triangle's test puts it just outside all of them (a
+/// ray through a tessellated ball's centre hits the opposite vertex
+/// exactly).
+pub const EDGE_TOLERANCE: f32 = 1e-6;
+
 /// Möller-Trumbore ray/triangle intersection: distance along `dir` (unit) to
 /// the triangle, metres, if it is beyond `t_min`; `NO_HIT` otherwise.
 pub fn ray_triangle(origin: Vec3, dir: Vec3, v0: Vec3, v1: Vec3, v2: Vec3, t_min: f32) -> f32 {
@@ -92,12 +100,12 @@ pub fn ray_triangle(origin: Vec3, dir: Vec3, v0: Vec3, v1: Vec3, v2: Vec3, t_min
     let inv_det = 1.0 / det;
     let s = origin - v0;
     let u = s.dot(p) * inv_det;
-    if u < 0.0 || u > 1.0 {
+    if u < -EDGE_TOLERANCE || u > 1.0 + EDGE_TOLERANCE {
         return NO_HIT;
     }
     let q = s.cross(e1);
     let v = dir.dot(q) * inv_det;
-    if v < 0.0 || u + v > 1.0 {
+    if v < -EDGE_TOLERANCE || u + v > 1.0 + EDGE_TOLERANCE {
         return NO_HIT;
     }
     let t = e2.dot(q) * inv_det;

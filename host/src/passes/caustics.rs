@@ -240,8 +240,11 @@ pub struct CacheFile {
 
 /// The disk cache of light transport tables: one file per glass object,
 /// named by a 128-bit hash (XXH3) of everything its table depends on (the
-/// object's vertices, normals and triangles, its material, the table's
-/// directions and format). A file holds a magic string, the format
+/// object's shape as defined, less its position: a sphere's radius and
+/// tessellation, a mesh file's bytes and scale; its material; the table's
+/// directions and format). Entries
+/// hold positions relative to their vertex and world directions, so a
+/// table stays valid when its object is moved (not when it is turned). A file holds a magic string, the format
 /// version, the key, the entry count, the entries and a 64-bit checksum of
 /// them; a file that fails any check is rebuilt, never trusted.
 pub mod cache {
@@ -251,7 +254,7 @@ pub mod cache {
 
     const MAGIC: &[u8; 8] = b"SLCTABLE";
     /// Bump when the table's contents change for the same inputs.
-    const VERSION: u32 = 3;
+    const VERSION: u32 = 5;
     const HEADER: usize = 8 + 4 + 16 + 8;
 
     /// `SLICELIGHT_CACHE_DIR` (`off`: no cache), else
@@ -284,11 +287,11 @@ pub mod cache {
         bytes.extend(params.rings.to_le_bytes());
         bytes.extend(params.azimuths.to_le_bytes());
         bytes.extend(params.compressed.to_le_bytes());
-        for v in verts {
-            bytes.extend(bytemuck::bytes_of(&v.position));
-            bytes.extend(bytemuck::bytes_of(&v.normal));
-            bytes.extend(v.channels.to_le_bytes());
-        }
+        // The object's shape, not its place (its definition, less its
+        // position: `SceneData::shape_keys`), and its vertex count.
+        bytes.extend(scene.shape_keys[object as usize].to_le_bytes());
+        bytes.extend((verts.len() as u64).to_le_bytes());
+        bytes.extend(verts[0].channels.to_le_bytes());
         for t in scene.glass_triangles.iter().filter(|t| t.object == object) {
             for i in t.vertices {
                 bytes.extend((i as u64 - first as u64).to_le_bytes());

@@ -21,6 +21,11 @@ pub struct Objects {
     /// glass triangle is also in `triangles`, with `glass` pointing here.
     pub glass_vertices: Vec<GlassVertex>,
     pub glass_triangles: Vec<GlassTriangle>,
+    /// Per object, a hash of what its shape is made from, leaving out where
+    /// it stands (a sphere's radius and tessellation, not its centre; a
+    /// mesh file's bytes and scale, not its translation): the cache key of
+    /// a glass object's light transport table.
+    pub shape_keys: Vec<u128>,
 }
 
 /// A triangle mesh with one normal per vertex (outward).
@@ -138,9 +143,26 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
             Object::Torus(t) => torus(&field, t)?,
             Object::TrefoilKnot(k) => trefoil_knot(&field, k)?,
         };
+        out.shape_keys.push(shape_key(obj, base));
         push_mesh(&mut out, &mesh, id, glass);
     }
     Ok(out)
+}
+
+/// See `Objects::shape_keys`.
+fn shape_key(obj: &Object, base: &Path) -> u128 {
+    let text = match obj {
+        Object::Sphere(s) => format!("sphere {:?} {:?}", s.radius, s.segments.unwrap_or([96, 64])),
+        Object::Box(b) => format!("box {:?}", (Vec3::from(b.max) - Vec3::from(b.min)).to_array()),
+        Object::Quad(q) => format!("quad {:?} {:?}", q.u, q.v),
+        Object::Torus(t) => format!("torus {:?} {:?} {:?} {:?}", t.axis, t.major_radius, t.minor_radius, t.segments),
+        Object::TrefoilKnot(k) => format!("knot {:?} {:?} {:?}", k.scale, k.tube_radius, k.segments),
+        Object::Mesh(m) => {
+            let bytes = std::fs::read(base.join(&m.file)).unwrap_or_default();
+            format!("mesh {:x} {:?}", twox_hash::XxHash3_128::oneshot(&bytes), m.scale)
+        }
+    };
+    twox_hash::XxHash3_128::oneshot(text.as_bytes())
 }
 
 /// Appends a mesh's triangles (and, for glass, its vertices and indexed

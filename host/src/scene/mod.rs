@@ -42,6 +42,9 @@ pub struct SceneData {
     /// The glass meshes (vertices with smooth normals, indexed triangles).
     pub glass_vertices: Vec<GlassVertex>,
     pub glass_triangles: Vec<GlassTriangle>,
+    /// Per object, what its shape is made from, not where it stands (the
+    /// cache key of a glass object's table; `geometry::Objects::shape_keys`).
+    pub shape_keys: Vec<u128>,
     pub light_map: Vec<Vec4>,
     /// Axis-aligned bounds of the geometry, if there is any.
     pub bounds: Option<(Vec3, Vec3)>,
@@ -287,6 +290,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         materials: objects.materials,
         glass_vertices: objects.glass_vertices,
         glass_triangles: objects.glass_triangles,
+        shape_keys: objects.shape_keys,
         light_map: lights.light_map,
         bounds,
         exposure: file.camera.exposure,

@@ -820,14 +820,18 @@ fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f
         let w = if corner % 2 == 1 { fu } else { 1.0 - fu } * if corner / 2 == 1 { fv } else { 1.0 - fv };
         if w > 0.0 && i >= 0.0 && j >= 0.0 && i < params.map_width as f32 && j < params.map_height as f32 {
             let bin = ((plane * params.map_height + j as u32) * params.map_width + i as u32) * MAP_BINS;
-            density += Vec4::new(
+            let d = Vec4::new(
                 read_bin(words, params, bin),
                 read_bin(words, params, bin + 1),
                 read_bin(words, params, bin + 2),
                 0.0,
-            ) * w;
-            sx += (read_bin(words, params, bin + 3) - read_bin(words, params, bin + 4)) * w;
-            sz += (read_bin(words, params, bin + 5) - read_bin(words, params, bin + 6)) * w;
+            );
+            // Most texels of a map hold no light: no direction to read.
+            if d.x > 0.0 || d.y > 0.0 || d.z > 0.0 {
+                density += d * w;
+                sx += (read_bin(words, params, bin + 3) - read_bin(words, params, bin + 4)) * w;
+                sz += (read_bin(words, params, bin + 5) - read_bin(words, params, bin + 6)) * w;
+            }
         }
         corner += 1;
     }

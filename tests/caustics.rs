@@ -3,11 +3,10 @@
 mod common;
 
 use glam::{DVec3, Vec4};
+use slicelight::bench_caustics::{not_glass, select};
 use slicelight::caustics_reference::caustic_image;
 use slicelight::metrics::{difference, to_f64};
 use slicelight::scene::SceneData;
-use slicelight_shaders::geometry::{trace_nearest, NO_HIT};
-use slicelight_shaders::types::MATERIAL_GLASS;
 
 fn layer<'a>(r: &'a slicelight::render::Rendered, name: &str) -> &'a [Vec4] {
     r.layers.iter().find(|(n, _)| *n == name).map(|(_, b)| b.as_slice()).unwrap_or(&[])
@@ -26,25 +25,6 @@ fn render_checked(data: &SceneData, what: &str) -> slicelight::render::Rendered 
     r
 }
 
-/// Pixels none of whose sub-pixel samples sees glass first.
-fn not_glass(data: &SceneData) -> Vec<bool> {
-    let geometry = data.geometry();
-    let mut keep = vec![true; data.pixel_count() as usize];
-    for s in 0..data.samples_per_pixel() {
-        let mut common = data.common;
-        common.sample_index = s;
-        for (i, k) in keep.iter_mut().enumerate() {
-            let (x, y) = (i as u32 % data.width(), i as u32 / data.width());
-            let (o, d) = slicelight_shaders::camera::camera_ray(&common, x, y);
-            let hit = trace_nearest(o, d, 0.0, NO_HIT, &geometry);
-            if hit.distance != NO_HIT && data.materials[hit.material as usize].kind == MATERIAL_GLASS {
-                *k = false;
-            }
-        }
-    }
-    keep
-}
-
 fn shrink(name: &str, w: u32, h: u32, spp: u32, extra: &str) -> SceneData {
     let text = std::fs::read_to_string(common::root().join("scenes").join(name)).unwrap();
     let text = regex_free_resolution(&text, w, h);
@@ -59,10 +39,6 @@ fn regex_free_resolution(text: &str, w: u32, h: u32) -> String {
         .map(|l| if l.trim_start().starts_with("resolution") { format!("resolution = [{w}, {h}]") } else { l.into() })
         .collect::<Vec<_>>()
         .join("\n")
-}
-
-fn select(v: &[DVec3], keep: &[bool]) -> Vec<DVec3> {
-    v.iter().zip(keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect()
 }
 
 #[test]

@@ -116,9 +116,11 @@ fn small(mut data: SceneData, stride: u32) -> Result<SceneData> {
     Ok(data)
 }
 
-/// Pixels none of whose sub-pixel samples sees glass first.
-fn not_glass(data: &SceneData) -> Vec<bool> {
+/// Pixels none of whose sub-pixel samples sees glass first (the pixels the
+/// caustics error is measured over; also the tests').
+pub fn not_glass(data: &SceneData) -> Vec<bool> {
     use slicelight_shaders::geometry::{trace_nearest, NO_HIT};
+
     let geometry = data.geometry();
     let mut keep = vec![true; data.pixel_count() as usize];
     for s in 0..data.samples_per_pixel() {
@@ -128,9 +130,7 @@ fn not_glass(data: &SceneData) -> Vec<bool> {
             let (x, y) = (i as u32 % data.width(), i as u32 / data.width());
             let (o, d) = slicelight_shaders::camera::camera_ray(&common, x, y);
             let hit = trace_nearest(o, d, 0.0, NO_HIT, &geometry);
-            if hit.distance != NO_HIT
-                && data.materials[hit.material as usize].kind == slicelight_shaders::types::MATERIAL_GLASS
-            {
+            if slicelight_shaders::glass::is_glass(&data.materials, &hit) {
                 *k = false;
             }
         }
@@ -138,7 +138,8 @@ fn not_glass(data: &SceneData) -> Vec<bool> {
     keep
 }
 
-fn select(v: &[DVec3], keep: &[bool]) -> Vec<DVec3> {
+/// The values whose `keep` is true.
+pub fn select(v: &[DVec3], keep: &[bool]) -> Vec<DVec3> {
     v.iter().zip(keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect()
 }
 

@@ -68,7 +68,7 @@ fn epsilon(p: DVec3) -> f64 {
     1e-9 * p.abs().max_element().max(1.0)
 }
 
-/// A view ray `o + t d` whose first hit (at `t_hit`) is glass, followed in
+/// A view ray `o + t d` whose first hit `first` is glass, followed in
 /// channel `c` through the glass (refraction with the Fresnel transmittance
 /// as weight, total internal reflection followed) to the first opaque
 /// surface: (the point it leaves the glass from, its direction, the weight,
@@ -77,12 +77,12 @@ pub(crate) fn through_glass(
     data: &SceneData,
     o: DVec3,
     d: DVec3,
-    t_hit: f64,
+    first: &Surface,
     c: usize,
 ) -> Option<(DVec3, DVec3, f64, Surface)> {
-    let mut p = o + d * t_hit;
+    let mut p = o + d * first.t;
     let mut dir = d;
-    let mut hit = nearest(data, o, d, 0.0, f64::INFINITY)?;
+    let mut hit = first.clone();
     let mut inside = false;
     let mut weight = 1.0;
     for _ in 0..MAX_BOUNCES {
@@ -248,7 +248,7 @@ fn trace_path(
 pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only: bool) -> Vec<DVec3> {
     let pixels = data.pixel_count() as usize;
     let dispersive =
-        data.materials.iter().any(|m| m.kind == MATERIAL_GLASS && (m.ior.x != m.ior.y || m.ior.y != m.ior.z));
+        data.materials.iter().any(|m| m.kind == MATERIAL_GLASS && slicelight_shaders::glass::dispersive(m));
     let channels: Vec<Option<usize>> = if dispersive { vec![Some(0), Some(1), Some(2)] } else { vec![None] };
     let objects = glass_objects(data);
     let tasks = 64u64;

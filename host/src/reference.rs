@@ -36,6 +36,7 @@ pub(crate) fn d3(v: Vec4) -> DVec3 {
     v.xyz().as_dvec3()
 }
 
+#[derive(Clone)]
 pub(crate) struct Surface {
     pub t: f64,
     /// Unit geometric normal, not turned to face the ray.
@@ -252,7 +253,7 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         // Through glass: the opaque surface behind, lit directly, per channel.
         let mut radiance = DVec3::ZERO;
         for c in 0..3 {
-            if let Some((q, dir, weight, behind)) = crate::caustics_reference::through_glass(data, o, d, hit.t, c) {
+            if let Some((q, dir, weight, behind)) = crate::caustics_reference::through_glass(data, o, d, &hit, c) {
                 let l = direct(data, q, dir, &behind) * (-sigma_t * behind.t).exp();
                 radiance[c] += l[c] * weight;
             }

@@ -918,11 +918,6 @@ pub fn caustics_pixel(
     Vec4::new(radiance.x, radiance.y, radiance.z, 0.0)
 }
 
-/// Channel `c`'s value of a table entry's transmittance (tests, host).
-pub fn entry_transmittance(e: &TableEntry, c: u32) -> f32 {
-    pick(e.transmittance, c)
-}
-
 #[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn caustics_table_kernel(

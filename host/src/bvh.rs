@@ -1,7 +1,8 @@
 //! The triangle BVH: built on the host with the surface area heuristic over
-//! binned centroids, flattened in depth-first order with skip links so the
-//! kernels walk it without a stack (`geometry::trace_nearest`), and walked
-//! the same way by the f64 reference.
+//! binned centroids, flattened in depth-first order. The kernels walk it
+//! nearest child first with a small stack (`geometry::trace_nearest`, each
+//! inner node naming its second child); the f64 reference walks it in plain
+//! depth-first order by the skip links.
 
 use glam::{Vec3, Vec4};
 use slicelight_shaders::types::{GpuBvhNode, GpuTriangle};
@@ -13,8 +14,10 @@ const BINS: usize = 16;
 /// Cost of visiting a node, in triangle tests (the SAH's traversal cost).
 const TRAVERSAL_COST: f32 = 1.0;
 /// Below this depth the SAH chooses splits; past it (a degenerate mesh)
-/// splits are median splits, which bound the depth by log2 of the count.
-const SAH_DEPTH: u32 = 40;
+/// splits are median splits, which bound the depth by log2 of the count:
+/// at most `SAH_DEPTH + 32` levels, within the kernels' traversal stack
+/// (`geometry::BVH_STACK`).
+const SAH_DEPTH: u32 = 32;
 
 /// The flattened tree and the triangles reordered so each leaf's are contiguous.
 pub struct Bvh {
@@ -81,6 +84,7 @@ fn build_node(items: &mut [Item], first: usize, end: usize, depth: u32, nodes: &
         }
         Some(mid) => {
             build_node(items, first, first + mid, depth + 1, nodes);
+            nodes[index].right = nodes.len() as u32;
             build_node(items, first + mid, end, depth + 1, nodes);
         }
     }
@@ -166,7 +170,7 @@ fn padded_node(b: Aabb) -> GpuBvhNode {
         first: 0,
         count: 0,
         skip: 0,
-        _pad: 0,
+        right: 0,
     }
 }
 
@@ -239,6 +243,7 @@ mod tests {
             }
             ancestors.push(i);
             let next = visit(bvh, i + 1, ancestors, seen);
+            assert_eq!(node.right as usize, next, "second child of node {i}");
             let after = visit(bvh, next, ancestors, seen);
             ancestors.pop();
             assert_eq!(after, node.skip as usize, "skip link of node {i}");
@@ -262,5 +267,69 @@ mod tests {
         let one = Bvh::build(random_triangles(1));
         assert_eq!(one.nodes.len(), 1);
         assert!(Bvh::build(Vec::new()).nodes.is_empty());
+    }
+
+    #[test]
+    fn depth_stays_within_the_kernels_stack() {
+        // Exponentially spaced triangles: each binned SAH split peels off
+        // the farthest few, the deepest tree the build can make; past
+        // SAH_DEPTH, median splits bound it.
+        let chain: Vec<GpuTriangle> = (0..3000)
+            .map(|i| {
+                let c = Vec3::new(1.02f32.powi(i), 0.0, 0.0);
+                GpuTriangle {
+                    v0: c.extend(1.0),
+                    v1: (c + Vec3::Y).extend(1.0),
+                    v2: (c + Vec3::Z).extend(1.0),
+                    ..Default::default()
+                }
+            })
+            .collect();
+        let d = depth(&Bvh::build(chain).nodes);
+        assert!(d <= slicelight_shaders::geometry::BVH_STACK, "depth {d}");
+    }
+
+    #[test]
+    fn nearest_first_walk_finds_what_every_triangle_tested_finds() {
+        use slicelight_shaders::geometry::{occluded, ray_triangle, trace_nearest, trace_object, NO_HIT};
+        let tris = random_triangles(4000);
+        let bvh = Bvh::build(tris);
+        let common =
+            slicelight_shaders::types::CommonParams { bvh_node_count: bvh.nodes.len() as u32, ..Default::default() };
+        let geometry = slicelight_shaders::scene_geometry(&common, &[], &bvh.triangles, &bvh.nodes);
+        let mut state = 99u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 40) as f32) / (1u64 << 24) as f32
+        };
+        let mut hits = 0;
+        for k in 0..3000 {
+            let o = Vec3::new(next(), next(), next()) * 14.0 - 2.0;
+            // Two rays in three toward a triangle (near its centroid), the rest anywhere.
+            let t = bvh.triangles[(next() * 3999.0) as usize];
+            let aim = (t.v0 + t.v1 + t.v2).truncate() / 3.0 + (Vec3::new(next(), next(), next()) - 0.5) * 0.05;
+            let d =
+                if k % 3 == 2 { (Vec3::new(next(), next(), next()) - 0.5).normalize() } else { (aim - o).normalize() };
+            let brute = |only: Option<u32>| {
+                bvh.triangles
+                    .iter()
+                    .filter(|t| only.is_none_or(|o| t.object == o))
+                    .map(|t| ray_triangle(o, d, t.v0.truncate(), t.v1.truncate(), t.v2.truncate(), 0.0))
+                    .fold(NO_HIT, f32::min)
+            };
+            let nearest = brute(None);
+            let hit = trace_nearest(o, d, 0.0, NO_HIT, &geometry);
+            assert_eq!(hit.distance, nearest, "ray {k}");
+            hits += (nearest < NO_HIT) as u32;
+            // A shadow ray to just past and just before the nearest hit.
+            if nearest < NO_HIT {
+                assert!(occluded(o, d, 0.0, nearest * 1.001, &geometry), "ray {k}");
+                assert!(!occluded(o, d, 0.0, nearest * 0.999, &geometry), "ray {k}");
+            }
+            let object = k % 4000;
+            assert_eq!(trace_object(o, d, 0.0, NO_HIT, &geometry, object).distance, brute(Some(object)), "ray {k}");
+        }
+        // Enough of the rays meet something for the comparison to mean something.
+        assert!(hits > 1000, "{hits} of 3000 rays hit");
     }
 }

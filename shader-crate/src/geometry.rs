@@ -116,6 +116,25 @@ pub fn ray_triangle(origin: Vec3, dir: Vec3, v0: Vec3, v1: Vec3, v2: Vec3, t_min
     }
 }
 
+/// Entries of the BVH traversal stack: at least the deepest tree's depth
+/// (`bvh::SAH_DEPTH + 32` on the host).
+pub const BVH_STACK: usize = 64;
+
+/// Where the ray `origin + t dir` enters the box `[lo, hi]` within
+/// `[t_min, t_max]` (`t_min` if it starts inside), or `NO_HIT` if it does
+/// not meet it there; the slab test of `ray_hits_box`.
+pub fn box_entry(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_min: f32, t_max: f32) -> f32 {
+    let a = (lo - origin) * inv_dir;
+    let b = (hi - origin) * inv_dir;
+    let near = a.x.min(b.x).max(a.y.min(b.y)).max(a.z.min(b.z)).max(t_min);
+    let far = a.x.max(b.x).min(a.y.max(b.y)).min(a.z.max(b.z)).min(t_max);
+    if near <= far {
+        near
+    } else {
+        NO_HIT
+    }
+}
+
 /// Whether the ray `origin + t dir` meets the box `[lo, hi]` for some `t` in
 /// `[t_min, t_max]` (slab test). Axes along which `dir` is 0 give infinite
 /// slab distances, which `min`/`max` order correctly. The one case that
@@ -123,20 +142,17 @@ pub fn ray_triangle(origin: Vec3, dir: Vec3, v0: Vec3, v1: Vec3, v2: Vec3, t_min
 /// it) may report a miss; the host pads every box beyond its triangles, so
 /// such a ray cannot meet any of them.
 pub fn ray_hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_min: f32, t_max: f32) -> bool {
-    let a = (lo - origin) * inv_dir;
-    let b = (hi - origin) * inv_dir;
-    let near = a.x.min(b.x).max(a.y.min(b.y)).max(a.z.min(b.z)).max(t_min);
-    let far = a.x.max(b.x).min(a.y.max(b.y)).min(a.z.max(b.z)).min(t_max);
-    near <= far
+    box_entry(origin, inv_dir, lo, hi, t_min, t_max) < NO_HIT
 }
 
 /// The nearest hit of a ray with the scene, closer than `t_max`.
 ///
-/// Triangles are found through the BVH, walked in depth-first order without
-/// a stack: a node whose box the ray misses, or meets only beyond the
-/// nearest hit so far, is skipped with its whole subtree (`skip`). Without
-/// a stack the children are not visited nearest-first; the pruning by the
-/// nearest hit still keeps the cost about logarithmic in the triangle count.
+/// Triangles are found through the BVH, walked nearest child first: at an
+/// inner node both children's boxes are tested, the nearer one is entered
+/// and the farther one put on a small stack with its entry distance; a box
+/// the ray misses, or enters only beyond the nearest hit so far, is never
+/// opened. Nearest-first, the first hits found are close, which prunes the
+/// rest early.
 pub fn trace_nearest(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry) -> Hit {
     trace(origin, dir, t_min, t_max, geometry, false, NO_OBJECT)
 }
@@ -177,39 +193,72 @@ fn trace(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, geometry: &Geometry, a
         }
         i += 1;
     }
+    if geometry.node_count == 0 {
+        return hit;
+    }
     let inv_dir = Vec3::new(1.0 / dir.x, 1.0 / dir.y, 1.0 / dir.z);
-    let mut n = 0;
-    while n < geometry.node_count {
+    // Nodes still to visit (the farther child wherever both were met) and
+    // where the ray enters their boxes.
+    let mut stack = [0u32; BVH_STACK];
+    let mut entry = [0.0f32; BVH_STACK];
+    let mut depth = 0usize;
+    let root = geometry.nodes[0];
+    hit.visits += 1;
+    let mut n = 0u32;
+    let mut walking = box_entry(origin, inv_dir, root.bounds_min.xyz(), root.bounds_max.xyz(), t_min, best) < NO_HIT;
+    while walking {
         let node = geometry.nodes[n as usize];
-        hit.visits += 1;
-        if !ray_hits_box(origin, inv_dir, node.bounds_min.xyz(), node.bounds_max.xyz(), t_min, best) {
-            n = node.skip;
-            continue;
-        }
-        if node.count == 0 {
-            n += 1;
-            continue;
-        }
-        let mut j = node.first as usize;
-        let end = j + node.count as usize;
-        while j < end {
-            let tri = geometry.triangles[j];
-            let (v0, v1, v2) = (tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz());
-            let t = ray_triangle(origin, dir, v0, v1, v2, t_min);
-            if t < best && (only == NO_OBJECT || tri.object == only) {
-                best = t;
-                hit.distance = t;
-                hit.normal = (v1 - v0).cross(v2 - v0).normalize();
-                hit.object = tri.object;
-                hit.material = tri.material;
-                hit.primitive = j as u32;
-                if any_hit {
-                    return hit;
+        let mut next = NO_OBJECT;
+        if node.count > 0 {
+            let mut j = node.first as usize;
+            let end = j + node.count as usize;
+            while j < end {
+                let tri = geometry.triangles[j];
+                let (v0, v1, v2) = (tri.v0.xyz(), tri.v1.xyz(), tri.v2.xyz());
+                let t = ray_triangle(origin, dir, v0, v1, v2, t_min);
+                if t < best && (only == NO_OBJECT || tri.object == only) {
+                    best = t;
+                    hit.distance = t;
+                    hit.normal = (v1 - v0).cross(v2 - v0).normalize();
+                    hit.object = tri.object;
+                    hit.material = tri.material;
+                    hit.primitive = j as u32;
+                    if any_hit {
+                        return hit;
+                    }
                 }
+                j += 1;
             }
-            j += 1;
+        } else {
+            let (l, r) = (n + 1, node.right);
+            let (ln, rn) = (geometry.nodes[l as usize], geometry.nodes[r as usize]);
+            hit.visits += 2;
+            let tl = box_entry(origin, inv_dir, ln.bounds_min.xyz(), ln.bounds_max.xyz(), t_min, best);
+            let tr = box_entry(origin, inv_dir, rn.bounds_min.xyz(), rn.bounds_max.xyz(), t_min, best);
+            if tl < NO_HIT && tr < NO_HIT {
+                // Both: the nearer now, the farther later (`depth` stays
+                // below the tree's depth, which the host keeps within the stack).
+                let (near, far, t_far) = if tl <= tr { (l, r, tr) } else { (r, l, tl) };
+                stack[depth % BVH_STACK] = far;
+                entry[depth % BVH_STACK] = t_far;
+                depth += 1;
+                next = near;
+            } else if tl < NO_HIT {
+                next = l;
+            } else if tr < NO_HIT {
+                next = r;
+            }
         }
-        n = node.skip;
+        // Otherwise the nearest node put aside that the ray enters before
+        // the nearest hit so far.
+        while next == NO_OBJECT && depth > 0 {
+            depth -= 1;
+            if entry[depth % BVH_STACK] < best {
+                next = stack[depth % BVH_STACK];
+            }
+        }
+        walking = next != NO_OBJECT;
+        n = next;
     }
     hit
 }

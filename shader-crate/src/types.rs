@@ -220,7 +220,8 @@ pub struct GpuBvhNode {
     pub count: u32,
     /// Index of the node after this node's subtree (`bvh_node_count` at the end).
     pub skip: u32,
-    pub _pad: u32,
+    /// Inner node: its second child (the first is the next node); leaf: 0.
+    pub right: u32,
 }
 
 /// What the surface pass leaves for later passes at every pixel (G-buffer).

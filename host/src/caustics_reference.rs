@@ -16,8 +16,8 @@
 //! refraction at every interface with the Fresnel transmittance as weight,
 //! and paths that meet total internal reflection dropped.
 //!
-//! A line light is the row of point lights the scene's loader makes of it;
-//! the tests use point, spot and directional lights.
+//! A line light emits from its whole segment: each of its paths starts at
+//! a uniformly chosen point of it (not at the point lights the kernels see).
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -242,6 +242,28 @@ fn trace_path(
     }
 }
 
+/// Where the light tracer's paths start: a light, or a whole line light.
+#[derive(Clone, Copy)]
+enum Source {
+    Light(usize),
+    Line(usize),
+}
+
+/// A direction from `pos` uniform over the cone that sees the sphere
+/// (`center`, `radius`; every direction from inside it), and the cone's
+/// solid angle, sr.
+fn toward_sphere(pos: DVec3, center: DVec3, radius: f64, rng: &mut Rng) -> (DVec3, f64) {
+    let to = center - pos;
+    let dist = to.length();
+    let cos_max = if dist > radius { (1.0 - (radius / dist).powi(2)).sqrt() } else { -1.0 };
+    let axis = if dist > 0.0 { to / dist } else { DVec3::Y };
+    let (e1, e2) = axis.any_orthonormal_pair();
+    let cos = 1.0 - rng.next() * (1.0 - cos_max);
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    let phi = std::f64::consts::TAU * rng.next();
+    (axis * cos + (e1 * phi.cos() + e2 * phi.sin()) * sin, std::f64::consts::TAU * (1.0 - cos_max))
+}
+
 /// The caustic light (paths that met glass, then an opaque surface) each
 /// pixel sees, W/(m^2 sr) per channel, from `paths` paths per light, glass
 /// object and channel traced as described in the module docs.
@@ -252,8 +274,15 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
     let channels: Vec<Option<usize>> = if dispersive { vec![Some(0), Some(1), Some(2)] } else { vec![None] };
     let objects = glass_objects(data);
     let tasks = 64u64;
+    // Every light but the line lights' points, then the line lights.
+    let in_line = |i: usize| data.line_lights.iter().any(|l| l.lights.contains(&i));
+    let sources: Vec<Source> = (0..data.lights.len())
+        .filter(|i| !in_line(*i))
+        .map(Source::Light)
+        .chain((0..data.line_lights.len()).map(Source::Line))
+        .collect();
     let mut jobs = Vec::new();
-    for (li, _) in data.lights.iter().enumerate() {
+    for (li, _) in sources.iter().enumerate() {
         for (oi, _) in objects.iter().enumerate() {
             for &c in &channels {
                 for t in 0..tasks {
@@ -266,7 +295,6 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
         .fold(
             || vec![DVec3::ZERO; pixels],
             |mut image, &(li, oi, channel, task)| {
-                let light = &data.lights[li];
                 let (center, radius) = objects[oi];
                 let count = paths / tasks + u64::from(task < paths % tasks);
                 let mut rng =
@@ -276,6 +304,21 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
                     None => DVec3::ONE,
                 };
                 for _ in 0..count {
+                    let light = match sources[li] {
+                        Source::Light(i) => &data.lights[i],
+                        Source::Line(k) => {
+                            // A point of the segment, uniformly; the
+                            // segment's intensity `per_metre * length` in
+                            // every direction of the cone toward the object.
+                            let line = &data.line_lights[k];
+                            let (a, b) = (line.from.as_dvec3(), line.to.as_dvec3());
+                            let pos = a + (b - a) * rng.next();
+                            let (d, solid_angle) = toward_sphere(pos, center, radius, &mut rng);
+                            let flux = line.per_metre.as_dvec3() * ((b - a).length() * solid_angle / paths as f64);
+                            trace_path(data, pos, d, flux * mask, channel, transmission_only, &mut rng, &mut image);
+                            continue;
+                        }
+                    };
                     let (o, d, flux) = if light.kind == LIGHT_DIRECTIONAL {
                         // Uniform over the disc the bounding sphere casts across the beam.
                         let axis = d3(light.axis_z);
@@ -294,20 +337,10 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
                         let e = emitted(data, light, local);
                         (o, axis, e * (std::f64::consts::PI * radius * radius / paths as f64))
                     } else {
-                        // Uniform over the cone that sees the bounding sphere.
                         let pos = d3(light.position);
-                        let to = center - pos;
-                        let dist = to.length();
-                        let cos_max = if dist > radius { (1.0 - (radius / dist).powi(2)).sqrt() } else { -1.0 };
-                        let axis = if dist > 0.0 { to / dist } else { DVec3::Y };
-                        let (e1, e2) = axis.any_orthonormal_pair();
-                        let cos = 1.0 - rng.next() * (1.0 - cos_max);
-                        let sin = (1.0 - cos * cos).max(0.0).sqrt();
-                        let phi = std::f64::consts::TAU * rng.next();
-                        let d = axis * cos + (e1 * phi.cos() + e2 * phi.sin()) * sin;
+                        let (d, solid_angle) = toward_sphere(pos, center, radius, &mut rng);
                         let local =
                             DVec3::new(d.dot(d3(light.axis_x)), d.dot(d3(light.axis_y)), d.dot(d3(light.axis_z)));
-                        let solid_angle = std::f64::consts::TAU * (1.0 - cos_max);
                         (pos, d, emitted(data, light, local) * (solid_angle / paths as f64))
                     };
                     if flux == DVec3::ZERO {

@@ -263,33 +263,65 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
     (direct(data, o, d, &hit) * (-sigma_t * hit.t).exp(), hit.t)
 }
 
+/// Points per line light of the reference's direct light: the midpoint
+/// rule over the segment, each point one shadow ray. Where the segment is
+/// partly hidden the error is at most 1/256 of the line's irradiance (one
+/// piece seen or not); elsewhere it falls as the square of the piece's
+/// length. The method sees the line as `points` point lights.
+pub const LINE_REFERENCE_POINTS: usize = 256;
+
 /// Radiance leaving the opaque surface `hit` of the ray `o + t d` toward
-/// its origin, lit directly by every light (shadow rays), f64.
+/// its origin, lit directly by every light (shadow rays), f64. A line light
+/// is integrated along its segment (`LINE_REFERENCE_POINTS`), not taken as
+/// the point lights the kernels see.
 pub(crate) fn direct(data: &SceneData, o: DVec3, d: DVec3, hit: &Surface) -> DVec3 {
-    let p = &data.common;
     let point = o + d * hit.t;
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
-    let sigma_t = d3(p.sigma_t);
     let mut irradiance = DVec3::ZERO;
-    for light in &data.lights {
+    for (i, light) in data.lights.iter().enumerate() {
+        if data.line_lights.iter().any(|l| l.lights.contains(&i)) {
+            continue;
+        }
         let (local, to_light, distance) = toward_light(light, point);
         let falloff = if light.kind == LIGHT_DIRECTIONAL { 1.0 } else { 1.0 / (distance * distance) };
-        let cos = normal.dot(to_light);
-        if cos <= 0.0 {
-            continue;
+        irradiance += incident(data, point, normal, to_light, distance, falloff, || emitted(data, light, local));
+    }
+    for line in &data.line_lights {
+        let (a, b) = (line.from.as_dvec3(), line.to.as_dvec3());
+        let piece = line.per_metre.as_dvec3() * ((b - a).length() / LINE_REFERENCE_POINTS as f64);
+        for k in 0..LINE_REFERENCE_POINTS {
+            let rel = a + (b - a) * ((k as f64 + 0.5) / LINE_REFERENCE_POINTS as f64) - point;
+            let distance = rel.length();
+            let falloff = 1.0 / (distance * distance);
+            irradiance += incident(data, point, normal, rel / distance.max(1e-300), distance, falloff, || piece);
         }
-        let e = emitted(data, light, local);
-        if e == DVec3::ZERO {
-            continue;
-        }
-        // A directional light's shadow ray ends at its entry plane.
-        if !sees_light(data, point, to_light, distance) {
-            continue;
-        }
-        let attenuation = (-sigma_t * distance).exp();
-        irradiance += e * attenuation * (cos * falloff);
     }
     hit.albedo * irradiance / std::f64::consts::PI
+}
+
+/// Irradiance at `point` (unit `normal`) from a light `distance` away
+/// toward `to_light` emitting `intensity()` that way (W/sr, or W/m^2 for a
+/// directional light with `falloff` 1), if it sees the light.
+fn incident(
+    data: &SceneData,
+    point: DVec3,
+    normal: DVec3,
+    to_light: DVec3,
+    distance: f64,
+    falloff: f64,
+    intensity: impl Fn() -> DVec3,
+) -> DVec3 {
+    let cos = normal.dot(to_light);
+    if cos <= 0.0 {
+        return DVec3::ZERO;
+    }
+    let e = intensity();
+    // A directional light's shadow ray ends at its entry plane.
+    if e == DVec3::ZERO || !sees_light(data, point, to_light, distance) {
+        return DVec3::ZERO;
+    }
+    let attenuation = (-d3(data.common.sigma_t) * distance).exp();
+    e * attenuation * (cos * falloff)
 }
 
 /// Unpolarised Fresnel reflectance from air onto index `n` at incidence cosine `cos_i`, f64.

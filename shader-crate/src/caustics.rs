@@ -47,18 +47,17 @@
 //! which the mean direction is rebuilt. Only rays going down cross the
 //! planes (light from above the receivers).
 
-use crate::camera::{camera_ray, in_image};
-use crate::geometry::{trace_nearest, trace_object, Geometry, NO_HIT};
+use crate::geometry::{trace_object, Geometry, NO_HIT};
 use crate::glam::{Quat, UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::glass::{
     fresnel_transmittance, pick, surface_epsilon, trace_through, Glass, PATH_LOST, PATH_OCCLUDED, PATH_OUT,
 };
 use crate::light::{emitted, light_local, transmittance};
-use crate::scatter::{scatter_add, AtomicWords};
-use crate::surface::{channel_part, receiver, shadow_ray_visibility, view_channels};
+use crate::scatter::{scatter_add, AtomicWords, REJECTED_WORD};
+use crate::surface::{channel_part, shadow_ray_visibility, Receiver};
 use crate::types::{
     CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
-    LIGHT_DIRECTIONAL, MATERIAL_GLASS, NO_OBJECT,
+    LIGHT_DIRECTIONAL,
 };
 use core::f32::consts::{FRAC_1_PI, FRAC_PI_2, TAU};
 #[cfg(target_arch = "spirv")]
@@ -123,8 +122,9 @@ fn from16(w: u32) -> f32 {
 }
 
 /// Writes entry `e` of `vertex` into table slot `slot`, its point nearest
-/// the vertex relative to the vertex (so the table holds for the object
-/// wherever it stands); section 6 when
+/// the vertex relative to the vertex and it and the exit direction turned
+/// back by the object's rotation (so the table holds for the object
+/// wherever it stands and however it is turned); section 6 when
 /// compressed: 16 bits per coordinate of the point nearest the vertex and
 /// the exit distance, relative to the vertex within +- the object's
 /// diagonal `vertex.normal.w`; 16 bits per angle of the exit direction,
@@ -132,16 +132,19 @@ fn from16(w: u32) -> f32 {
 /// transmittance).
 pub fn store_entry(table: &mut [u32], params: &CausticsParams, slot: u32, e: &TableEntry, vertex: &GlassVertex) {
     let base = (slot * params.entry_words) as usize;
+    // As the object was defined: turned back by its rotation.
+    let undo = object_rotation(vertex).conjugate();
+    let relative = undo.mul_vec3(e.position.xyz() - vertex.position.xyz());
+    let d = undo.mul_vec3(e.direction.xyz());
     if params.compressed == 0 {
-        store4(table, base, (e.position.xyz() - vertex.position.xyz()).extend(e.position.w));
-        store4(table, base + 4, e.direction);
+        store4(table, base, relative.extend(e.position.w));
+        store4(table, base + 4, d.extend(e.direction.w));
         store4(table, base + 8, e.transmittance);
         return;
     }
     let size = vertex.normal.w;
-    let a = (e.position.xyz() - vertex.position.xyz()) / size * 0.5 + 0.5;
+    let a = relative / size * 0.5 + 0.5;
     let s = e.direction.w / size * 0.5 + 0.5;
-    let d = e.direction.xyz();
     let mut azimuth = d.z.atan2(d.x);
     if azimuth < 0.0 {
         azimuth += TAU;
@@ -173,13 +176,13 @@ fn load4(table: &[u32], at: usize) -> Vec4 {
 /// Reads table slot `slot` of `vertex` (see `store_entry`).
 pub fn load_entry(table: &[u32], params: &CausticsParams, slot: u32, vertex: &GlassVertex) -> TableEntry {
     let base = (slot * params.entry_words) as usize;
+    let turn = object_rotation(vertex);
     if params.compressed == 0 {
+        let p = load4(table, base);
+        let d = load4(table, base + 4);
         return TableEntry {
-            position: {
-                let p = load4(table, base);
-                (p.xyz() + vertex.position.xyz()).extend(p.w)
-            },
-            direction: load4(table, base + 4),
+            position: (vertex.position.xyz() + turn.mul_vec3(p.xyz())).extend(p.w),
+            direction: turn.mul_vec3(d.xyz()).extend(d.w),
             transmittance: load4(table, base + 8),
         };
     }
@@ -192,8 +195,8 @@ pub fn load_entry(table: &[u32], params: &CausticsParams, slot: u32, vertex: &Gl
     let (sp, cp) = polar.sin_cos();
     let (sa, ca) = azimuth.sin_cos();
     TableEntry {
-        position: (vertex.position.xyz() + a).extend((w4 >> 16) as f32),
-        direction: Vec3::new(sp * ca, cp, sp * sa).extend(s),
+        position: (vertex.position.xyz() + turn.mul_vec3(a)).extend((w4 >> 16) as f32),
+        direction: turn.mul_vec3(Vec3::new(sp * ca, cp, sp * sa)).extend(s),
         transmittance: Vec4::new(from16(w3), from16(w3 >> 16), from16(w4), 0.0),
     }
 }
@@ -227,12 +230,25 @@ mod pod {
     const _: () = assert!(core::mem::size_of::<super::TableEntry>() == 48);
 }
 
-/// The local frame of a vertex (section 4, Fig. 3): tangent `t` and
-/// binormal `b` from the unit normal `n`, the same on every call.
-pub fn vertex_frame(n: Vec3) -> (Vec3, Vec3) {
+/// The tangent of a vertex's local frame (section 4, Fig. 3) from the unit
+/// normal `n` as the object was defined (the host turns it with the object:
+/// `GlassVertex::tangent`).
+pub fn frame_tangent(n: Vec3) -> Vec3 {
     let a = if n.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
-    let t = a.cross(n).normalize();
-    (t, n.cross(t))
+    a.cross(n).normalize()
+}
+
+/// The local frame of a vertex (section 4, Fig. 3): its unit normal `n`,
+/// tangent `t` and binormal `b = n x t`, turned with its object.
+pub fn vertex_frame(v: &GlassVertex) -> (Vec3, Vec3, Vec3) {
+    let n = v.normal.xyz();
+    let t = v.tangent.xyz();
+    (n, t, n.cross(t))
+}
+
+/// The object's rotation of vertex `v` (see `GlassVertex::rotation`).
+fn object_rotation(v: &GlassVertex) -> Quat {
+    Quat::from_xyzw(v.rotation.x, v.rotation.y, v.rotation.z, v.rotation.w)
 }
 
 /// Eq. 3's angles of table direction `j`: (`phi` from the inward normal,
@@ -282,8 +298,8 @@ pub fn table_entry(
     let c = index % params.channels;
     let j = (index / params.channels) % params.directions;
     let v = glass.vertices[(index / (params.channels * params.directions)) as usize];
-    let (p, n) = (v.position.xyz(), v.normal.xyz());
-    let (t, b) = vertex_frame(n);
+    let p = v.position.xyz();
+    let (n, t, b) = vertex_frame(&v);
     let (phi, theta) = direction_angles(params, j);
     let w = sampling_direction(n, t, b, phi, theta);
     // Self-occlusion (section 4): a ray from the vertex back toward the
@@ -470,8 +486,7 @@ pub fn lookup(
     if !lit {
         return invalid;
     }
-    let n = v.normal.xyz();
-    let (t, b) = vertex_frame(n);
+    let (n, t, b) = vertex_frame(&v);
     let phi = (-l.dot(n)).clamp(0.0, 1.0).acos();
     let mut theta = (-l.dot(b)).atan2(-l.dot(t));
     if theta < 0.0 {
@@ -631,7 +646,11 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
         return;
     }
     let (d0, d1, d2) = (r0.direction.xyz(), r1.direction.xyz(), r2.direction.xyz());
-    if !(d0.y < 0.0 && d1.y < 0.0 && d2.y < 0.0) {
+    // Only light going down, and not within 0.9 degrees of the horizontal
+    // (`MAX_SLOPE`): such rays land over 64 heights away, where a
+    // cross-section's corners lie so far out that f32 cannot tell which
+    // samples it covers.
+    if !(steep(d0) && steep(d1) && steep(d2)) {
         return;
     }
     let y = params.map_origin.y + k as f32 * params.plane_spacing;
@@ -666,18 +685,34 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
     let area2 = (bx - ax) * (cz - az) - (bz - az) * (cx - ax);
     let tri = Triangle2 { ax, az, bx, bz, cx, cz, sign: if area2 < 0.0 { -1.0 } else { 1.0 } };
     let (wmax, hmax) = (params.map_width as f32 - 1.0, params.map_height as f32 - 1.0);
-    // Texels whose squares [i - 1/2, i + 1/2] the cross-section's box meets.
-    let i0 = (ax.min(bx).min(cx) - 0.5).ceil().max(0.0);
-    let i1 = (ax.max(bx).max(cx) + 0.5).floor().min(wmax);
+    // Rows whose squares [j - 1/2, j + 1/2] the cross-section's box meets;
+    // in each, only the texels its span over that row meets.
     let j0 = (az.min(bz).min(cz) - 0.5).ceil().max(0.0);
     let j1 = (az.max(bz).max(cz) + 0.5).floor().min(hmax);
-    // First pass: the sub-samples covered in all (4 x 4 per texel).
+    // First the texels to visit: a cross-section over `MAX_VOLUME_TEXELS`
+    // (light spread over a tenth of a 512^2 map or more) is counted as
+    // rejected and not drawn, on both backends alike: lavapipe ends every
+    // loop of an invocation after 65 535 iterations in all, which would cut
+    // it short on that device only.
+    let mut visits = 0.0;
+    let mut j = j0;
+    while j <= j1 {
+        let (lo, hi) = row_span(&tri, j, wmax);
+        visits += (hi - lo + 1.0).max(0.0);
+        j += 1.0;
+    }
+    if visits > MAX_VOLUME_TEXELS {
+        words.fetch_add(REJECTED_WORD, 1);
+        return;
+    }
+    // Then the sub-samples covered in all (4 x 4 per texel).
     let mut count = 0u32;
-    if i0 <= i1 && j0 <= j1 && area2 != 0.0 {
+    if area2 != 0.0 {
         let mut j = j0;
         while j <= j1 {
-            let mut i = i0;
-            while i <= i1 {
+            let (lo, hi) = row_span(&tri, j, wmax);
+            let mut i = lo;
+            while i <= hi {
                 count += texel_coverage(&tri, i, j);
                 i += 1.0;
             }
@@ -685,6 +720,14 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
         }
     }
     let plane_base = k * params.map_width * params.map_height;
+    // A cross-section partly off the map: its samples there are not all
+    // it covers, so each sample carries the flux over the cross-section's
+    // whole area (16 samples per texel), and what falls off the map is lost.
+    let on_map = ax.min(bx).min(cx) >= -0.5
+        && az.min(bz).min(cz) >= -0.5
+        && ax.max(bx).max(cx) <= wmax + 0.5
+        && az.max(bz).max(cz) <= hmax + 0.5;
+    let samples = if on_map { count as f32 } else { (count as f32).max(area2.abs() * 0.5 * SUBSAMPLES as f32) };
     if count == 0 {
         // Smaller than a sub-sample's spacing, or a focal line: all of it
         // in the texel under the centroid.
@@ -696,12 +739,13 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
         }
         return;
     }
-    // Second pass: each texel its share of the flux, by its sub-samples.
-    let per_sample = flux * (SUBSAMPLES as f32 / (count as f32 * texel * texel));
+    // Last, each texel its share of the flux, by its sub-samples.
+    let per_sample = flux * (SUBSAMPLES as f32 / (samples * texel * texel));
     let mut j = j0;
     while j <= j1 {
-        let mut i = i0;
-        while i <= i1 {
+        let (lo, hi) = row_span(&tri, j, wmax);
+        let mut i = lo;
+        while i <= hi {
             let covered = texel_coverage(&tri, i, j);
             if covered > 0 {
                 let density = per_sample * (covered as f32 / SUBSAMPLES as f32);
@@ -711,6 +755,49 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
         }
         j += 1.0;
     }
+}
+
+/// Most texels one cross-section may visit (see `rasterize`): with three
+/// walks over its rows (at most 4 096) and two over its texels, within
+/// lavapipe's 65 535 loop iterations per invocation.
+pub const MAX_VOLUME_TEXELS: f32 = 24_000.0;
+
+/// The texels `[lo, hi]` of row `j` (within `[0, wmax]`) whose squares the
+/// cross-section meets within the row's band `[j - 1/2, j + 1/2]`: the
+/// x-extent of the triangle clipped to the band (empty: `lo > hi`).
+fn row_span(t: &Triangle2, j: f32, wmax: f32) -> (f32, f32) {
+    let (zlo, zhi) = (j - 0.5, j + 0.5);
+    let (lo, hi) = clip_edge(t.ax, t.az, t.bx, t.bz, zlo, zhi, f32::MAX, -f32::MAX);
+    let (lo, hi) = clip_edge(t.bx, t.bz, t.cx, t.cz, zlo, zhi, lo, hi);
+    let (lo, hi) = clip_edge(t.cx, t.cz, t.ax, t.az, zlo, zhi, lo, hi);
+    ((lo - 0.5).ceil().max(0.0), (hi + 0.5).floor().min(wmax))
+}
+
+/// `[lo, hi]` grown by the x-extent of the edge `(x0, z0)-(x1, z1)` where
+/// it lies within `zlo <= z <= zhi`.
+#[allow(clippy::too_many_arguments)]
+fn clip_edge(x0: f32, z0: f32, x1: f32, z1: f32, zlo: f32, zhi: f32, lo: f32, hi: f32) -> (f32, f32) {
+    let dz = z1 - z0;
+    let (mut t0, mut t1) = (0.0f32, 1.0f32);
+    if dz == 0.0 {
+        if z0 < zlo || z0 > zhi {
+            return (lo, hi);
+        }
+    } else {
+        let (ta, tb) = ((zlo - z0) / dz, (zhi - z0) / dz);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+        if t0 > t1 {
+            return (lo, hi);
+        }
+    }
+    let (xa, xb) = (x0 + (x1 - x0) * t0, x0 + (x1 - x0) * t1);
+    (lo.min(xa).min(xb), hi.max(xa).max(xb))
+}
+
+/// Whether an exit ray goes down more steeply than `MAX_SLOPE`.
+fn steep(d: Vec3) -> bool {
+    d.y < 0.0 && d.x.abs().max(d.z.abs()) < -d.y * MAX_SLOPE
 }
 
 /// Coverage samples per texel (a 4 x 4 grid).
@@ -745,17 +832,20 @@ pub fn texel_coverage(t: &Triangle2, i: f32, j: f32) -> u32 {
     {
         return SUBSAMPLES;
     }
-    let mut n = 0;
-    let mut s = 0;
-    while s < SUBSAMPLES {
-        let px = i - 0.5 + ((s % 4) as f32 + 0.5) * 0.25;
-        let pz = j - 0.5 + ((s / 4) as f32 + 0.5) * 0.25;
-        if inside(t, px, pz) {
-            n += 1;
-        }
-        s += 1;
-    }
-    n
+    // Written out, not looped: every loop iteration counts toward
+    // lavapipe's limit (see `rasterize`).
+    sample_row(t, i, j - 0.375)
+        + sample_row(t, i, j - 0.125)
+        + sample_row(t, i, j + 0.125)
+        + sample_row(t, i, j + 0.375)
+}
+
+/// Of the four sub-samples of texel column `i` at height `pz`, those inside.
+fn sample_row(t: &Triangle2, i: f32, pz: f32) -> u32 {
+    inside(t, i - 0.375, pz) as u32
+        + inside(t, i - 0.125, pz) as u32
+        + inside(t, i + 0.125, pz) as u32
+        + inside(t, i + 0.375, pz) as u32
 }
 
 /// Texel coordinates (centres at integers) of a point on a sample plane.
@@ -873,49 +963,62 @@ pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Ve
     density * (cos * len)
 }
 
-/// Per-pixel kernel: the caustic light the surface seen at pixel `index`
-/// reflects toward the eye, W/(m^2 sr) per channel (w = 0):
-/// `albedo / pi * E_caustic` times the transmittance along the view ray
-/// (and through glass, for a surface seen through it).
-#[allow(clippy::too_many_arguments)]
-pub fn caustics_pixel(
-    index: u32,
-    common: &CommonParams,
-    params: &CausticsParams,
-    geometry: &Geometry,
-    glass: &Glass,
-    materials: &[GpuMaterial],
-    words: &[u32],
-    texel: &GBufferTexel,
-) -> Vec4 {
-    let x = index % common.width;
-    let y = index / common.width;
-    if texel.object == NO_OBJECT || !in_image(common, x, y) {
+/// The caustic light a receiver (`surface::receiver`: the surface a view
+/// ray meets, directly or through glass) reflects toward the eye,
+/// W/(m^2 sr) per channel (w = 0): `albedo / pi * E_caustic` times the
+/// receiver's weight (the transmittance along the view ray and through
+/// glass). None without maps (`params.planes` = 0: no caustics this frame).
+pub fn caustic_light(words: &[u32], params: &CausticsParams, materials: &[GpuMaterial], r: &Receiver) -> Vec4 {
+    if params.planes == 0 || !r.found {
         return Vec4::ZERO;
     }
-    let (origin, dir) = camera_ray(common, x, y);
-    if materials[texel.material as usize].kind != MATERIAL_GLASS {
-        // Seen directly: the G-buffer has the point and its normal.
-        let distance = texel.normal_distance.w;
-        let p = origin + dir * distance;
-        let e = caustic_irradiance(words, params, p, texel.normal_distance.xyz());
-        let l = materials[texel.material as usize].albedo * e * transmittance(common.sigma_t, distance) * FRAC_1_PI;
-        return Vec4::new(l.x, l.y, l.z, 0.0);
+    let e = caustic_irradiance(words, params, r.point, r.normal);
+    let l = materials[r.material as usize].albedo * e * r.weight * FRAC_1_PI;
+    Vec4::new(l.x, l.y, l.z, 0.0)
+}
+
+/// Mantissa bits per channel of `pack_rgb`.
+const PACKED_MANTISSA: u32 = 18;
+
+/// Packs non-negative rgb into 64 bits: three 18-bit mantissas sharing the
+/// 8-bit exponent of the largest channel (bits 0-17 r, 18-35 g, 36-53 b,
+/// 54-61 the exponent), so each channel keeps 2^-18 of the largest, over
+/// the whole f32 range (below 2^-109, with fewer bits). How the G-buffer carries
+/// a pixel's caustic light from the surface pass to the caustics layer.
+pub fn pack_rgb(v: Vec3) -> [u32; 2] {
+    let m = v.x.max(v.y).max(v.z);
+    // Not positive, or NaN: nothing.
+    if m.is_nan() || m <= 0.0 {
+        return [0, 0];
     }
-    let hit = trace_nearest(origin, dir, 0.0, NO_HIT, geometry);
-    let channels = view_channels(materials, &hit);
-    let mut radiance = Vec4::ZERO;
-    let mut c = 0;
-    while c < channels {
-        let r = receiver(common, geometry, glass, materials, origin, dir, &hit, c);
-        if r.found {
-            let e = caustic_irradiance(words, params, r.point, r.normal);
-            let l = materials[r.material as usize].albedo * e * r.weight * FRAC_1_PI;
-            radiance += channel_part(l, c, channels);
-        }
-        c += 1;
+    let e = ((m.to_bits() >> 23) & 0xff).clamp(18, 254);
+    // v / 2^(e - 126 - 18): the largest channel lands in [2^17, 2^18).
+    let scale = f32::from_bits((271 - e) << 23);
+    let top = (1u32 << PACKED_MANTISSA) - 1;
+    let q = |x: f32| ((x.max(0.0) * scale + 0.5) as u32).min(top);
+    let (r, g, b) = (q(v.x), q(v.y), q(v.z));
+    [r | (g << 18), (g >> 14) | (b << 4) | (e << 22)]
+}
+
+/// The rgb `pack_rgb` packed.
+pub fn unpack_rgb(w: [u32; 2]) -> Vec3 {
+    let e = (w[1] >> 22) & 0xff;
+    if e == 0 {
+        return Vec3::ZERO;
     }
-    Vec4::new(radiance.x, radiance.y, radiance.z, 0.0)
+    let mask = (1u32 << PACKED_MANTISSA) - 1;
+    let r = w[0] & mask;
+    let g = (w[0] >> 18) | ((w[1] & 0xf) << 14);
+    let b = (w[1] >> 4) & mask;
+    let unit = f32::from_bits((e - 17) << 23);
+    Vec3::new(r as f32, g as f32, b as f32) * unit
+}
+
+/// Per-pixel kernel: the caustic light pixel `index` sees, W/(m^2 sr) per
+/// channel (w = 0), from its G-buffer texel, where the surface pass left it
+/// (`caustic_light` at the receivers it shaded, through glass included).
+pub fn caustics_pixel(texel: &GBufferTexel) -> Vec4 {
+    unpack_rgb(texel.caustic).extend(0.0)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -996,37 +1099,44 @@ pub fn caustics_maps_kernel(
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn caustics_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
     #[spirv(num_workgroups)] groups: UVec3,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[GpuSphere],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[GpuTriangle],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[GpuBvhNode],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] params: &[CausticsParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 34)] words: &[u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 35)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
-    let c = &common[0];
-    if index < c.band_pixels {
-        let geometry = crate::scene_geometry(c, spheres, triangles, nodes);
-        let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
-        radiance[index as usize] = caustics_pixel(
-            c.band_start + index,
-            c,
-            &params[0],
-            &geometry,
-            &glass,
-            materials,
-            words,
-            &gbuffer[index as usize],
-        );
+    if index < common[0].band_pixels {
+        radiance[index as usize] = caustics_pixel(&gbuffer[index as usize]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packed_rgb_keeps_each_channel_to_2_pow_minus_17_of_the_largest() {
+        let mut state = 7u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 40) as f32) / (1u64 << 24) as f32
+        };
+        for k in 0..20_000 {
+            // Magnitudes from 1e-30 to 1e30, channels spread over 6 decades.
+            let scale = 10f32.powf(next() * 60.0 - 30.0);
+            let v = Vec3::new(next(), 10f32.powf(-6.0 * next()), next() * next()) * scale;
+            let back = unpack_rgb(pack_rgb(v));
+            let tol = v.max_element() * 2f32.powi(-17);
+            assert!((back - v).abs().max_element() <= tol, "{k}: {v} -> {back}");
+        }
+        for v in [Vec3::ZERO, Vec3::splat(-1.0), Vec3::splat(f32::NAN)] {
+            assert_eq!(unpack_rgb(pack_rgb(v)), Vec3::ZERO, "{v}");
+        }
+        // Negative channels beside a positive one read as 0; infinity as the largest finite step.
+        assert_eq!(unpack_rgb(pack_rgb(Vec3::new(-1.0, 2.0, 0.0))), Vec3::new(0.0, 2.0, 0.0));
+        assert!(unpack_rgb(pack_rgb(Vec3::new(f32::INFINITY, 0.0, 0.0))).x > 1e38);
     }
 }

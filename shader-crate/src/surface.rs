@@ -4,6 +4,7 @@
 //! It also writes the G-buffer that later passes read.
 
 use crate::camera::{camera_ray, in_image};
+use crate::caustics::{caustic_light, pack_rgb, CausticsParams};
 use crate::geometry::{occluded, trace_nearest, Geometry, Hit, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::glass::{dispersive, is_glass, shading_normal, trace_through, Glass, PATH_OUT};
@@ -24,7 +25,7 @@ pub fn no_surface() -> GBufferTexel {
         normal_distance: Vec4::new(0.0, 0.0, 0.0, MISS_DISTANCE),
         object: NO_OBJECT,
         material: NO_OBJECT,
-        _pad: [0; 2],
+        caustic: [0; 2],
     }
 }
 
@@ -191,6 +192,8 @@ pub fn surface_pixel(
     materials: &[GpuMaterial],
     light_map: &[Vec4],
     shadow: &[f32],
+    caustics: &CausticsParams,
+    caustic_maps: &[u32],
 ) -> (Vec4, GBufferTexel) {
     let x = index % params.width;
     let y = index / params.width;
@@ -205,6 +208,7 @@ pub fn surface_pixel(
     let normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
     let channels = view_channels(materials, &hit);
     let mut radiance = Vec4::ZERO;
+    let mut caustic = Vec4::ZERO;
     let mut c = 0;
     while c < channels {
         let r = receiver(params, geometry, glass, materials, origin, dir, &hit, c);
@@ -212,6 +216,9 @@ pub fn surface_pixel(
             let albedo = materials[r.material as usize].albedo;
             let l = direct_radiance(params, lights, geometry, light_map, shadow, r.point, r.normal, albedo) * r.weight;
             radiance += channel_part(l, c, channels);
+            // The caustic light at the same receiver, for the caustics
+            // layer (the view through glass is traced once, here).
+            caustic += channel_part(caustic_light(caustic_maps, caustics, materials, &r), c, channels);
         }
         c += 1;
     }
@@ -219,7 +226,7 @@ pub fn surface_pixel(
         normal_distance: normal.extend(hit.distance),
         object: hit.object,
         material: hit.material,
-        _pad: [0; 2],
+        caustic: pack_rgb(caustic.truncate()),
     };
     (Vec4::new(radiance.x, radiance.y, radiance.z, 0.0), texel)
 }
@@ -241,14 +248,26 @@ pub fn surface_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] caustics: &[CausticsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 34)] caustic_maps: &[u32],
 ) {
     let index = crate::flat_index(id, groups);
     let params = &common[0];
     if index < params.band_pixels {
         let geometry = crate::scene_geometry(params, spheres, triangles, nodes);
         let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
-        let (color, texel) =
-            surface_pixel(params.band_start + index, params, lights, &geometry, &glass, materials, light_map, shadow);
+        let (color, texel) = surface_pixel(
+            params.band_start + index,
+            params,
+            lights,
+            &geometry,
+            &glass,
+            materials,
+            light_map,
+            shadow,
+            &caustics[0],
+            caustic_maps,
+        );
         radiance[index as usize] = color;
         gbuffer[index as usize] = texel;
     }

@@ -185,6 +185,14 @@ pub struct GpuMaterial {
 pub struct GlassVertex {
     pub position: Vec4,
     pub normal: Vec4,
+    /// The tangent of the vertex's local frame (section 4; w unused):
+    /// `caustics::frame_tangent` of the normal as the object was defined,
+    /// turned with the object, so the frame turns with it.
+    pub tangent: Vec4,
+    /// The object's rotation from its definition to the scene (a unit
+    /// quaternion, x y z w): its table holds the exit rays as defined, and
+    /// stays valid however the object is turned or moved.
+    pub rotation: Vec4,
     /// The object and material of the mesh it belongs to.
     pub object: u32,
     pub material: u32,
@@ -235,7 +243,10 @@ pub struct GBufferTexel {
     pub object: u32,
     /// Its material (`NO_OBJECT` if none).
     pub material: u32,
-    pub _pad: [u32; 2],
+    /// The caustic light this pixel sees (on the surface itself, or behind
+    /// glass), rgb W/(m^2 sr), packed by `caustics::pack_rgb`; 0 without
+    /// caustics maps. The caustics pass turns it into its layer.
+    pub caustic: [u32; 2],
 }
 
 /// `GBufferTexel::object` and `material` of a pixel that sees no surface.
@@ -272,7 +283,7 @@ mod pod {
         assert!(core::mem::size_of::<super::GpuMaterial>() == 64);
         assert!(core::mem::size_of::<super::GpuBvhNode>() == 48);
         assert!(core::mem::size_of::<super::GBufferTexel>() == 32);
-        assert!(core::mem::size_of::<super::GlassVertex>() == 48);
+        assert!(core::mem::size_of::<super::GlassVertex>() == 80);
         assert!(core::mem::size_of::<super::GlassTriangle>() == 16);
     };
 }

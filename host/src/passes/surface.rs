@@ -62,7 +62,9 @@ impl Pass for Surface {
             LIGHT_MAPS,
             SHADOW_MAPS,
             GLASS_VERTICES,
-            GLASS_TRIANGLES
+            GLASS_TRIANGLES,
+            caustics::CAUSTICS_PARAMS,
+            caustics::CAUSTICS_MAPS
         ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
@@ -96,6 +98,11 @@ impl Pass for Surface {
         let glass =
             slicelight_shaders::glass::Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
         let shadow = frame.get::<f32>(&SHADOW_MAPS);
+        // The caustic light at each receiver goes into the G-buffer when
+        // this frame has caustics maps (`caustics::caustic_light`).
+        let caustic_maps = frame.get::<u32>(&caustics::CAUSTICS_MAPS);
+        let no_caustics = slicelight_shaders::caustics::CausticsParams::default();
+        let caustics = if caustic_maps.is_empty() { &no_caustics } else { &scene.caustics.params };
         for_each_invocation2(
             radiance.as_mut_slice::<Vec4>(),
             gbuffer.as_mut_slice::<GBufferTexel>(),
@@ -111,6 +118,8 @@ impl Pass for Surface {
                     &scene.materials,
                     &scene.light_map,
                     shadow,
+                    caustics,
+                    caustic_maps,
                 );
             },
         );

@@ -2,13 +2,13 @@
 //! object, and the triangles' BVH.
 
 use anyhow::{anyhow, bail, Result};
-use glam::{Vec3, Vec4};
+use glam::{Quat, Vec3, Vec4};
 use slicelight_shaders::types::{
     GlassTriangle, GlassVertex, GpuMaterial, GpuSphere, GpuTriangle, MATERIAL_DIFFUSE, MATERIAL_GLASS, NO_OBJECT,
 };
 use std::path::Path;
 
-use super::schema::{Material, MeshObject, Object, TorusObject, TrefoilKnotObject};
+use super::schema::{LatheObject, Material, MeshObject, Object, TorusObject, TrefoilKnotObject};
 use super::validate::{albedo, finite3, invalid, non_negative3, unit3};
 
 /// Everything the objects of a scene become.
@@ -79,10 +79,40 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
             Object::Mesh(m) => (m.albedo, &m.material),
             Object::Torus(t) => (t.albedo, &t.material),
             Object::TrefoilKnot(k) => (k.albedo, &k.material),
+            Object::Lathe(l) => (l.albedo, &l.material),
+        };
+        let rotation = match obj {
+            Object::Sphere(s) => s.rotation,
+            Object::Box(b) => b.rotation,
+            Object::Quad(q) => q.rotation,
+            Object::Mesh(m) => m.rotation,
+            Object::Torus(t) => t.rotation,
+            Object::TrefoilKnot(k) => k.rotation,
+            Object::Lathe(l) => l.rotation,
+        };
+        let turn = match rotation {
+            None => Quat::IDENTITY,
+            Some(r) => {
+                let axis = unit3(&format!("{field}.rotation.axis"), r.axis)?;
+                if !r.deg.is_finite() {
+                    bail!(invalid(&format!("{field}.rotation.deg"), "a finite number of degrees", r.deg));
+                }
+                Quat::from_axis_angle(axis, r.deg.to_radians())
+            }
         };
         let m = material(&field, albedo3, mat)?;
         let glass = m.kind == MATERIAL_GLASS;
         out.materials.push(m);
+        // The point the object turns about.
+        let pivot = match obj {
+            Object::Sphere(s) => Vec3::from(s.center),
+            Object::Box(b) => (Vec3::from(b.min) + Vec3::from(b.max)) * 0.5,
+            Object::Quad(q) => Vec3::from(q.center),
+            Object::Mesh(m) => Vec3::from(m.translate),
+            Object::Torus(t) => Vec3::from(t.center),
+            Object::TrefoilKnot(k) => Vec3::from(k.center),
+            Object::Lathe(l) => Vec3::from(l.center),
+        };
         let mesh = match obj {
             Object::Sphere(s) => {
                 let c = finite3(&format!("{field}.center"), s.center)?;
@@ -121,7 +151,7 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
                 if glass {
                     bail!(invalid(
                         &format!("{field}.material"),
-                        "glass only on closed objects (sphere, box, torus, trefoil_knot, mesh): a quad has no inside",
+                        "glass only on closed objects (sphere, box, torus, trefoil_knot, lathe, mesh): a quad has no inside",
                         "glass"
                     ));
                 }
@@ -142,9 +172,10 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
             Object::Mesh(mesh) => load_mesh(&field, base, mesh)?,
             Object::Torus(t) => torus(&field, t)?,
             Object::TrefoilKnot(k) => trefoil_knot(&field, k)?,
+            Object::Lathe(l) => lathe(&field, l)?,
         };
         out.shape_keys.push(shape_key(obj, base));
-        push_mesh(&mut out, &mesh, id, glass);
+        push_mesh(&mut out, &mesh, id, glass, turn, pivot);
     }
     Ok(out)
 }
@@ -157,6 +188,7 @@ fn shape_key(obj: &Object, base: &Path) -> u128 {
         Object::Quad(q) => format!("quad {:?} {:?}", q.u, q.v),
         Object::Torus(t) => format!("torus {:?} {:?} {:?} {:?}", t.axis, t.major_radius, t.minor_radius, t.segments),
         Object::TrefoilKnot(k) => format!("knot {:?} {:?} {:?}", k.scale, k.tube_radius, k.segments),
+        Object::Lathe(l) => format!("lathe {:?} {:?} {:?} {:?}", l.axis, l.profile, l.segments, l.sharp_deg),
         Object::Mesh(m) => {
             let bytes = std::fs::read(base.join(&m.file)).unwrap_or_default();
             format!("mesh {:x} {:?}", twox_hash::XxHash3_128::oneshot(&bytes), m.scale)
@@ -166,23 +198,33 @@ fn shape_key(obj: &Object, base: &Path) -> u128 {
 }
 
 /// Appends a mesh's triangles (and, for glass, its vertices and indexed
-/// triangles, sharing normals).
-fn push_mesh(out: &mut Objects, mesh: &IndexedMesh, object: u32, glass: bool) {
+/// triangles, sharing normals), turned by `turn` about `pivot`.
+fn push_mesh(out: &mut Objects, defined: &IndexedMesh, object: u32, glass: bool, turn: Quat, pivot: Vec3) {
+    // Not turned: the positions as defined, exactly.
+    let moved = |p: &Vec3| if turn == Quat::IDENTITY { *p } else { pivot + turn * (*p - pivot) };
+    let mesh = IndexedMesh {
+        positions: defined.positions.iter().map(moved).collect(),
+        normals: defined.normals.iter().map(|n| turn * *n).collect(),
+        indices: defined.indices.clone(),
+    };
     let first_vertex = out.glass_vertices.len() as u32;
     if glass {
         let channels = if slicelight_shaders::glass::dispersive(&out.materials[object as usize]) { 3 } else { 1 };
-        // The object's diagonal, in the normals' w: the range of a compressed
-        // table's positions around each vertex.
-        let (lo, hi) = mesh
+        // The object's diagonal as defined (the same however it is turned),
+        // in the normals' w: the range of a compressed table's positions
+        // around each vertex.
+        let (lo, hi) = defined
             .positions
             .iter()
             .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
         let diagonal = (hi - lo).length().max(1e-6);
         let mut block = out.glass_vertices.last().map_or(0, |v| v.table_block + v.channels);
-        for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
+        for ((p, n), defined_normal) in mesh.positions.iter().zip(&mesh.normals).zip(&defined.normals) {
             out.glass_vertices.push(GlassVertex {
                 position: p.extend(1.0),
                 normal: n.extend(diagonal),
+                tangent: (turn * slicelight_shaders::caustics::frame_tangent(*defined_normal)).extend(0.0),
+                rotation: Vec4::from(turn),
                 object,
                 material: object,
                 channels,
@@ -359,6 +401,103 @@ fn trefoil_knot(field: &str, k: &TrefoilKnotObject) -> Result<IndexedMesh> {
     }))
 }
 
+fn lathe(field: &str, l: &LatheObject) -> Result<IndexedMesh> {
+    let c = finite3(&format!("{field}.center"), l.center)?;
+    let axis = unit3(&format!("{field}.axis"), l.axis)?;
+    let profile_field = format!("{field}.profile");
+    let p: Vec<glam::Vec2> = l.profile.iter().map(|&[r, h]| glam::Vec2::new(r, h)).collect();
+    let m = p.len();
+    let closed_outline =
+        "at least 3 finite [r, h] points from the axis back to it: first and last r = 0, the others > 0";
+    if m < 3
+        || p.iter().any(|q| !q.is_finite())
+        || p[0].x != 0.0
+        || p[m - 1].x != 0.0
+        || p[1..m - 1].iter().any(|q| q.x <= 0.0)
+    {
+        bail!(invalid(&profile_field, closed_outline, &l.profile));
+    }
+    if !(3..=1_000_000).contains(&l.segments) || 2 * l.segments as u64 * m as u64 > MAX_PROCEDURAL_TRIANGLES {
+        bail!(invalid(
+            &format!("{field}.segments"),
+            &format!("at least 3 slices, at most {MAX_PROCEDURAL_TRIANGLES} triangles in all"),
+            l.segments
+        ));
+    }
+    if !(l.sharp_deg.is_finite() && l.sharp_deg > 0.0) {
+        bail!(invalid(&format!("{field}.sharp_deg"), "a positive angle in degrees", l.sharp_deg));
+    }
+    // Outward in the (r, h) half-plane: the outline must run bottom, side,
+    // top (counter-clockwise with the axis closing it).
+    let area: f32 = p.windows(2).map(|w| w[0].x * w[1].y - w[1].x * w[0].y).sum();
+    if area.is_nan() || area <= 0.0 {
+        bail!(invalid(
+            &profile_field,
+            "an outline that runs from the bottom of the axis outward, up and back (counter-clockwise in r, h)",
+            &l.profile
+        ));
+    }
+    // Each piece's outward normal, (dh, -dr) normalised.
+    let mut piece_normals = Vec::with_capacity(m - 1);
+    for (k, w) in p.windows(2).enumerate() {
+        let d = w[1] - w[0];
+        if d.length() <= 1e-9 {
+            bail!(invalid(&profile_field, "no two successive points the same", l.profile[k + 1]));
+        }
+        piece_normals.push(glam::Vec2::new(d.y, -d.x).normalize());
+    }
+    // The outline's rings: each inner point once with the mean normal of
+    // its two pieces, or twice (one per piece) at a sharp corner.
+    let sharp = l.sharp_deg.to_radians().cos();
+    let mut rings: Vec<(glam::Vec2, glam::Vec2, bool)> = Vec::new(); // (point, normal, starts a new strip)
+    for k in 1..m - 1 {
+        let (a, b) = (piece_normals[k - 1], piece_normals[k]);
+        if a.dot(b) < sharp {
+            rings.push((p[k], a, false));
+            rings.push((p[k], b, true));
+        } else {
+            rings.push((p[k], (a + b).normalize(), false));
+        }
+    }
+    let e1 = axis.any_orthonormal_vector();
+    let e2 = axis.cross(e1);
+    let n = l.segments;
+    let mut mesh = IndexedMesh::default();
+    let at = |q: glam::Vec2, normal: glam::Vec2, phi: f32| {
+        let radial = e1 * phi.cos() + e2 * phi.sin();
+        (c + radial * q.x + axis * q.y, radial * normal.x + axis * normal.y)
+    };
+    // The poles, with the first and last pieces' normals (flat there).
+    let bottom = 0u32;
+    mesh.positions.push(c + axis * p[0].y);
+    mesh.normals.push(axis * piece_normals[0].y.signum());
+    for &(q, normal, _) in &rings {
+        for i in 0..n {
+            let (pos, nrm) = at(q, normal, std::f32::consts::TAU * i as f32 / n as f32);
+            mesh.positions.push(pos);
+            mesh.normals.push(nrm);
+        }
+    }
+    let top = mesh.positions.len() as u32;
+    mesh.positions.push(c + axis * p[m - 1].y);
+    mesh.normals.push(axis * piece_normals[m - 2].y.signum());
+    let ring = |j: usize, i: u32| 1 + j as u32 * n + (i % n);
+    for i in 0..n {
+        // Counter-clockwise seen from outside.
+        mesh.indices.push([bottom, ring(0, i + 1), ring(0, i)]);
+        for j in 0..rings.len() - 1 {
+            if rings[j + 1].2 {
+                continue; // the two rings of a sharp corner: one place, no strip between
+            }
+            mesh.indices.push([ring(j, i), ring(j, i + 1), ring(j + 1, i + 1)]);
+            mesh.indices.push([ring(j, i), ring(j + 1, i + 1), ring(j + 1, i)]);
+        }
+        let last = rings.len() - 1;
+        mesh.indices.push([ring(last, i), ring(last, i + 1), top]);
+    }
+    Ok(mesh)
+}
+
 fn load_mesh(field: &str, base: &Path, m: &MeshObject) -> Result<IndexedMesh> {
     let path = base.join(&m.file);
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
@@ -427,4 +566,80 @@ pub fn bounds(spheres: &[GpuSphere], tris: &[GpuTriangle]) -> Option<(Vec3, Vec3
         }
     }
     (lo.x <= hi.x).then_some((lo, hi))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::schema::LatheObject;
+    use std::collections::HashMap;
+
+    fn lathe_of(profile: &[[f32; 2]]) -> Result<IndexedMesh> {
+        let l = LatheObject {
+            center: [0.0, 0.0, 0.0],
+            axis: [0.2, 1.0, 0.1],
+            profile: profile.to_vec(),
+            segments: 24,
+            sharp_deg: 40.0,
+            albedo: [0.8; 3],
+            material: None,
+            rotation: None,
+        };
+        lathe("object[0]", &l)
+    }
+
+    #[test]
+    fn a_lathe_is_closed_and_faces_outward() {
+        // A cup: a flat foot, a stem, a hollow bowl (sharp corners and a
+        // concave inside).
+        let cup = [
+            [0.0, 0.0],
+            [0.3, 0.0],
+            [0.3, 0.05],
+            [0.05, 0.1],
+            [0.05, 0.4],
+            [0.3, 0.6],
+            [0.3, 0.9],
+            [0.27, 0.9],
+            [0.27, 0.62],
+            [0.0, 0.45],
+        ];
+        let mesh = lathe_of(&cup).unwrap();
+        // Closed: every edge (by position) belongs to exactly two triangles,
+        // once each way.
+        let key = |p: Vec3| p.to_array().map(|x| (x * 1e5).round() as i64);
+        let mut edges: HashMap<_, i32> = HashMap::new();
+        for f in &mesh.indices {
+            for k in 0..3 {
+                let (a, b) = (key(mesh.positions[f[k] as usize]), key(mesh.positions[f[(k + 1) % 3] as usize]));
+                *edges.entry((a, b)).or_default() += 1;
+                *edges.entry((b, a)).or_default() -= 1;
+            }
+        }
+        assert!(edges.values().all(|&n| n == 0), "open or inconsistently wound edges");
+        // Outward: each face's winding agrees with its vertices' normals,
+        // and the volume by the divergence theorem is positive.
+        let mut volume = 0.0;
+        for f in &mesh.indices {
+            let [a, b, c] = f.map(|i| mesh.positions[i as usize]);
+            let n = (b - a).cross(c - a);
+            let mean = f.iter().map(|&i| mesh.normals[i as usize]).sum::<Vec3>();
+            assert!(n.dot(mean) > 0.0, "face {f:?} wound against its normals");
+            volume += a.dot(b.cross(c)) / 6.0;
+        }
+        assert!(volume > 0.0, "volume {volume}");
+    }
+
+    #[test]
+    fn a_bad_lathe_outline_names_the_field() {
+        for bad in [
+            vec![[0.1, 0.0], [0.3, 0.5], [0.0, 1.0]], // does not start on the axis
+            vec![[0.0, 0.0], [0.3, 0.5]],             // too short
+            vec![[0.0, 1.0], [0.3, 0.5], [0.0, 0.0]], // clockwise
+            vec![[0.0, 0.0], [0.3, 0.0], [0.3, 0.0], [0.0, 1.0]], // a repeated point
+        ] {
+            let e = lathe_of(&bad).err().expect("refused").to_string();
+            assert!(e.contains("object[0].profile"), "{e}");
+        }
+    }
 }

@@ -15,6 +15,20 @@ pub struct Lights {
     pub lights: Vec<GpuLight>,
     pub light_map: Vec<Vec4>,
     pub shadow_texels: u32,
+    /// The line lights as defined (the kernels see their point lights).
+    pub lines: Vec<LineSource>,
+}
+
+/// A line light as the scene defines it, for the references (which light
+/// it continuously), and the point lights the kernels see in its place.
+#[derive(Debug, Clone)]
+pub struct LineSource {
+    pub from: Vec3,
+    pub to: Vec3,
+    /// W/sr per metre per channel, emitted the same way in every direction.
+    pub per_metre: Vec3,
+    /// Its point lights among the scene's lights.
+    pub lights: std::ops::Range<usize>,
 }
 
 impl Lights {
@@ -69,6 +83,8 @@ pub fn build(
             Some(n) => bail!(invalid(&format!("{field}.points"), "a count in 1..=4096", n)),
             None => line_light_points(length),
         };
+        let first = out.lights.len();
+        out.lines.push(LineSource { from, to, per_metre, lights: first..first + n as usize });
         // Point k at the middle of the k-th of n equal pieces, with that piece's intensity.
         for k in 0..n {
             let p = from + (to - from) * ((k as f32 + 0.5) / n as f32);

@@ -33,6 +33,8 @@ pub const MAX_SAMPLES_PER_PIXEL: u32 = 4096;
 pub struct SceneData {
     pub common: CommonParams,
     pub lights: Vec<GpuLight>,
+    /// The line lights as defined; each is a row of `lights` for the kernels.
+    pub line_lights: Vec<lights::LineSource>,
     pub spheres: Vec<GpuSphere>,
     /// Triangles in BVH order.
     pub triangles: Vec<GpuTriangle>,
@@ -284,6 +286,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     let mut data = SceneData {
         common,
         lights: lights.lights,
+        line_lights: lights.lines,
         spheres: objects.spheres,
         triangles: bvh.triangles,
         bvh_nodes: bvh.nodes,

@@ -146,6 +146,7 @@ pub enum Object {
     Mesh(MeshObject),
     Torus(TorusObject),
     TrefoilKnot(TrefoilKnotObject),
+    Lathe(LatheObject),
 }
 
 /// What an object is made of; without one, a diffuse surface of the
@@ -160,6 +161,18 @@ pub enum Material {
         #[serde(default)]
         absorption: [f32; 3],
     },
+}
+
+/// A turn of an object about its own centre (a sphere's, box's, quad's,
+/// torus's or knot's `center`; a mesh's origin, after `scale`, before
+/// `translate`): `deg` degrees about `axis`, counter-clockwise seen from
+/// the axis's tip. A glass object keeps its light transport table when
+/// turned or moved.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Rotation {
+    pub axis: [f32; 3],
+    pub deg: f32,
 }
 
 /// One index of refraction, or one per channel (dispersion).
@@ -194,10 +207,43 @@ pub struct TrefoilKnotObject {
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
     pub material: Option<Material>,
+    pub rotation: Option<Rotation>,
 }
 
 fn default_knot_segments() -> [u32; 2] {
     [256, 24]
+}
+
+/// A solid of revolution: the outline `profile` (pairs `[r, h]`, metres:
+/// distance from the axis and height along it from `center`) turned about
+/// `axis` through `center`, tessellated into `segments` slices. The outline
+/// runs from the axis back to the axis (first and last `r` = 0, every other
+/// `r` > 0): bottom, sides, top, so that it bounds a closed solid. Vertex
+/// normals follow the outline smoothly, except at corners sharper than
+/// `sharp_deg`, where each side keeps its own.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LatheObject {
+    pub center: [f32; 3],
+    #[serde(default = "default_up")]
+    pub axis: [f32; 3],
+    pub profile: Vec<[f32; 2]>,
+    #[serde(default = "default_lathe_segments")]
+    pub segments: u32,
+    #[serde(default = "default_sharp_deg")]
+    pub sharp_deg: f32,
+    #[serde(default = "default_albedo")]
+    pub albedo: [f32; 3],
+    pub material: Option<Material>,
+    pub rotation: Option<Rotation>,
+}
+
+fn default_lathe_segments() -> u32 {
+    96
+}
+
+fn default_sharp_deg() -> f32 {
+    40.0
 }
 
 #[derive(Debug, Deserialize)]
@@ -211,6 +257,7 @@ pub struct SphereObject {
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
     pub material: Option<Material>,
+    pub rotation: Option<Rotation>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -221,6 +268,7 @@ pub struct BoxObject {
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
     pub material: Option<Material>,
+    pub rotation: Option<Rotation>,
 }
 
 /// The rectangle `center +- u/2 +- v/2`.
@@ -233,6 +281,7 @@ pub struct QuadObject {
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
     pub material: Option<Material>,
+    pub rotation: Option<Rotation>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -246,6 +295,7 @@ pub struct MeshObject {
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
     pub material: Option<Material>,
+    pub rotation: Option<Rotation>,
 }
 
 /// A torus around `axis` through `center`: tube radius `minor_radius` swept
@@ -264,6 +314,7 @@ pub struct TorusObject {
     #[serde(default = "default_albedo")]
     pub albedo: [f32; 3],
     pub material: Option<Material>,
+    pub rotation: Option<Rotation>,
 }
 
 fn default_torus_segments() -> [u32; 2] {

@@ -19,9 +19,11 @@
 //!   each horizontal sample plane is a triangle, rasterised into that
 //!   plane's caustics map with the flux it carries, by the scatter
 //!   primitive (`scatter.rs`).
-//! - `caustics_kernel` (per pixel): the caustic irradiance at the surface a
-//!   pixel sees (directly or through glass), interpolated between the two
-//!   sample planes around it, times `albedo / pi`.
+//! - `caustics_kernel` (per pixel): the caustic light at the surface a
+//!   pixel sees (directly or through glass): the irradiance interpolated
+//!   between the two sample planes around it, times `albedo / pi`
+//!   (`caustic_light`), which the surface pass reads where it shades that
+//!   surface and leaves in the G-buffer; this kernel unpacks it.
 //!
 //! # Units and the flux ratio
 //! A lit triangle of area `S` whose normal makes the angle `theta` with the

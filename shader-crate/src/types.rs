@@ -212,10 +212,10 @@ pub struct GlassTriangle {
     pub object: u32,
 }
 
-/// A node of the triangle BVH, flattened in depth-first order so that it
-/// can be walked without a stack (see `geometry::trace_nearest`): the first
-/// child of an inner node is the next node, and `skip` is where the walk goes
-/// when the ray misses this node's box (or after a leaf's triangles).
+/// A node of the triangle BVH, flattened in depth-first order: the first
+/// child of an inner node is the next node, `right` the second (the
+/// kernels' nearest-first walk, `geometry::trace_nearest`), and `skip` the
+/// node after its subtree (the f64 reference's walk).
 #[repr(C)]
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct GpuBvhNode {

@@ -685,15 +685,21 @@ impl Pass for CausticsMaps {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (glass, p) = (glass(scene), &scene.caustics.params);
-        let atomics: Vec<AtomicU32> = (0..scene.caustics.map_words()).map(|_| AtomicU32::new(0)).collect();
+        // Zeroed pages the rasteriser never reaches are never touched: most
+        // of a map holds no light.
+        let mut maps = Buffer::zeroed::<u32>(scene.caustics.map_words() as usize);
         {
+            let words = maps.as_mut_slice::<u32>();
+            // SAFETY: `AtomicU32` has the size, alignment and bit validity of
+            // `u32`, and the exclusive borrow of `words` is this view's only
+            // access until it ends.
+            let atomics: &[AtomicU32] = unsafe { &*(words as *mut [u32] as *const [AtomicU32]) };
             let rays = frame.get::<ExitRay>(&CAUSTICS_RAYS);
             for_each_index(scene.caustics.map_invocations() as u32, progress, |i| {
-                rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, &mut CpuAtomics(&atomics));
+                rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, &mut CpuAtomics(atomics));
             });
         }
-        let words: Vec<u32> = atomics.into_iter().map(AtomicU32::into_inner).collect();
-        frame.put(&CAUSTICS_MAPS, &words);
+        frame.insert(&CAUSTICS_MAPS, maps);
     }
     fn keeps(&self) -> &'static [&'static Resource] {
         resources![CAUSTICS_MAPS]

@@ -251,7 +251,10 @@ impl Buffer {
     /// `len` zeroed `T`s.
     pub fn zeroed<T: Pod>(len: usize) -> Buffer {
         let bytes = len * std::mem::size_of::<T>();
-        Buffer { blocks: std::sync::Arc::new(vec![Block::default(); bytes.div_ceil(16)]), bytes }
+        // Zeroed by the allocator: the system's fresh pages are zero and
+        // cost nothing until touched (a sparse caustics map, a layer most
+        // pixels of which a pass leaves at 0).
+        Buffer { blocks: std::sync::Arc::new(bytemuck::zeroed_vec::<Block>(bytes.div_ceil(16))), bytes }
     }
 
     pub fn from_bytes(bytes: &[u8]) -> Buffer {

@@ -54,3 +54,12 @@ pub fn for_each_invocation2<T: Send, U: Send>(
         progress.inc(ca.len() as u64);
     });
 }
+
+/// `words` seen as atomics, for kernels that accumulate with the scatter
+/// primitive (`scatter::CpuAtomics`): no copy in or out.
+pub fn as_atomics(words: &mut [u32]) -> &[std::sync::atomic::AtomicU32] {
+    // SAFETY: `AtomicU32` has the size, alignment and bit validity of `u32`,
+    // and the exclusive borrow of `words` lasts as long as this view.
+    unsafe { &*(words as *mut [u32] as *const [std::sync::atomic::AtomicU32]) }
+}
+

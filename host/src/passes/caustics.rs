@@ -15,7 +15,6 @@ use slicelight_shaders::caustics::{
 use slicelight_shaders::glass::{dispersive, trace_through, Glass, PATH_OUT};
 use slicelight_shaders::scatter::{words_for, CpuAtomics};
 use slicelight_shaders::types::{CommonParams, GBufferTexel, MATERIAL_GLASS, NO_OBJECT};
-use std::sync::atomic::AtomicU32;
 
 use super::*;
 use crate::cpu::{for_each_index, for_each_invocation};
@@ -689,11 +688,7 @@ impl Pass for CausticsMaps {
         // of a map holds no light.
         let mut maps = Buffer::zeroed::<u32>(scene.caustics.map_words() as usize);
         {
-            let words = maps.as_mut_slice::<u32>();
-            // SAFETY: `AtomicU32` has the size, alignment and bit validity of
-            // `u32`, and the exclusive borrow of `words` is this view's only
-            // access until it ends.
-            let atomics: &[AtomicU32] = unsafe { &*(words as *mut [u32] as *const [AtomicU32]) };
+            let atomics = crate::cpu::as_atomics(maps.as_mut_slice::<u32>());
             let rays = frame.get::<ExitRay>(&CAUSTICS_RAYS);
             for_each_index(scene.caustics.map_invocations() as u32, progress, |i| {
                 rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, &mut CpuAtomics(atomics));

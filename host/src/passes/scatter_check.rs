@@ -8,7 +8,6 @@ use indicatif::ProgressBar;
 use slicelight_shaders::scatter::{decode, words_for, CpuAtomics};
 use slicelight_shaders::scatter_check::{scatter_check_invocation, ScatterCheckParams};
 use slicelight_shaders::types::CommonParams;
-use std::sync::atomic::AtomicU32;
 
 use super::*;
 use crate::cpu::for_each_index;
@@ -88,12 +87,14 @@ impl Pass for ScatterCheck {
     }
 
     fn run_cpu(&self, _scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let atomics: Vec<AtomicU32> = (0..words_for(2 * PARAMS.bins)).map(|_| AtomicU32::new(0)).collect();
-        for_each_index(PARAMS.invocations, progress, |i| {
-            scatter_check_invocation(i, &PARAMS, &mut CpuAtomics(&atomics));
-        });
-        let words: Vec<u32> = atomics.into_iter().map(AtomicU32::into_inner).collect();
-        frame.put(&CHECK_WORDS, &words);
+        let mut words = Buffer::zeroed::<u32>(words_for(2 * PARAMS.bins) as usize);
+        {
+            let atomics = crate::cpu::as_atomics(words.as_mut_slice::<u32>());
+            for_each_index(PARAMS.invocations, progress, |i| {
+                scatter_check_invocation(i, &PARAMS, &mut CpuAtomics(atomics));
+            });
+        }
+        frame.insert(&CHECK_WORDS, words);
     }
 
     fn report(&self, _scene: &SceneData, frame: &Frame) -> Option<String> {

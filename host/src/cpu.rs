@@ -62,4 +62,3 @@ pub fn as_atomics(words: &mut [u32]) -> &[std::sync::atomic::AtomicU32] {
     // and the exclusive borrow of `words` lasts as long as this view.
     unsafe { &*(words as *mut [u32] as *const [std::sync::atomic::AtomicU32]) }
 }
-

@@ -79,6 +79,34 @@ pub fn light_uv(light: &GpuLight, local: Vec3) -> (f32, f32) {
 /// radiant intensity in W/sr (spot: `I_l` of eq. 2, cone profile times light
 /// map) or irradiance in W/m^2 (directional: light map over the window).
 pub fn emitted(light: &GpuLight, light_map: &[Vec4], local: Vec3) -> Vec4 {
+    // The projective coordinates cost a division: only for a window or a map.
+    let uv = if needs_uv(light) { light_uv(light, local) } else { (0.0, 0.0) };
+    emitted_at(light, light_map, local, uv)
+}
+
+/// Whether `emitted` reads the light's projective coordinates (a window or
+/// a light map).
+fn needs_uv(light: &GpuLight) -> bool {
+    light.kind != LIGHT_POINT && (light.bounded != 0 || light.light_map_width > 0)
+}
+
+/// `emitted(light, light_map, local) * shadow_visibility(light, shadow,
+/// local, cos_incidence)`, the light's projective coordinates computed once
+/// for both (the shafts' and the surfaces' inner loops).
+pub fn emitted_visible(light: &GpuLight, light_map: &[Vec4], shadow: &[f32], local: Vec3, cos_incidence: f32) -> Vec4 {
+    let mapped = light.kind != LIGHT_POINT && light.shadow_resolution > 0;
+    let uv = if mapped || needs_uv(light) { light_uv(light, local) } else { (0.0, 0.0) };
+    let e = emitted_at(light, light_map, local, uv);
+    if (e.x > 0.0 || e.y > 0.0 || e.z > 0.0) && mapped {
+        e * shadow_visibility_at(light, shadow, local, cos_incidence, uv)
+    } else {
+        e
+    }
+}
+
+/// `emitted`, given the light's projective coordinates `uv` (`light_uv`;
+/// read only where `needs_uv`).
+fn emitted_at(light: &GpuLight, light_map: &[Vec4], local: Vec3, uv: (f32, f32)) -> Vec4 {
     if light.kind == LIGHT_POINT {
         return light.power;
     }
@@ -94,9 +122,8 @@ pub fn emitted(light: &GpuLight, light_map: &[Vec4], local: Vec3) -> Vec4 {
         }
     }
     let mut color = light.power * strength;
-    // The projective coordinates cost a division: only for a window or a map.
-    if light.bounded != 0 || light.light_map_width > 0 {
-        let (u, v) = light_uv(light, local);
+    if needs_uv(light) {
+        let (u, v) = uv;
         if light.kind == LIGHT_DIRECTIONAL && light.bounded != 0 && (u < 0.0 || u > 1.0 || v < 0.0 || v > 1.0) {
             return Vec4::ZERO;
         }
@@ -155,11 +182,16 @@ pub fn shadow_bias(footprint: f32, cos_incidence: f32, distance: f32) -> f32 {
 /// otherwise. `cos_incidence` is the cosine between the surface normal
 /// and the direction to the light (1 for points in the medium).
 pub fn shadow_visibility(light: &GpuLight, shadow: &[f32], local: Vec3, cos_incidence: f32) -> f32 {
-    let res = light.shadow_resolution;
-    if res == 0 {
+    if light.shadow_resolution == 0 {
         return 1.0;
     }
-    let (u, v) = light_uv(light, local);
+    shadow_visibility_at(light, shadow, local, cos_incidence, light_uv(light, local))
+}
+
+/// `shadow_visibility` of a light with a shadow map, given its projective
+/// coordinates `(u, v)` at `local`.
+fn shadow_visibility_at(light: &GpuLight, shadow: &[f32], local: Vec3, cos_incidence: f32, (u, v): (f32, f32)) -> f32 {
+    let res = light.shadow_resolution;
     if u < 0.0 || u >= 1.0 || v < 0.0 || v >= 1.0 {
         // Outside the shadow map: outside the cone or the window, already dark.
         return 1.0;

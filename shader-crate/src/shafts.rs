@@ -18,7 +18,7 @@ use spirv_std::num_traits::Float;
 
 use crate::camera::camera_ray;
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
-use crate::light::{emitted, light_local, shadow_visibility, transmittance};
+use crate::light::{emitted_visible, light_local, transmittance};
 use crate::phase;
 use crate::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL};
 use core::f32::consts::PI;
@@ -446,10 +446,7 @@ pub fn shafts_pixel(
                     while j < sub {
                         let u = a + (b - a) * (j as f32 + 0.5) / sub as f32;
                         let local = q + v * u;
-                        let e = emitted(&light, light_map, local);
-                        if e.x > 0.0 || e.y > 0.0 || e.z > 0.0 {
-                            j_sum += e * shadow_visibility(&light, shadow, local, 1.0);
-                        }
+                        j_sum += emitted_visible(&light, light_map, shadow, local, 1.0);
                         j += 1;
                     }
                     samples += sub;

@@ -8,7 +8,7 @@ use crate::caustics::{caustic_light, pack_rgb, CausticsParams};
 use crate::geometry::{occluded, trace_nearest, Geometry, Hit, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::glass::{dispersive, is_glass, shading_normal, trace_through, Glass, PATH_OUT};
-use crate::light::{emitted, light_local, shadow_visibility, transmittance};
+use crate::light::{emitted, emitted_visible, light_local, transmittance};
 use crate::types::{
     CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
     LIGHT_DIRECTIONAL, NO_OBJECT, SHADOWS_MAP,
@@ -64,14 +64,15 @@ pub fn direct_radiance(
         };
         let cos_incidence = normal.dot(to_light);
         if cos_incidence > 0.0 {
-            let color = emitted(&light, light_map, local);
-            if color.x > 0.0 || color.y > 0.0 || color.z > 0.0 {
-                let visible = if params.surface_shadows == SHADOWS_MAP && light.shadow_resolution > 0 {
-                    shadow_visibility(&light, shadow, local, cos_incidence)
-                } else {
-                    shadow_ray_visibility(geometry, p, normal, to_light, distance)
-                };
-                irradiance += color * transmittance(params.sigma_t, distance) * (visible * cos_incidence * falloff);
+            if params.surface_shadows == SHADOWS_MAP && light.shadow_resolution > 0 {
+                let lit = emitted_visible(&light, light_map, shadow, local, cos_incidence);
+                irradiance += lit * transmittance(params.sigma_t, distance) * (cos_incidence * falloff);
+            } else {
+                let color = emitted(&light, light_map, local);
+                if color.x > 0.0 || color.y > 0.0 || color.z > 0.0 {
+                    let visible = shadow_ray_visibility(geometry, p, normal, to_light, distance);
+                    irradiance += color * transmittance(params.sigma_t, distance) * (visible * cos_incidence * falloff);
+                }
             }
         }
         l += 1;

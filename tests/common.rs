@@ -10,7 +10,16 @@ pub fn root() -> PathBuf {
 
 /// Loads a scene from a TOML string written to a fresh temporary folder.
 pub fn scene_from_str(toml: &str) -> slicelight::scene::SceneData {
+    scene_with_files(toml, &[])
+}
+
+/// Loads a scene from `toml` written beside `files` (name, contents: meshes,
+/// light maps) in a fresh temporary folder.
+pub fn scene_with_files(toml: &str, files: &[(&str, String)]) -> slicelight::scene::SceneData {
     let dir = tempfile::tempdir().unwrap();
+    for (name, text) in files {
+        std::fs::write(dir.path().join(name), text).unwrap();
+    }
     let path = dir.path().join("scene.toml");
     std::fs::write(&path, toml).unwrap();
     slicelight::scene::load(&path).unwrap()

@@ -8,7 +8,7 @@ use slicelight_shaders::types::{
 };
 use std::path::Path;
 
-use super::schema::{LatheObject, Material, MeshObject, Object, TorusObject, TrefoilKnotObject};
+use super::schema::{LatheObject, Material, MeshObject, Object, Rotation, TorusObject, TrefoilKnotObject};
 use super::validate::{albedo, finite3, invalid, non_negative3, unit3};
 
 /// Everything the objects of a scene become.
@@ -72,24 +72,7 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
     for (i, obj) in objects.iter().enumerate() {
         let field = format!("object[{i}]");
         let id = i as u32;
-        let (albedo3, mat) = match obj {
-            Object::Sphere(s) => (s.albedo, &s.material),
-            Object::Box(b) => (b.albedo, &b.material),
-            Object::Quad(q) => (q.albedo, &q.material),
-            Object::Mesh(m) => (m.albedo, &m.material),
-            Object::Torus(t) => (t.albedo, &t.material),
-            Object::TrefoilKnot(k) => (k.albedo, &k.material),
-            Object::Lathe(l) => (l.albedo, &l.material),
-        };
-        let rotation = match obj {
-            Object::Sphere(s) => s.rotation,
-            Object::Box(b) => b.rotation,
-            Object::Quad(q) => q.rotation,
-            Object::Mesh(m) => m.rotation,
-            Object::Torus(t) => t.rotation,
-            Object::TrefoilKnot(k) => k.rotation,
-            Object::Lathe(l) => l.rotation,
-        };
+        let (albedo3, mat, rotation, pivot) = shared_fields(obj);
         let turn = match rotation {
             None => Quat::IDENTITY,
             Some(r) => {
@@ -103,16 +86,6 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
         let m = material(&field, albedo3, mat)?;
         let glass = m.kind == MATERIAL_GLASS;
         out.materials.push(m);
-        // The point the object turns about.
-        let pivot = match obj {
-            Object::Sphere(s) => Vec3::from(s.center),
-            Object::Box(b) => (Vec3::from(b.min) + Vec3::from(b.max)) * 0.5,
-            Object::Quad(q) => Vec3::from(q.center),
-            Object::Mesh(m) => Vec3::from(m.translate),
-            Object::Torus(t) => Vec3::from(t.center),
-            Object::TrefoilKnot(k) => Vec3::from(k.center),
-            Object::Lathe(l) => Vec3::from(l.center),
-        };
         let mesh = match obj {
             Object::Sphere(s) => {
                 let c = finite3(&format!("{field}.center"), s.center)?;
@@ -178,6 +151,20 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
         push_mesh(&mut out, &mesh, id, glass, turn, pivot);
     }
     Ok(out)
+}
+
+/// The fields every object has: albedo, material, rotation, and the point
+/// it turns about (its centre; a mesh's origin, moved by `translate`).
+fn shared_fields(obj: &Object) -> ([f32; 3], &Option<Material>, Option<Rotation>, Vec3) {
+    match obj {
+        Object::Sphere(s) => (s.albedo, &s.material, s.rotation, Vec3::from(s.center)),
+        Object::Box(b) => (b.albedo, &b.material, b.rotation, (Vec3::from(b.min) + Vec3::from(b.max)) * 0.5),
+        Object::Quad(q) => (q.albedo, &q.material, q.rotation, Vec3::from(q.center)),
+        Object::Mesh(m) => (m.albedo, &m.material, m.rotation, Vec3::from(m.translate)),
+        Object::Torus(t) => (t.albedo, &t.material, t.rotation, Vec3::from(t.center)),
+        Object::TrefoilKnot(k) => (k.albedo, &k.material, k.rotation, Vec3::from(k.center)),
+        Object::Lathe(l) => (l.albedo, &l.material, l.rotation, Vec3::from(l.center)),
+    }
 }
 
 /// See `Objects::shape_keys`.

@@ -275,9 +275,8 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
     let objects = glass_objects(data);
     let tasks = 64u64;
     // Every light but the line lights' points, then the line lights.
-    let in_line = |i: usize| data.line_lights.iter().any(|l| l.lights.contains(&i));
     let sources: Vec<Source> = (0..data.lights.len())
-        .filter(|i| !in_line(*i))
+        .filter(|i| !data.is_line_point(*i))
         .map(Source::Light)
         .chain((0..data.line_lights.len()).map(Source::Line))
         .collect();

@@ -279,7 +279,7 @@ pub(crate) fn direct(data: &SceneData, o: DVec3, d: DVec3, hit: &Surface) -> DVe
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
     let mut irradiance = DVec3::ZERO;
     for (i, light) in data.lights.iter().enumerate() {
-        if data.line_lights.iter().any(|l| l.lights.contains(&i)) {
+        if data.is_line_point(i) {
             continue;
         }
         let (local, to_light, distance) = toward_light(light, point);

@@ -299,11 +299,6 @@ impl Frame {
         self.buffers.contains_key(&r.binding)
     }
 
-    /// Stores a copy of `values` as the contents of `r`.
-    pub fn put<T: Pod>(&mut self, r: &Resource, values: &[T]) {
-        self.insert(r, Buffer::from_bytes(bytemuck::cast_slice(values)));
-    }
-
     pub fn insert(&mut self, r: &Resource, buffer: Buffer) {
         self.buffers.insert(r.binding, buffer);
     }

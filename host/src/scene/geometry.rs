@@ -6,6 +6,7 @@ use glam::{Quat, Vec3, Vec4};
 use slicelight_shaders::types::{
     GlassTriangle, GlassVertex, GpuMaterial, GpuSphere, GpuTriangle, MATERIAL_DIFFUSE, MATERIAL_GLASS, NO_OBJECT,
 };
+use std::borrow::Cow;
 use std::path::Path;
 
 use super::schema::{LatheObject, Material, MeshObject, Object, Rotation, TorusObject, TrefoilKnotObject};
@@ -187,12 +188,14 @@ fn shape_key(obj: &Object, base: &Path) -> u128 {
 /// Appends a mesh's triangles (and, for glass, its vertices and indexed
 /// triangles, sharing normals), turned by `turn` about `pivot`.
 fn push_mesh(out: &mut Objects, defined: &IndexedMesh, object: u32, glass: bool, turn: Quat, pivot: Vec3) {
-    // Not turned: the positions as defined, exactly.
-    let moved = |p: &Vec3| if turn == Quat::IDENTITY { *p } else { pivot + turn * (*p - pivot) };
-    let mesh = IndexedMesh {
-        positions: defined.positions.iter().map(moved).collect(),
-        normals: defined.normals.iter().map(|n| turn * *n).collect(),
-        indices: defined.indices.clone(),
+    // Not turned: the positions and normals as defined, exactly, not copied.
+    let (positions, normals): (Cow<[Vec3]>, Cow<[Vec3]>) = if turn == Quat::IDENTITY {
+        (Cow::Borrowed(&defined.positions), Cow::Borrowed(&defined.normals))
+    } else {
+        (
+            defined.positions.iter().map(|p| pivot + turn * (*p - pivot)).collect(),
+            defined.normals.iter().map(|n| turn * *n).collect(),
+        )
     };
     let first_vertex = out.glass_vertices.len() as u32;
     if glass {
@@ -206,7 +209,7 @@ fn push_mesh(out: &mut Objects, defined: &IndexedMesh, object: u32, glass: bool,
             .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
         let diagonal = (hi - lo).length().max(1e-6);
         let mut block = out.glass_vertices.last().map_or(0, |v| v.table_block + v.channels);
-        for ((p, n), defined_normal) in mesh.positions.iter().zip(&mesh.normals).zip(&defined.normals) {
+        for ((p, n), defined_normal) in positions.iter().zip(normals.iter()).zip(&defined.normals) {
             out.glass_vertices.push(GlassVertex {
                 position: p.extend(1.0),
                 normal: n.extend(diagonal),
@@ -220,8 +223,8 @@ fn push_mesh(out: &mut Objects, defined: &IndexedMesh, object: u32, glass: bool,
             block += channels;
         }
     }
-    for f in &mesh.indices {
-        let v = f.map(|i| mesh.positions[i as usize]);
+    for f in &defined.indices {
+        let v = f.map(|i| positions[i as usize]);
         let glass_index = if glass {
             out.glass_triangles.push(GlassTriangle { vertices: f.map(|i| first_vertex + i), object });
             out.glass_triangles.len() as u32 - 1

@@ -64,6 +64,12 @@ pub struct SceneData {
 }
 
 impl SceneData {
+    /// Whether light `i` is one of a line light's points (the references
+    /// light the line itself instead).
+    pub fn is_line_point(&self, i: usize) -> bool {
+        self.line_lights.iter().any(|l| l.lights.contains(&i))
+    }
+
     pub fn width(&self) -> u32 {
         self.common.width
     }

@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use slicelight_shaders::camera::sample_offset;
 use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT, MATERIAL_GLASS, PROJECTION_FISHEYE};
 
-use crate::sea_reference::SeaReference;
+use crate::sea_reference::{HeightField, SeaReference};
 use crate::sky_reference::SkyReference;
 
 /// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`;
@@ -29,6 +29,10 @@ pub const SKY_TOLERANCE: f64 = 1e-6;
 /// against 1e-6 it changes orders 1 and 2 by 9e-8 of their values (test
 /// `reference_tolerance_is_converged`, which allows 1e-3), at ~0.2 s per pixel.
 pub const SEA_TOLERANCE: f64 = 1e-4;
+/// Tolerance of order 2 over a varying bottom (`order2_over`, about a
+/// second a pixel at this): within 2e-3 of 1e-4's (test
+/// `shore_order2_against_the_height_field_quadrature`).
+pub const SEA_HEIGHT_FIELD_TOLERANCE: f64 = 1e-3;
 
 use crate::scene::SceneData;
 
@@ -360,15 +364,25 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     if view.y < 1e-4 {
         view = DVec3::new(view.x, 1e-4, view.z).normalize();
     }
-    // A varying bottom: the water column under the view ray taken as flat
-    // at the depth where the ray meets the bottom (the method's assumption
-    // too; the bottom's tilt enters eq. 9's cosine).
-    let (depth, cos_gamma) =
-        slicelight_shaders::sea::bottom_hit(p, &data.sea.bottom, hit.x as f32, hit.z as f32, view.as_vec3());
+    // A varying bottom: order 1 and the bottom's reflection are exact with
+    // the depth where the view ray meets it (the bottom's tilt enters eq.
+    // 9's cosine); order 2 is integrated over the real height field
+    // (`order2_over`: every direction marched to the bottom), not over the
+    // method's locally flat water.
+    let grid = &data.sea.bottom;
+    let (depth, cos_gamma) = slicelight_shaders::sea::bottom_hit(p, grid, hit.x as f32, hit.z as f32, view.as_vec3());
     let local = slicelight_shaders::sea::SeaParams { depth, ..*p };
     let sea = SeaReference::new(&local, SEA_TOLERANCE);
     let bottom = sea.bottom(view) * (cos_gamma as f64 / sea.mu_s);
-    let second = if data.sea.second_order { sea.order2(view) } else { DVec3::ZERO };
+    let second = if !data.sea.second_order {
+        DVec3::ZERO
+    } else if p.bottom_nx >= 2 {
+        let height = |x: f64, z: f64| slicelight_shaders::sea::bottom_depth(p, grid, x as f32, z as f32) as f64;
+        let field = HeightField { depth: &height, step: 0.5 * p.bottom_grid.z as f64, deepest: p.bottom_grid.w as f64 };
+        SeaReference::new(p, SEA_HEIGHT_FIELD_TOLERANCE).order2_over(&field, (hit.x, hit.z), view)
+    } else {
+        sea.order2(view)
+    };
     let below = sea.order1(view) + second + bottom;
     sky * r + below * ((1.0 - r) / (n * n))
 }

@@ -26,6 +26,14 @@ fn d3(v: glam::Vec3) -> DVec3 {
     v.as_dvec3()
 }
 
+/// A varying bottom for the references: its depth (m) at horizontal
+/// `(x, z)`, the march step that resolves it (m), and its deepest depth.
+pub struct HeightField<'a> {
+    pub depth: &'a (dyn Fn(f64, f64) -> f64 + Sync),
+    pub step: f64,
+    pub deepest: f64,
+}
+
 /// The water and its sunlight, in f64.
 #[derive(Debug, Clone)]
 pub struct SeaReference {
@@ -88,15 +96,23 @@ impl SeaReference {
     }
 
     /// Order-1 radiance at depth `z` travelling along unit `dir`, by the
-    /// closed-form integral along the ray (eq. 7 written out afresh).
+    /// closed-form integral along the ray (eq. 7 written out afresh), over
+    /// the flat bottom.
     pub fn l1(&self, z: f64, dir: DVec3) -> DVec3 {
+        self.l1_below(z, dir, self.depth - z)
+    }
+
+    /// `l1` where light travelling upward was scattered over `span` (m,
+    /// vertically) below `z`: between `z` and wherever the bottom is along
+    /// the way it came.
+    pub fn l1_below(&self, z: f64, dir: DVec3, span: f64) -> DVec3 {
         let beta = self.b * self.hg(self.sun.dot(dir));
         let mu = dir.y;
         let per_channel = |c: f64| -> f64 {
             if mu > 0.0 {
                 // Scattered between z and the bottom, travelling up.
                 let k = c * (1.0 / self.mu_s + 1.0 / mu);
-                let span = self.depth - z;
+                let span = span.max(0.0);
                 let integral = if k * span < 1e-8 { span } else { -(-k * span).exp_m1() / k };
                 (-c * z / self.mu_s).exp() * integral / mu
             } else {
@@ -110,6 +126,44 @@ impl SeaReference {
             }
         };
         beta * self.beam * DVec3::new(per_channel(self.c.x), per_channel(self.c.y), per_channel(self.c.z))
+    }
+
+    /// How far below the point at horizontal `at` and depth `z` (m,
+    /// vertically) the bottom lies along the way light travelling along
+    /// upward unit `dir` came: the first crossing of the bilinear height
+    /// field, marched `field.step` horizontally at a time and bisected to
+    /// 1e-9 of the step. Where the light has crossed 60 optical depths of the
+    /// clearest channel first, that far (the rest cannot be told from no
+    /// bottom in f64).
+    pub fn below(&self, field: &HeightField, at: (f64, f64), z: f64, dir: DVec3) -> f64 {
+        let mu = dir.y.max(1e-12);
+        let gap = |t: f64| z + mu * t - (field.depth)(at.0 - dir.x * t, at.1 - dir.z * t);
+        if gap(0.0) >= 0.0 {
+            return 0.0;
+        }
+        let t_far = ((field.deepest - z) / mu).min(60.0 / self.c.min_element().max(1e-12));
+        let horizontal = (dir.x * dir.x + dir.z * dir.z).sqrt();
+        let dt = if horizontal > 1e-12 { (field.step / horizontal).min(t_far) } else { t_far };
+        let mut t0 = 0.0;
+        loop {
+            let t1 = (t0 + dt).min(t_far);
+            if gap(t1) >= 0.0 {
+                let (mut lo, mut hi) = (t0, t1);
+                while hi - lo > 1e-9 * dt {
+                    let mid = 0.5 * (lo + hi);
+                    if gap(mid) >= 0.0 {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                return mu * 0.5 * (lo + hi);
+            }
+            if t1 >= t_far {
+                return mu * t_far;
+            }
+            t0 = t1;
+        }
     }
 
     /// Order 1 toward the surface along upward `view`: the integral over
@@ -132,7 +186,16 @@ impl SeaReference {
 
     /// `int_0^depth f(z) dz` in pieces graded toward the surface.
     fn over_depth(&self, f: &dyn Fn(f64) -> DVec3) -> DVec3 {
-        let reach = self.reach();
+        self.over_depth_to(f, self.depth)
+    }
+
+    /// `int_0^end f(z) dz` in pieces graded toward the surface (cut where
+    /// 60 optical depths of the clearest channel are reached).
+    fn over_depth_to(&self, f: &dyn Fn(f64) -> DVec3, end: f64) -> DVec3 {
+        let reach = self.reach().min(end);
+        if reach <= 0.0 {
+            return DVec3::ZERO;
+        }
         let mut cuts = vec![0.0];
         let mut x = reach / 4096.0;
         while x < reach {
@@ -147,6 +210,11 @@ impl SeaReference {
     /// over the vertical cosine (cut at the horizontal and where the sun
     /// and the view lie) and the azimuth (cut at theirs).
     pub fn source2(&self, z: f64, view: DVec3) -> DVec3 {
+        self.source2_with(view, &|w| self.l1(z, w))
+    }
+
+    /// `source2` with the order-1 radiance along each direction `l1(w)`.
+    fn source2_with(&self, view: DVec3, l1: &dyn Fn(DVec3) -> DVec3) -> DVec3 {
         let azimuth = |d: DVec3| d.z.atan2(d.x).rem_euclid(2.0 * PI);
         let mut mu_cuts = vec![-1.0, -self.mu_s, 0.0, view.y, 1.0];
         mu_cuts.sort_by(f64::total_cmp);
@@ -158,7 +226,7 @@ impl SeaReference {
             let s = (1.0 - mu * mu).max(0.0).sqrt();
             let f = |phi: f64| {
                 let w = DVec3::new(s * phi.cos(), mu, s * phi.sin());
-                self.b * self.hg(w.dot(view)) * self.l1(z, w)
+                self.b * self.hg(w.dot(view)) * l1(w)
             };
             phi_cuts.windows(2).map(|p| integrate(&f, p[0], p[1], self.tolerance, 0.0, 20)).sum()
         };
@@ -174,6 +242,29 @@ impl SeaReference {
             self.source2(z, view) * att / mu_v
         };
         self.over_depth(&f)
+    }
+
+    /// Order 2 toward the surface along upward `view` from the surface at
+    /// horizontal `start`, over the height field `field`: the view ray ends
+    /// where it meets the bottom, and the order-1 radiance travelling up at
+    /// every point along it was scattered between that point and the bottom
+    /// along the way it came (`below`); no sampling planes, no depth table.
+    /// The sun's light is not shadowed by the bottom (as in the method).
+    pub fn order2_over(&self, field: &HeightField, start: (f64, f64), view: DVec3) -> DVec3 {
+        let mu_v = view.y;
+        let c = self.c;
+        let end = self.below(field, start, 0.0, view);
+        let f = |z: f64| {
+            let t = z / mu_v;
+            let at = (start.0 - view.x * t, start.1 - view.z * t);
+            let l1 = |w: DVec3| {
+                let span = if w.y > 0.0 { self.below(field, at, z, w) } else { 0.0 };
+                self.l1_below(z, w, span)
+            };
+            let att = DVec3::new((-c.x * z / mu_v).exp(), (-c.y * z / mu_v).exp(), (-c.z * z / mu_v).exp());
+            self.source2_with(view, &l1) * att / mu_v
+        };
+        self.over_depth_to(&f, end)
     }
 
     /// The bottom's reflection of the direct sun along `view` (eq. 9 with `1/pi`), closed form.

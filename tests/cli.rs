@@ -90,6 +90,9 @@ fn good_scene_writes_png_exr_and_stats() {
             "sea.radiance_map",
             "sea.scattering_maps",
             "sea.accumulated_map",
+            "sea.table_samples",
+            "sea.depth_table",
+            "sea.bottom_correction",
             "surface",
             "caustics",
             "shafts",
@@ -115,6 +118,9 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.radiance_map",
         "sea.scattering_maps",
         "sea.accumulated_map",
+        "sea.table_samples",
+        "sea.depth_table",
+        "sea.bottom_correction",
         "sea.reflection",
         "sea.order1",
         "sea.order2",
@@ -353,6 +359,10 @@ fn a_sea_scene_writes_each_term_as_a_layer() {
     for name in ["sea.radiance_map", "sea.scattering_maps", "sea.accumulated_map", "sea.order2", "sea.bottom"] {
         assert!(ran(name), "{name} did not run");
     }
+    // A flat bottom needs no depth table.
+    for name in ["sea.table_samples", "sea.depth_table", "sea.bottom_correction"] {
+        assert!(!ran(name), "{name} ran over a flat bottom");
+    }
     // A preset water renders as its coefficients written out.
     let preset = SEA
         .replace("absorption = [0.343, 0.0585, 0.0180]", "water = \"clear-ocean\"")
@@ -383,6 +393,7 @@ fn bad_sea_settings_name_the_field() {
         ("depth_m = 12.0", "depth_m = -1.0", &["sea.depth_m", "-1"]),
         ("depth_m = 12.0", "depth_m = 12.0\ndirections = 100", &["sea.directions", "100"]),
         ("depth_m = 12.0", "depth_m = 12.0\nplanes = 1", &["sea.planes"]),
+        ("depth_m = 12.0", "depth_m = 12.0\ndepth_table = 1", &["sea.depth_table", "1"]),
         ("depth_m = 12.0", "depth_m = 12.0\ng = 1.0", &["sea.g"]),
         ("depth_m = 12.0", "depth_m = 12.0\nlevel_m = 20.0", &["sea.level_m", "below the camera"]),
         (

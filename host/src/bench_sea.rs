@@ -19,10 +19,10 @@ use std::path::Path;
 
 use crate::bench::median;
 use crate::passes::sea::{order2_at, EPSILON};
-use crate::reference::SEA_TOLERANCE;
+use crate::reference::{SEA_HEIGHT_FIELD_TOLERANCE, SEA_TOLERANCE};
 use crate::render::{self, Backend};
 use crate::scene::{self, SceneData};
-use crate::sea_reference::SeaReference;
+use crate::sea_reference::{HeightField, SeaReference};
 use slicelight_shaders::sea::{sea_view, SeaParams};
 
 /// One configuration of the sweep.
@@ -36,6 +36,8 @@ pub struct Config {
     /// `k`: `n_d = 3 k^2`.
     pub polar: u32,
     pub map: u32,
+    /// The depth table's samples across the image (0: none).
+    pub table: u32,
 }
 
 impl Config {
@@ -45,7 +47,8 @@ impl Config {
 }
 
 pub fn sweep(auto: &SeaParams, quick: bool) -> Vec<Config> {
-    let base = Config { series: "auto", planes: auto.planes, polar: auto.polar, map: auto.map_width };
+    let base =
+        Config { series: "auto", planes: auto.planes, polar: auto.polar, map: auto.map_width, table: auto.table_width };
     let planes: &[u32] = if quick { &[2, 4, 8, 16] } else { &[2, 3, 4, 6, 8, 12, 16, 24] };
     let polar: &[u32] = if quick { &[2, 6, 12] } else { &[2, 4, 6, 8, 10, 12, 16] };
     let maps: &[u32] = if quick { &[8, 32] } else { &[8, 16, 32, 64] };
@@ -53,7 +56,13 @@ pub fn sweep(auto: &SeaParams, quick: bool) -> Vec<Config> {
     v.extend(planes.iter().map(|&n| Config { series: "planes", planes: n, ..base }));
     v.extend(polar.iter().map(|&k| Config { series: "directions", polar: k, ..base }));
     v.extend(maps.iter().map(|&m| Config { series: "map", map: m, ..base }));
-    v.extend([6, 8].map(|k| Config { series: "paper", planes: 12, polar: k, map: 32 }));
+    v.extend([6, 8].map(|k| Config { series: "paper", planes: 12, polar: k, map: 32, ..base }));
+    if auto.layers > 1 {
+        // A varying bottom: without the depth table (locally flat water) and
+        // with tables of several sizes.
+        let tables: &[u32] = if quick { &[0, 32] } else { &[0, 8, 16, 32, 64] };
+        v.extend(tables.iter().map(|&t| Config { series: "depth-table", table: t, ..base }));
+    }
     v
 }
 
@@ -65,13 +74,20 @@ fn configure(data: &SceneData, c: &Config) -> SceneData {
     p.azimuths = c.polar;
     p.map_width = c.map;
     p.map_height = c.map;
+    p.table_width = c.table;
+    p.table_height = if c.table > 0 {
+        ((c.table as f32 * data.common.height as f32 / data.common.width as f32).round() as u32).max(2)
+    } else {
+        0
+    };
     d
 }
 
 /// Pixels on a lattice of `stride` whose centre ray meets the sea, with the
 /// direction the light leaves the water toward the eye, the surface's
-/// `T_o / n^2` there, and the depth where the view ray meets the bottom.
-pub fn sea_pixels(data: &SceneData, stride: u32) -> Vec<(u32, Vec3, f32, f32)> {
+/// `T_o / n^2` there, where it meets the surface, and the depth where it
+/// meets the bottom.
+pub fn sea_pixels(data: &SceneData, stride: u32) -> Vec<(u32, Vec3, f32, Vec3, f32)> {
     let common = slicelight_shaders::types::CommonParams { samples_per_pixel: 1, sample_index: 0, ..data.common };
     let blank = slicelight_shaders::surface::no_surface();
     let w = data.width();
@@ -82,7 +98,7 @@ pub fn sea_pixels(data: &SceneData, stride: u32) -> Vec<(u32, Vec3, f32, f32)> {
             let v = sea_view(i, &common, &data.sea.params, &data.sea.waves, &blank);
             let p = &data.sea.params;
             let (depth, _) = slicelight_shaders::sea::bottom_hit(p, &data.sea.bottom, v.point.x, v.point.z, v.view);
-            v.hit.then_some((i, v.view, v.transmission, depth))
+            v.hit.then_some((i, v.view, v.transmission, v.point, depth))
         })
         .collect()
 }
@@ -180,14 +196,25 @@ pub fn run(
         let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
         let pixels = sea_pixels(&data, stride.max(1));
         let t = std::time::Instant::now();
-        // Over a varying bottom the reference takes the water under each
-        // pixel as flat at the depth its view ray meets (as `slicelight
-        // reference` does).
+        // Over a varying bottom the reference integrates over the real height
+        // field (as `slicelight reference` does).
+        let p = &data.sea.params;
+        let height =
+            |x: f64, z: f64| slicelight_shaders::sea::bottom_depth(p, &data.sea.bottom, x as f32, z as f32) as f64;
+        let field = HeightField { depth: &height, step: 0.5 * p.bottom_grid.z as f64, deepest: p.bottom_grid.w as f64 };
         let exact: Vec<DVec3> = pixels
             .par_iter()
-            .map(|&(_, v, tr, depth)| {
-                let local = SeaParams { depth, ..data.sea.params };
-                SeaReference::new(&local, SEA_TOLERANCE).order2(v.as_dvec3()) * tr as f64
+            .map(|&(_, v, tr, point, depth)| {
+                let o2 = if p.layers > 1 {
+                    SeaReference::new(p, SEA_HEIGHT_FIELD_TOLERANCE).order2_over(
+                        &field,
+                        (point.x as f64, point.z as f64),
+                        v.as_dvec3(),
+                    )
+                } else {
+                    SeaReference::new(&SeaParams { depth, ..*p }, SEA_TOLERANCE).order2(v.as_dvec3())
+                };
+                o2 * tr as f64
             })
             .collect();
         eprintln!("{name}: reference order 2 at {} pixels, {:.1} s", pixels.len(), t.elapsed().as_secs_f64());
@@ -206,7 +233,14 @@ pub fn run(
                     let pass = |prefix: &[&str]| -> f64 {
                         st.passes.iter().filter(|p| prefix.contains(&p.name)).map(|p| p.seconds).sum()
                     };
-                    maps.push(pass(&["sea.radiance_map", "sea.scattering_maps", "sea.accumulated_map"]));
+                    maps.push(pass(&[
+                        "sea.radiance_map",
+                        "sea.scattering_maps",
+                        "sea.accumulated_map",
+                        "sea.table_samples",
+                        "sea.depth_table",
+                        "sea.bottom_correction",
+                    ]));
                     per_pixel.push(pass(&["sea.reflection", "sea.order1", "sea.order2", "sea.bottom"]));
                     last = Some(r);
                 }
@@ -230,12 +264,13 @@ pub fn run(
                     max_relative: max,
                 };
                 eprintln!(
-                    "{name:>14} {:>4} {:<10} n_z={:<3} n_d={:<5} map={:<3} {:>8.4} s (maps {:.4} s, per-pixel {:.4} s)  rms {:.3}%  max {:.3}%",
+                    "{name:>14} {:>4} {:<11} n_z={:<3} n_d={:<5} map={:<3} table={:<3} {:>8.4} s (maps {:.4} s, per-pixel {:.4} s)  rms {:.3}%  max {:.3}%",
                     row.backend,
                     c.series,
                     c.planes,
                     c.directions(),
                     c.map,
+                    c.table,
                     row.median_seconds,
                     row.maps_median_seconds,
                     row.pixels_median_seconds,
@@ -262,19 +297,20 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     let mut out = Vec::new();
     writeln!(
         out,
-        "scene,backend,series,planes,directions,map,median_seconds,maps_median_seconds,per_pixel_median_seconds,rms_relative_percent,max_relative_percent"
+        "scene,backend,series,planes,directions,map,depth_table,median_seconds,maps_median_seconds,per_pixel_median_seconds,rms_relative_percent,max_relative_percent"
     )?;
     for r in rows {
         let c = &r.config;
         writeln!(
             out,
-            "{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5}",
+            "{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5}",
             r.scene,
             r.backend,
             c.series,
             c.planes,
             c.directions(),
             c.map,
+            c.table,
             r.median_seconds,
             r.maps_median_seconds,
             r.pixels_median_seconds,

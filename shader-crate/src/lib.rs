@@ -23,6 +23,7 @@ pub mod phase;
 pub mod scatter;
 pub mod scatter_check;
 pub mod sea;
+pub mod sea_table;
 pub mod shadow_map;
 pub mod shafts;
 pub mod sky;

@@ -50,8 +50,8 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use crate::camera::{camera_ray, in_image};
-use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
+use crate::camera::{camera_ray, in_image, sample_offset};
+use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::phase::henyey_greenstein;
 use crate::sky::{sky_radiance, sun_disk, SkyParams};
 use crate::types::{CommonParams, GBufferTexel, NO_OBJECT};
@@ -109,7 +109,13 @@ pub struct SeaParams {
     /// geometric from `shallow` to `bottom_grid.w`.
     pub layers: u32,
     pub shallow: f32,
-    pub _pad: [u32; 4],
+    /// Over a varying bottom, section 5.4's depth table and the order-2
+    /// correction it feeds (`sea_table`): `table_width x table_height`
+    /// samples across the image (0: none, the water under each pixel taken
+    /// as flat).
+    pub table_width: u32,
+    pub table_height: u32,
+    pub _pad: [u32; 2],
 }
 
 #[cfg(not(target_arch = "spirv"))]
@@ -240,11 +246,17 @@ fn around(axis: Vec3, cos_t: f32, i: u32, azimuths: u32) -> Vec3 {
 /// 7's removable singularity at `|mu| = mu_s` (`1 - sec(theta_io) cos(theta) = 0`)
 /// is `phi(0) = 1`, and no exponential grows.
 pub fn order1_path(z: Vec3, mu: f32, p: &SeaParams) -> Vec3 {
+    order1_path_over(z, mu, (Vec3::splat(p.depth) - z).max(Vec3::ZERO), p)
+}
+
+/// `order1_path` where upward light was scattered over `below` (m,
+/// vertically, per channel) under `z`: to wherever the bottom lies along
+/// the way it came (section 5.4's `Q_P P_k`).
+pub fn order1_path_over(z: Vec3, mu: f32, below: Vec3, p: &SeaParams) -> Vec3 {
     let c = p.extinction.xyz();
     let mu_s = p.sun_in_water.w;
     if mu > 0.0 {
         let mu = mu.max(1e-6);
-        let below = (Vec3::splat(p.depth) - z).max(Vec3::ZERO);
         let length = below * (1.0 / mu_s + 1.0 / mu);
         (-c * z / mu_s).exp() * below / mu * phi3(c * length)
     } else {
@@ -442,8 +454,6 @@ pub fn scattering_source(p: &SeaParams, k: u32, view: Vec3, radiance_map: &[Vec4
     let sun = p.sun_in_water.xyz();
     let b = p.scattering.xyz();
     let z = plane_depth(p, k);
-    let uniform = 0.25 * FRAC_1_PI;
-    let uniform2 = uniform * uniform;
     let held = base + (p.planes * 2 * n) as usize;
     let mut sum = Vec3::ZERO;
     let mut m = 0;
@@ -451,11 +461,7 @@ pub fn scattering_source(p: &SeaParams, k: u32, view: Vec3, radiance_map: &[Vec4
         // The sun's and the uniform set: L1 from the radiance map.
         let d = radiance_map[held + m as usize];
         let (ps, pv, h) = (d.w, henyey_greenstein(d.xyz().dot(view), g), horizon_window(d.y));
-        let (a_s, a_v) = (h * ps, h * pv);
-        // Power heuristic: set i's direction counts f q_i^2 / (p_i sum q_j^2),
-        // q_s = h p_s, q_v = h p_v, q_u = p_u.
-        let own = if m < n { h * a_s } else { uniform };
-        let weight = own / (a_s * a_s + a_v * a_v + uniform2);
+        let weight = set_weight(ps, pv, h, if m < n { SET_SUN } else { SET_UNIFORM });
         sum += radiance_map[base + (k * 2 * n + m) as usize].xyz() * (pv * weight);
         m += 1;
     }
@@ -467,12 +473,34 @@ pub fn scattering_source(p: &SeaParams, k: u32, view: Vec3, radiance_map: &[Vec4
         let local = radiance_map[held + (2 * n + m) as usize];
         let dir = t * local.x + u * local.y + view * local.z;
         let (ps, pv, h) = (henyey_greenstein(sun.dot(dir), g), henyey_greenstein(local.z, g), horizon_window(dir.y));
-        let (a_s, a_v) = (h * ps, h * pv);
-        let weight = h * a_v / (a_s * a_s + a_v * a_v + uniform2);
+        let weight = set_weight(ps, pv, h, SET_VIEW);
         sum += beam * order1_path(z, dir.y, p) * (ps * pv * weight);
         m += 1;
     }
     b * sum / n as f32
+}
+
+/// The three direction sets of `scattering_source`.
+pub const SET_SUN: u32 = 0;
+pub const SET_UNIFORM: u32 = 1;
+pub const SET_VIEW: u32 = 2;
+
+/// `scattering_source`'s multiple importance weight of a direction from
+/// `set`, divided by that set's density: with `q_s = h p_s`, `q_v = h p_v`
+/// (`p_s`, `p_v` the phase function toward the direction from the sun and
+/// the view, `h` the horizon window) and `q_u = 1/(4 pi)`, the power
+/// heuristic's `q_i^2 / (p_i sum q_j^2)`.
+pub fn set_weight(ps: f32, pv: f32, h: f32, set: u32) -> f32 {
+    let uniform = 0.25 * FRAC_1_PI;
+    let (a_s, a_v) = (h * ps, h * pv);
+    let own = if set == SET_SUN {
+        h * a_s
+    } else if set == SET_UNIFORM {
+        uniform
+    } else {
+        h * a_v
+    };
+    own / (a_s * a_s + a_v * a_v + uniform * uniform)
 }
 
 /// Where unit upward `view` falls in a scattering map: the lower-left texel
@@ -527,6 +555,15 @@ fn exp_linear(length: f32, h_a: f32, h_b: f32, kappa: f32) -> f32 {
     length * (h_a * phi(x) + (s_b - h_a) * psi1(x))
 }
 
+/// `exp_linear` per channel.
+pub fn exp_linear3(length: Vec3, h_a: Vec3, h_b: Vec3, kappa: Vec3) -> Vec3 {
+    Vec3::new(
+        exp_linear(length.x, h_a.x, h_b.x, kappa.x),
+        exp_linear(length.y, h_a.y, h_b.y, kappa.y),
+        exp_linear(length.z, h_a.z, h_b.z, kappa.z),
+    )
+}
+
 /// Accumulated map kernel: texel `index`, the scattering maps accumulated
 /// over the planes (`order2_radiance` at the texel's own direction, so no
 /// interpolation), the order-2 radiance below the surface toward the eye.
@@ -560,12 +597,7 @@ pub fn accumulate_planes(p: &SeaParams, view: Vec3, sources: &[Vec4], first: u32
     while k < p.planes {
         let z_b = plane_depth(p, k);
         let h_b = plane_integrand(sources[(first + k * stride) as usize].xyz(), z_b, c, mu_v);
-        let length = z_b - z_a;
-        sum += Vec3::new(
-            exp_linear(length.x, h_a.x, h_b.x, kappa.x),
-            exp_linear(length.y, h_a.y, h_b.y, kappa.y),
-            exp_linear(length.z, h_a.z, h_b.z, kappa.z),
-        );
+        sum += exp_linear3(z_b - z_a, h_a, h_b, kappa);
         z_a = z_b;
         h_a = h_b;
         k += 1;
@@ -622,9 +654,9 @@ pub fn bottom_normal(p: &SeaParams, grid: &[f32], x: f32, z: f32) -> Vec3 {
 
 /// Where the refracted view ray from the surface at `(x, z)`, travelling
 /// against upward `view`, meets the bottom: its depth (m) and the cosine of
-/// eq. 9's `gamma`. A flat bottom in closed form; a varying one by marching
-/// half a grid spacing at a time (at most 2048 steps) and a secant between
-/// the last two; past the deepest depth, the deepest.
+/// eq. 9's `gamma`. A flat bottom in closed form; a varying one by
+/// `march_to_bottom` (at most 2048 steps); past the deepest depth, the
+/// deepest.
 pub fn bottom_hit(p: &SeaParams, grid: &[f32], x: f32, z: f32, view: Vec3) -> (f32, f32) {
     let mu_s = p.sun_in_water.w;
     if p.bottom_nx < 2 {
@@ -632,27 +664,43 @@ pub fn bottom_hit(p: &SeaParams, grid: &[f32], x: f32, z: f32, view: Vec3) -> (f
     }
     let deep = p.bottom_grid.w;
     let mu = view.y.max(1e-4);
-    let (hx, hz) = (-view.x, -view.z);
-    let t_max = deep / mu;
+    let t = march_to_bottom(p, grid, x, z, 0.0, view, deep / mu, 2048);
+    if t < 0.0 {
+        return (deep, mu_s);
+    }
+    let (qx, qz) = (x - view.x * t, z - view.z * t);
+    let up = -p.sun_in_water.xyz();
+    (t * view.y.max(1e-4), bottom_normal(p, grid, qx, qz).dot(up).max(0.0))
+}
+
+/// The distance `t` (m) along the ray from horizontal `(x, z)` at depth
+/// `z0` travelling against upward unit `dir` (so going down) to the first
+/// crossing of the varying bottom, within `t_max`: marched half a grid
+/// spacing at a time (at most `steps`; fewer, longer ones where the ray is
+/// steep) and a secant between the last two; -1 where it stays above.
+#[allow(clippy::too_many_arguments)]
+pub fn march_to_bottom(p: &SeaParams, grid: &[f32], x: f32, z: f32, z0: f32, dir: Vec3, t_max: f32, steps: u32) -> f32 {
+    let mu = dir.y.max(1e-4);
+    let (hx, hz) = (-dir.x, -dir.z);
     let horizontal = (hx * hx + hz * hz).sqrt().max(1e-6);
-    let dt = (0.5 * p.bottom_grid.z / horizontal).min(t_max).max(t_max / 2048.0);
+    let dt = (0.5 * p.bottom_grid.z / horizontal).min(t_max).max(t_max / steps as f32);
     let mut t_prev = 0.0;
-    let mut f_prev = -bottom_depth(p, grid, x, z);
+    let mut f_prev = z0 - bottom_depth(p, grid, x, z);
+    if f_prev >= 0.0 {
+        return 0.0;
+    }
     let mut t = dt;
     while t <= t_max + 0.5 * dt {
         let (px, pz) = (x + hx * t, z + hz * t);
-        let f = t * mu - bottom_depth(p, grid, px, pz);
+        let f = z0 + t * mu - bottom_depth(p, grid, px, pz);
         if f >= 0.0 {
-            let th = t_prev + dt * (-f_prev / (f - f_prev).max(1e-20));
-            let (qx, qz) = (x + hx * th, z + hz * th);
-            let up = -p.sun_in_water.xyz();
-            return (th * mu, bottom_normal(p, grid, qx, qz).dot(up).max(0.0));
+            return t_prev + dt * (-f_prev / (f - f_prev).max(1e-20));
         }
         t_prev = t;
         f_prev = f;
         t += dt;
     }
-    (deep, mu_s)
+    -1.0
 }
 
 /// The order-2 layers bracketing bottom depth `depth`: the lower index and
@@ -806,6 +854,7 @@ pub fn order2_pixel(
     waves: &[Vec4],
     bottom: &[f32],
     accumulated: &[Vec4],
+    correction: &[Vec4],
     texel: &GBufferTexel,
 ) -> Vec4 {
     let v = sea_view(index, common, p, waves, texel);
@@ -848,6 +897,13 @@ pub fn order2_pixel(
                 ),
             );
             value = cubic.max(Vec3::ZERO);
+        }
+        if p.table_width > 0 {
+            // Section 5.4: the depth table's correction for the bottom along
+            // every sampling ray rather than flat under the view ray.
+            let offset = sample_offset(common.sample_index, common.samples_per_pixel);
+            let position = Vec2::new((index % common.width) as f32, (index / common.width) as f32) + offset;
+            value = (value + crate::sea_table::correction_at(p, common, correction, position)).max(Vec3::ZERO);
         }
     }
     (value * v.transmission).extend(0.0)
@@ -976,6 +1032,7 @@ pub fn order2_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 27)] accumulated: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 38)] correction: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 25)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
@@ -988,6 +1045,7 @@ pub fn order2_kernel(
             waves,
             bottom,
             accumulated,
+            correction,
             &gbuffer[index as usize],
         );
     }

@@ -32,6 +32,7 @@ macro_rules! resources {
 pub mod caustics;
 pub mod scatter_check;
 pub mod sea;
+pub mod sea_table;
 pub mod shadow_maps;
 pub mod shafts;
 pub mod sky;
@@ -48,6 +49,9 @@ pub static PASSES: &[&dyn Pass] = &[
     &sea::SeaRadianceMap,
     &sea::SeaScatteringMaps,
     &sea::SeaAccumulatedMap,
+    &sea_table::SeaTableSamples,
+    &sea_table::SeaDepthTable,
+    &sea_table::SeaBottomCorrection,
     &surface::Surface,
     &caustics::Caustics,
     &shafts::Shafts,

@@ -17,6 +17,7 @@ use slicelight_shaders::sea::{
 };
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
+use super::sea_table::SEA_BOTTOM_CORRECTION;
 use super::sky::{positive, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW};
 use super::*;
 use crate::cpu::for_each_invocation;
@@ -72,6 +73,11 @@ pub struct Settings {
     /// Bottom depths the order-2 maps are built for over a varying bottom.
     #[serde(default = "depth_layers")]
     pub depth_layers: u32,
+    /// Over a varying bottom, the depth table's samples across the image
+    /// (section 5.4; rows by the image's aspect); 0: none, the water under
+    /// each pixel taken as flat.
+    #[serde(default = "depth_table")]
+    pub depth_table: u32,
     /// Lambertian albedo of the bottom.
     #[serde(default = "sand")]
     pub bottom_albedo: [f32; 3],
@@ -107,7 +113,10 @@ pub struct Settings {
 }
 
 fn depth_layers() -> u32 {
-    8
+    12
+}
+fn depth_table() -> u32 {
+    32
 }
 fn sand() -> [f32; 3] {
     [0.6, 0.55, 0.4]
@@ -415,7 +424,13 @@ pub fn choose_directions(p: &SeaParams) -> (u32, Vec<(u32, f32)>) {
 
 /// Validates `[sea]` against the sky's sun and the camera's height, and
 /// returns the sea's setup; the error names the field under `sea.`.
-pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32, base: &std::path::Path) -> Result<Setup> {
+pub fn configure(
+    s: &Settings,
+    sky: &super::sky::Setup,
+    common: &CommonParams,
+    base: &std::path::Path,
+) -> Result<Setup> {
+    let camera_y = common.camera_position.y;
     if !sky.enabled {
         bail!(invalid("sea", "a scene with a [sky] (the sea's sun and the sky it reflects)", "no [sky]"));
     }
@@ -431,6 +446,9 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32, base: &st
     }
     if s.depth_m.is_some() && s.bottom.is_some() {
         bail!(invalid("sea.bottom", "either depth_m or bottom, not both", "both"));
+    }
+    if s.depth_table == 1 || s.depth_table > 512 {
+        bail!(invalid("sea.depth_table", "0 (no depth table) or 2..=512 samples across the image", s.depth_table));
     }
     if !(2..=64).contains(&s.depth_layers) {
         bail!(invalid("sea.depth_layers", "a layer count in 2..=64", s.depth_layers));
@@ -544,7 +562,13 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32, base: &st
         bottom_nz: grid.as_ref().map_or(0, |g| g.size[1]),
         layers: if grid.is_some() { s.depth_layers } else { 1 },
         shallow: grid.as_ref().map_or(0.0, |g| g.shallow),
-        _pad: [0; 4],
+        table_width: if grid.is_some() && s.second_order { s.depth_table } else { 0 },
+        table_height: if grid.is_some() && s.second_order && s.depth_table > 0 {
+            ((s.depth_table as f32 * common.height as f32 / common.width as f32).round() as u32).max(2)
+        } else {
+            0
+        },
+        _pad: [0; 2],
     };
     let mut sampling = Vec::new();
     let chosen = std::time::Instant::now();
@@ -591,11 +615,11 @@ pub fn configure(s: &Settings, sky: &super::sky::Setup, camera_y: f32, base: &st
     })
 }
 
-fn skip_without_sea(scene: &SceneData) -> Option<Plan> {
+pub(super) fn skip_without_sea(scene: &SceneData) -> Option<Plan> {
     (!scene.sea.enabled).then(|| Plan::skip("no [sea]"))
 }
 
-fn skip_without_order2(scene: &SceneData) -> Option<Plan> {
+pub(super) fn skip_without_order2(scene: &SceneData) -> Option<Plan> {
     skip_without_sea(scene).or_else(|| (!scene.sea.second_order).then(|| Plan::skip("second_order = false")))
 }
 
@@ -888,7 +912,7 @@ impl Pass for SeaOrder2 {
         "sea::order2_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_ACCUMULATED_MAP, SEA_BOTTOM_GRID]
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_ACCUMULATED_MAP, SEA_BOTTOM_GRID, SEA_BOTTOM_CORRECTION]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_ORDER2]
@@ -906,11 +930,20 @@ impl Pass for SeaOrder2 {
         if scene.sea.params.scattering.truncate().max_element() <= 0.0 {
             return Plan::skip("the water does not scatter (scattering = 0)");
         }
+        if scene.sea.params.table_width > 0 {
+            return Plan::run(
+                "second-order scattering, looked up in the accumulated map, with the depth table's correction",
+                0,
+            );
+        }
         Plan::run("second-order scattering, looked up in the accumulated map", 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        run_term(common, frame, progress, &SEA_ORDER2, |i, t, maps| order2_pixel(i, common, p, waves, bottom, maps, t));
+        let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION).to_vec();
+        run_term(common, frame, progress, &SEA_ORDER2, |i, t, maps| {
+            order2_pixel(i, common, p, waves, bottom, maps, &correction, t)
+        });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea order 2", &SEA_ORDER2, gpu, cpu)

@@ -246,7 +246,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
             if common.projection == PROJECTION_FISHEYE {
                 bail!(invalid("camera.projection", "a pinhole camera over a sea", "fisheye"));
             }
-            crate::passes::sea::configure(s, &sky, common.camera_position.y, base)?
+            crate::passes::sea::configure(s, &sky, &common, base)?
         }
         None => Default::default(),
     };

@@ -358,6 +358,7 @@ fn stress_a_bottom_with_cliffs() {
         |x, y| if (x / 16 + y / 16) % 2 == 0 || (x == 40 && y == 40) { 255 } else { 0 },
         "bottom = { kind = \"image\", path = \"bottom.png\", size_m = [40.0, 40.0], center_m = [0.0, -15.0], shallow_m = 0.5, deep_m = 60.0 }",
     );
+    assert!(data.sea.params.table_width > 0, "the cliffs render with the depth table");
     let r = render_checked(&data, "cliffs");
     let bottom = layer(&r, "sea.bottom");
     let (lo, hi) = bottom.iter().fold((f32::INFINITY, 0.0f32), |(a, b), v| (a.min(v.y), b.max(v.y)));

@@ -42,6 +42,10 @@
 //!   bottom), and the source between planes is taken as a line times the
 //!   known exponential attenuation, integrated exactly.
 //!
+//! Over a varying bottom the maps are built for `layers` flat bottoms and
+//! read at the depth under each pixel's view ray; `sea_table.rs` corrects
+//! that with the paper's depth table (5.4).
+//!
 //! A scattering map texel stands for a direction toward the eye rather than
 //! a point on the plane: in a flat, uniform, horizontally infinite sea the
 //! order-2 radiance at a depth depends on the point only through that

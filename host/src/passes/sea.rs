@@ -3,6 +3,7 @@
 //! per-pixel terms, each its own layer: `sea.reflection`, `sea.order1`,
 //! `sea.order2`, `sea.bottom`; their settings (the scene's `[sea]`), and the
 //! automatic choice of `n_z` and `n_d` by the paper's 1/255 rule (6.1).
+//! Over a varying bottom, `sea_table.rs` adds the depth table (5.4).
 
 use anyhow::{bail, ensure, Result};
 use glam::{Vec3, Vec4};

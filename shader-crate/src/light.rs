@@ -167,14 +167,10 @@ pub fn shadow_texel_ray(light: &GpuLight, texel: u32) -> (Vec3, Vec3) {
 /// differ from it by up to `footprint * tan(theta)`. The bias is one footprint
 /// plus that slope term (capped at 10 footprints, i.e. grazing at 84 deg), plus
 /// 1e-4 of the distance for f32 rounding of the depths themselves.
+/// (`shadow_visibility` applies it in a form without divisions.)
 pub fn shadow_bias(footprint: f32, cos_incidence: f32, distance: f32) -> f32 {
-    if cos_incidence >= 1.0 {
-        // A point in the medium (or a surface facing the light): no slope.
-        return footprint + 1e-4 * distance;
-    }
-    let c = cos_incidence.abs().clamp(1e-3, 1.0);
-    let tan = ((1.0 - c * c).sqrt() / c).min(10.0);
-    footprint * (1.0 + tan) + 1e-4 * distance
+    // A point in the medium (or a surface facing the light): no slope.
+    footprint * shadow_slope(cos_incidence) + 1e-4 * distance
 }
 
 /// The shadow test `H` of eq. 2 (2002 paper): 1 if the point at `local` in
@@ -199,20 +195,37 @@ fn shadow_visibility_at(light: &GpuLight, shadow: &[f32], local: Vec3, cos_incid
     let i = ((u * res as f32) as u32).min(res - 1);
     let j = ((v * res as f32) as u32).min(res - 1);
     let stored = shadow[(light.shadow_offset + j * res + i) as usize];
-    let (distance, footprint) = if light.kind == LIGHT_DIRECTIONAL {
-        (local.z, 2.0 * light.half_extent_x.max(light.half_extent_y) / res as f32)
-    } else {
-        // The frame is orthonormal: the distance to the light is |local|.
-        let d = local.length();
-        // Texel width at distance d, widened off-axis by 1/cos^2 of the angle.
-        let cos2 = local.z * local.z / (d * d).max(1e-30);
-        (d, d * 2.0 * light.tan_cutoff / (res as f32 * cos2.max(1e-3)))
-    };
-    if distance - shadow_bias(footprint, cos_incidence, distance) > stored {
+    // `shadow_bias` is `footprint * slope + 1e-4 distance`.
+    let slope = shadow_slope(cos_incidence);
+    if light.kind == LIGHT_DIRECTIONAL {
+        let footprint = 2.0 * light.half_extent_x.max(light.half_extent_y) / res as f32;
+        return if local.z - (footprint * slope + 1e-4 * local.z) > stored { 0.0 } else { 1.0 };
+    }
+    // A spot: the distance to the light is |local| (the frame is
+    // orthonormal), and a texel's footprint there `d 2 tan(cutoff) / (res
+    // cos^2)`, widened off-axis by `1/cos^2 = d^2 / z^2` (at most 1e3).
+    // The test `d - bias > stored` multiplied through by `z^2` (the larger
+    // of `z^2` and `1e-3 d^2`, positive) needs no division: it runs for
+    // every sample of every shaft.
+    let d2 = local.length_squared();
+    let d = d2.sqrt();
+    let z2 = (local.z * local.z).max(1e-3 * d2);
+    let texel = 2.0 * light.tan_cutoff / res as f32;
+    if (d * (1.0 - 1e-4) - stored) * z2 > texel * slope * d * d2 {
         0.0
     } else {
         1.0
     }
+}
+
+/// `shadow_bias`'s factor on the footprint: 1, plus `tan(theta)` (at most
+/// 10) on a surface tilted by `theta` to the light.
+fn shadow_slope(cos_incidence: f32) -> f32 {
+    if cos_incidence >= 1.0 {
+        return 1.0;
+    }
+    let c = cos_incidence.abs().clamp(1e-3, 1.0);
+    1.0 + ((1.0 - c * c).sqrt() / c).min(10.0)
 }
 
 #[cfg(test)]
@@ -270,6 +283,47 @@ mod tests {
         assert_eq!(o, Vec3::ZERO);
         let expected = Vec3::new(-0.5, -0.5, 1.0).normalize();
         assert!((d - expected).length() < 1e-6);
+    }
+
+    #[test]
+    fn the_division_free_shadow_test_is_distance_minus_bias() {
+        // `shadow_visibility` tests `(d - 1e-4 d - stored) z^2 > texel
+        // slope d^3`; it must agree with `d - shadow_bias(footprint) >
+        // stored` (footprint `d texel / cos^2`) wherever the two sides are
+        // not within f32 rounding (1e-5 of d) of each other. Stored depths
+        // are drawn around the threshold, so both outcomes occur.
+        let mut light = spot(35.0, 35.0);
+        light.shadow_resolution = 64;
+        let res = light.shadow_resolution;
+        let texel = 2.0 * light.tan_cutoff / res as f32;
+        let mut state = 12345u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let (mut checked, mut shadowed) = (0, 0);
+        for _ in 0..20_000 {
+            let z = 0.05 + 20.0 * next();
+            let local =
+                Vec3::new((2.0 * next() - 1.0) * z * light.tan_cutoff, (2.0 * next() - 1.0) * z * light.tan_cutoff, z);
+            let cos_incidence = if next() < 0.5 { 1.0 } else { next() };
+            let d = local.length();
+            let footprint = d * texel / (local.z * local.z / (d * d)).max(1e-3);
+            let threshold = d - shadow_bias(footprint, cos_incidence, d);
+            let stored = threshold * (1.0 + 0.02 * (2.0 * next() - 1.0));
+            if (threshold - stored).abs() < 1e-5 * d {
+                continue;
+            }
+            let mut map = vec![0.0f32; (res * res) as usize];
+            let (u, v) = light_uv(&light, local);
+            let (i, j) = (((u * res as f32) as u32).min(res - 1), ((v * res as f32) as u32).min(res - 1));
+            map[(j * res + i) as usize] = stored;
+            let want = if threshold > stored { 0.0 } else { 1.0 };
+            assert_eq!(shadow_visibility(&light, &map, local, cos_incidence), want, "{local} {cos_incidence} {stored}");
+            checked += 1;
+            shadowed += (want == 0.0) as u32;
+        }
+        assert!(checked > 19_000 && shadowed > 5_000 && shadowed < checked - 5_000, "{checked} {shadowed}");
     }
 
     #[test]

@@ -48,12 +48,11 @@ pub fn cone_falloff(light: &GpuLight, local: Vec3) -> f32 {
 pub fn sample_light_map(texels: &[Vec4], offset: u32, width: u32, height: u32, u: f32, v: f32) -> Vec4 {
     let fx = (u * width as f32 - 0.5).clamp(0.0, (width - 1) as f32);
     let fy = (v * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
-    let x0 = fx.floor();
-    let y0 = fy.floor();
-    let tx = fx - x0;
-    let ty = fy - y0;
-    let x0 = x0 as u32;
-    let y0 = y0 as u32;
+    // fx, fy >= 0: truncation is the floor (and needs no libm call).
+    let x0 = fx as u32;
+    let y0 = fy as u32;
+    let tx = fx - x0 as f32;
+    let ty = fy - y0 as f32;
     let x1 = (x0 + 1).min(width - 1);
     let y1 = (y0 + 1).min(height - 1);
     let row0 = offset + y0 * width;
@@ -61,6 +60,14 @@ pub fn sample_light_map(texels: &[Vec4], offset: u32, width: u32, height: u32, u
     let top = texels[(row0 + x0) as usize] * (1.0 - tx) + texels[(row0 + x1) as usize] * tx;
     let bottom = texels[(row1 + x0) as usize] * (1.0 - tx) + texels[(row1 + x1) as usize] * tx;
     top * (1.0 - ty) + bottom * ty
+}
+
+/// A spotlight's cone terms from its half-angle `cutoff` (radians):
+/// `tan(cutoff)`, `cos^2(cutoff)` and `sin^2(cutoff)` (`GpuLight`'s
+/// `tan_cutoff`, `cos2_cutoff`, `sin2_cutoff`).
+pub fn cone_terms(cutoff: f32) -> (f32, f32, f32) {
+    let (sin, cos) = cutoff.sin_cos();
+    (cutoff.tan(), cos * cos, sin * sin)
 }
 
 /// Light-map / shadow-map coordinates `(u, v)` in [0, 1] of a point given in
@@ -241,7 +248,9 @@ mod tests {
             power: Vec4::ONE,
             cutoff: cutoff_deg.to_radians(),
             beam: beam_deg.to_radians(),
-            tan_cutoff: cutoff_deg.to_radians().tan(),
+            tan_cutoff: cone_terms(cutoff_deg.to_radians()).0,
+            cos2_cutoff: cone_terms(cutoff_deg.to_radians()).1,
+            sin2_cutoff: cone_terms(cutoff_deg.to_radians()).2,
             ..Default::default()
         }
     }

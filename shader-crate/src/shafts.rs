@@ -90,8 +90,7 @@ pub const MODE_TABLES: u32 = 1;
 pub fn clip_to_cone(light: &GpuLight, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
     let q = light_local(light, o);
     let v = Vec3::new(d.dot(light.axis_x.xyz()), d.dot(light.axis_y.xyz()), d.dot(light.axis_z.xyz()));
-    let (sin, cos) = light.cutoff.sin_cos();
-    let (c2, s2) = (cos * cos, sin * sin);
+    let (c2, s2) = (light.cos2_cutoff, light.sin2_cutoff);
     let a = c2 * (v.x * v.x + v.y * v.y) - s2 * v.z * v.z;
     let b = 2.0 * (c2 * (q.x * v.x + q.y * v.y) - s2 * q.z * v.z);
     let c = c2 * (q.x * q.x + q.y * q.y) - s2 * q.z * q.z;
@@ -525,6 +524,7 @@ mod tests {
 
     fn spot(cutoff_deg: f32) -> GpuLight {
         let c = cutoff_deg.to_radians();
+        let (tan_cutoff, cos2_cutoff, sin2_cutoff) = crate::light::cone_terms(c);
         GpuLight {
             position: Vec4::new(0.3, 2.0, -1.0, 1.0),
             axis_x: Vec4::X,
@@ -532,7 +532,9 @@ mod tests {
             axis_z: Vec4::NEG_Y,
             cutoff: c,
             beam: c,
-            tan_cutoff: c.tan(),
+            tan_cutoff,
+            cos2_cutoff,
+            sin2_cutoff,
             ..Default::default()
         }
     }

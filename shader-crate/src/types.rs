@@ -126,7 +126,11 @@ pub struct GpuLight {
     /// 1 if the light's volume may be seen by the camera (the shafts pass
     /// skips the others).
     pub in_view: u32,
-    pub _pad: [u32; 3],
+    /// Spot: `cos^2(cutoff)` and `sin^2(cutoff)`, the cone's quadric
+    /// coefficients (`shafts::clip_to_cone`), computed once on the host.
+    pub cos2_cutoff: f32,
+    pub sin2_cutoff: f32,
+    pub _pad: u32,
 }
 
 /// A sphere. `object` is the index of the scene's `[[object]]` it came

@@ -136,6 +136,7 @@ fn spotlight(field: &str, s: &Spotlight, base: &Path) -> Result<(GpuLight, Light
     if !(beam > 0.0 && beam <= s.cutoff_deg) {
         bail!(invalid(&format!("{field}.beam_deg"), "an angle in (0, cutoff_deg] degrees", beam));
     }
+    let (tan_cutoff, cos2_cutoff, sin2_cutoff) = slicelight_shaders::light::cone_terms(s.cutoff_deg.to_radians());
     let light = GpuLight {
         position: pos.extend(1.0),
         axis_x: x.extend(0.0),
@@ -145,7 +146,9 @@ fn spotlight(field: &str, s: &Spotlight, base: &Path) -> Result<(GpuLight, Light
         kind: LIGHT_SPOT,
         cutoff: s.cutoff_deg.to_radians(),
         beam: beam.to_radians(),
-        tan_cutoff: s.cutoff_deg.to_radians().tan(),
+        tan_cutoff,
+        cos2_cutoff,
+        sin2_cutoff,
         shadow_resolution: shadow_resolution(&format!("{field}.shadow_map_resolution"), s.shadow_map_resolution)?,
         ..Default::default()
     };

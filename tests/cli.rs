@@ -394,6 +394,11 @@ fn bad_sea_settings_name_the_field() {
         ("depth_m = 12.0", "depth_m = 12.0\ndirections = 100", &["sea.directions", "100"]),
         ("depth_m = 12.0", "depth_m = 12.0\nplanes = 1", &["sea.planes"]),
         ("depth_m = 12.0", "depth_m = 12.0\ndepth_table = 1", &["sea.depth_table", "1"]),
+        (
+            "depth_m = 12.0",
+            "bottom = { kind = \"shore\", slope = 0.1, shallow_m = 1.0, deep_m = 30.0 }\ndepth_table = 512\nplanes = 64\ndirections = 768",
+            &["sea.depth_table", "MiB", "512"],
+        ),
         ("depth_m = 12.0", "depth_m = 12.0\ng = 1.0", &["sea.g"]),
         ("depth_m = 12.0", "depth_m = 12.0\nlevel_m = 20.0", &["sea.level_m", "below the camera"]),
         (

@@ -119,6 +119,8 @@ fn depth_layers() -> u32 {
 fn depth_table() -> u32 {
     32
 }
+/// The largest depth table a scene may ask for (one buffer, f32 entries).
+pub const MAX_TABLE_BYTES: u64 = 1 << 30;
 fn sand() -> [f32; 3] {
     [0.6, 0.55, 0.4]
 }
@@ -604,6 +606,25 @@ pub fn configure(
         if s.planes.is_none() || polar.is_none() {
             sampling.push(format!("chosen in {:.0} ms", 1e3 * chosen.elapsed().as_secs_f64()));
         }
+    }
+    // The depth table holds a distance per sample, level and direction.
+    let table_bytes = 4
+        * params.table_width as u64
+        * params.table_height as u64
+        * params.planes as u64
+        * 3
+        * set_size(&params) as u64;
+    if table_bytes > MAX_TABLE_BYTES {
+        bail!(invalid(
+            "sea.depth_table",
+            &format!(
+                "a depth table within {} MiB ({} planes x {} directions per sample)",
+                MAX_TABLE_BYTES >> 20,
+                params.planes,
+                3 * set_size(&params)
+            ),
+            s.depth_table
+        ));
     }
     Ok(Setup {
         enabled: true,

@@ -381,7 +381,7 @@ fn shore_against_a_path_tracer_over_the_height_field() {
     let (o1, o2) = (layer(&r, "sea.order1"), layer(&r, "sea.order2"));
     let p = &data.sea.params;
     let grid = &data.sea.bottom;
-    let bottom = |x: f64, z: f64| slicelight_shaders::sea::bottom_depth(p, grid, x as f32, z as f32) as f64;
+    let bottom = slicelight::sea_reference::grid_depth(p, grid);
     let reference = SeaReference::new(p, 1e-5);
     let blank = slicelight_shaders::surface::no_surface();
     let mut worst = (0.0f64, 0.0f64);
@@ -459,12 +459,8 @@ fn shore_order2_against_the_height_field_quadrature() {
     let p = &data.sea.params;
     assert!(p.table_width > 0, "sea_shore renders with a depth table");
     let grid = &data.sea.bottom;
-    let depth = |x: f64, z: f64| slicelight_shaders::sea::bottom_depth(p, grid, x as f32, z as f32) as f64;
-    let field = slicelight::sea_reference::HeightField {
-        depth: &depth,
-        step: 0.5 * p.bottom_grid.z as f64,
-        deepest: p.bottom_grid.w as f64,
-    };
+    let depth = slicelight::sea_reference::grid_depth(p, grid);
+    let field = slicelight::sea_reference::HeightField::of_sea(p, &depth);
     let reference = SeaReference::new(p, 1e-3);
     let blank = slicelight_shaders::surface::no_surface();
     let pixels = [(36u32, 26u32), (36, 30), (36, 38), (36, 47), (5, 40), (66, 33)];

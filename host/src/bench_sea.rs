@@ -18,11 +18,11 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::bench::median;
-use crate::passes::sea::{order2_at, EPSILON};
+use crate::passes::sea::{order2_at, table_rows, EPSILON};
 use crate::reference::{SEA_HEIGHT_FIELD_TOLERANCE, SEA_TOLERANCE};
 use crate::render::{self, Backend};
 use crate::scene::{self, SceneData};
-use crate::sea_reference::{HeightField, SeaReference};
+use crate::sea_reference::{grid_depth, HeightField, SeaReference};
 use slicelight_shaders::sea::{sea_view, SeaParams};
 
 /// One configuration of the sweep.
@@ -75,11 +75,7 @@ fn configure(data: &SceneData, c: &Config) -> SceneData {
     p.map_width = c.map;
     p.map_height = c.map;
     p.table_width = c.table;
-    p.table_height = if c.table > 0 {
-        ((c.table as f32 * data.common.height as f32 / data.common.width as f32).round() as u32).max(2)
-    } else {
-        0
-    };
+    p.table_height = table_rows(c.table, &data.common);
     d
 }
 
@@ -199,9 +195,8 @@ pub fn run(
         // Over a varying bottom the reference integrates over the real height
         // field (as `slicelight reference` does).
         let p = &data.sea.params;
-        let height =
-            |x: f64, z: f64| slicelight_shaders::sea::bottom_depth(p, &data.sea.bottom, x as f32, z as f32) as f64;
-        let field = HeightField { depth: &height, step: 0.5 * p.bottom_grid.z as f64, deepest: p.bottom_grid.w as f64 };
+        let height = grid_depth(p, &data.sea.bottom);
+        let field = HeightField::of_sea(p, &height);
         let exact: Vec<DVec3> = pixels
             .par_iter()
             .map(|&(_, v, tr, point, depth)| {

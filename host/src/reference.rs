@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use slicelight_shaders::camera::sample_offset;
 use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT, MATERIAL_GLASS, PROJECTION_FISHEYE};
 
-use crate::sea_reference::{HeightField, SeaReference};
+use crate::sea_reference::{grid_depth, HeightField, SeaReference};
 use crate::sky_reference::SkyReference;
 
 /// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`;
@@ -377,8 +377,8 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let second = if !data.sea.second_order {
         DVec3::ZERO
     } else if p.bottom_nx >= 2 {
-        let height = |x: f64, z: f64| slicelight_shaders::sea::bottom_depth(p, grid, x as f32, z as f32) as f64;
-        let field = HeightField { depth: &height, step: 0.5 * p.bottom_grid.z as f64, deepest: p.bottom_grid.w as f64 };
+        let height = grid_depth(p, grid);
+        let field = HeightField::of_sea(p, &height);
         SeaReference::new(p, SEA_HEIGHT_FIELD_TOLERANCE).order2_over(&field, (hit.x, hit.z), view)
     } else {
         sea.order2(view)

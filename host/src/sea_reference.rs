@@ -34,6 +34,20 @@ pub struct HeightField<'a> {
     pub deepest: f64,
 }
 
+impl<'a> HeightField<'a> {
+    /// A sea's varying bottom (`p.bottom_grid`), its depth given by
+    /// `depth` (`grid_depth`), marched half a grid spacing at a time.
+    pub fn of_sea(p: &SeaParams, depth: &'a (dyn Fn(f64, f64) -> f64 + Sync)) -> HeightField<'a> {
+        HeightField { depth, step: 0.5 * p.bottom_grid.z as f64, deepest: p.bottom_grid.w as f64 }
+    }
+}
+
+/// The depth (m) of a sea's varying bottom `grid` at horizontal `(x, z)`:
+/// the scene's own bilinear height field (`sea::bottom_depth`), in f64.
+pub fn grid_depth<'a>(p: &'a SeaParams, grid: &'a [f32]) -> impl Fn(f64, f64) -> f64 + Sync + 'a {
+    move |x, z| slicelight_shaders::sea::bottom_depth(p, grid, x as f32, z as f32) as f64
+}
+
 /// The water and its sunlight, in f64.
 #[derive(Debug, Clone)]
 pub struct SeaReference {

@@ -762,11 +762,7 @@ pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4]
     let n = p.extinction.w;
     let r = fresnel(cos_i, 1.0, n);
     let reflected = dir + normal * (2.0 * cos_i);
-    let (refracted, _) = refract(dir, normal, 1.0 / n);
-    let mut view = -refracted;
-    if view.y < 1e-4 {
-        view = Vec3::new(view.x, 1e-4, view.z).normalize();
-    }
+    let view = view_in_water(dir, normal, n);
     out.hit = true;
     out.reflectance = r;
     out.reflected = Vec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
@@ -774,6 +770,18 @@ pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4]
     out.transmission = (1.0 - r) / (n * n);
     out.point = hit;
     out
+}
+
+/// The direction light leaves the water toward an eye looking along `dir`
+/// at a surface of normal `normal` and index `n` (the refracted view ray
+/// reversed), kept at least 1e-4 above the horizontal.
+pub fn view_in_water(dir: Vec3, normal: Vec3, n: f32) -> Vec3 {
+    let (refracted, _) = refract(dir, normal, 1.0 / n);
+    let view = -refracted;
+    if view.y < 1e-4 {
+        return Vec3::new(view.x, 1e-4, view.z).normalize();
+    }
+    view
 }
 
 /// Per-pixel kernel, `sea.reflection`: the sky and the sun reflected at the

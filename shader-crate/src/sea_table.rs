@@ -34,8 +34,8 @@ use crate::camera::pixel_ndc;
 use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::phase::henyey_greenstein;
 use crate::sea::{
-    bottom_hit, exp_linear3, held_direction, horizon_window, march_to_bottom, order1_path_over, plane_depth, refract,
-    set_direction, set_size, set_weight, SeaParams, DEEP_OPTICAL_DEPTH, SET_SUN, SET_UNIFORM, SET_VIEW,
+    bottom_hit, exp_linear3, held_direction, horizon_window, march_to_bottom, order1_path_over, plane_depth,
+    plane_reach, set_direction, set_size, set_weight, view_in_water, SeaParams, SET_SUN, SET_UNIFORM, SET_VIEW,
 };
 use crate::types::CommonParams;
 use spirv_std::spirv;
@@ -95,11 +95,7 @@ pub fn table_sample_texel(index: u32, common: &CommonParams, p: &SeaParams, grid
         return Vec4::ZERO;
     }
     let hit = origin + dir * ((p.level - origin.y) / dir.y);
-    let (refracted, _) = refract(dir, Vec3::Y, 1.0 / p.extinction.w);
-    let mut view = -refracted;
-    if view.y < 1e-4 {
-        view = Vec3::new(view.x, 1e-4, view.z).normalize();
-    }
+    let view = view_in_water(dir, Vec3::Y, p.extinction.w);
     if index % 2 == 1 {
         return view.extend(1.0);
     }
@@ -111,7 +107,7 @@ pub fn table_sample_texel(index: u32, common: &CommonParams, p: &SeaParams, grid
 /// `plane_depth`'s grading, the same depths in every channel, down to the
 /// bottom or to `DEEP_OPTICAL_DEPTH` of the clearest channel.
 pub fn level_params(p: &SeaParams, depth: f32) -> SeaParams {
-    let reach = (DEEP_OPTICAL_DEPTH / p.extinction.xyz().min_element().max(1e-6)).min(depth);
+    let reach = plane_reach(p.extinction.xyz(), depth).max_element();
     SeaParams { depth, plane_depth: Vec4::splat(reach), ..*p }
 }
 

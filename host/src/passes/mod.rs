@@ -347,7 +347,21 @@ pub fn compare_rgb(what: &str, gpu: &[Vec4], cpu: &[Vec4], rel: f32, allowed: us
     let flat = |v: &[Vec4]| v.iter().flat_map(|p| p.truncate().to_array()).collect::<Vec<f32>>();
     let (g, c) = (flat(gpu), flat(cpu));
     let peak = c.iter().fold(0.0f32, |m, v| m.max(*v));
-    let (outliers, worst) = count_differences(&g, &c, |v| rel * peak.max(v.abs()));
+    compare_within(what, &g, &c, peak, rel, allowed)
+}
+
+/// `compare_rgb` for plain values (positions, distances), the peak taken
+/// over their magnitudes.
+pub fn compare_values(what: &str, gpu: &[f32], cpu: &[f32], rel: f32, allowed: usize) -> anyhow::Result<String> {
+    anyhow::ensure!(gpu.len() == cpu.len(), "{what}: {} and {} values", gpu.len(), cpu.len());
+    let peak = cpu.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    compare_within(what, gpu, cpu, peak, rel, allowed)
+}
+
+/// Values differing by more than `rel` of `peak` (or of the value) are
+/// outliers; at most `allowed` of them.
+fn compare_within(what: &str, g: &[f32], c: &[f32], peak: f32, rel: f32, allowed: usize) -> anyhow::Result<String> {
+    let (outliers, worst) = count_differences(g, c, |v| rel * peak.max(v.abs()));
     anyhow::ensure!(
         outliers <= allowed,
         "{what}: {outliers} of {} values differ by more than {rel:e} of the peak",

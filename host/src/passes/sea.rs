@@ -119,6 +119,14 @@ fn depth_layers() -> u32 {
 fn depth_table() -> u32 {
     32
 }
+/// The depth table's rows for `columns` samples across the image: by the
+/// image's aspect, at least 2 (0 without a table).
+pub fn table_rows(columns: u32, common: &CommonParams) -> u32 {
+    if columns == 0 {
+        return 0;
+    }
+    ((columns as f32 * common.height as f32 / common.width as f32).round() as u32).max(2)
+}
 /// The largest depth table a scene may ask for (one buffer, f32 entries).
 pub const MAX_TABLE_BYTES: u64 = 1 << 30;
 fn sand() -> [f32; 3] {
@@ -566,11 +574,7 @@ pub fn configure(
         layers: if grid.is_some() { s.depth_layers } else { 1 },
         shallow: grid.as_ref().map_or(0.0, |g| g.shallow),
         table_width: if grid.is_some() && s.second_order { s.depth_table } else { 0 },
-        table_height: if grid.is_some() && s.second_order && s.depth_table > 0 {
-            ((s.depth_table as f32 * common.height as f32 / common.width as f32).round() as u32).max(2)
-        } else {
-            0
-        },
+        table_height: if grid.is_some() && s.second_order { table_rows(s.depth_table, common) } else { 0 },
         _pad: [0; 2],
     };
     let mut sampling = Vec::new();
@@ -862,21 +866,23 @@ impl Pass for SeaReflection {
 }
 
 /// A per-pixel sea term whose kernel reads the G-buffer, the sea's
-/// parameters and waves, and optionally the scattering maps.
+/// parameters and waves, and optionally the accumulated map and the depth
+/// table's correction (empty where their passes did not run).
 fn run_term(
     common: &CommonParams,
     frame: &mut Frame,
     progress: &ProgressBar,
     out: &Resource,
-    term: impl Fn(u32, &GBufferTexel, &[Vec4]) -> Vec4 + Sync,
+    term: impl Fn(u32, &GBufferTexel, &[Vec4], &[Vec4]) -> Vec4 + Sync,
 ) {
     let blank = slicelight_shaders::surface::no_surface();
     frame.write::<Vec4>(out, common.band_pixels as usize, |frame, values| {
         let maps = frame.get::<Vec4>(&SEA_ACCUMULATED_MAP);
+        let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION);
         let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
         for_each_invocation(values, common.band_start, progress, |i, v| {
             let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-            *v = term(i, texel, maps);
+            *v = term(i, texel, maps, correction);
         });
     });
 }
@@ -917,7 +923,7 @@ impl Pass for SeaOrder1 {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        run_term(common, frame, progress, &SEA_ORDER1, |i, t, _| order1_pixel(i, common, p, waves, bottom, t));
+        run_term(common, frame, progress, &SEA_ORDER1, |i, t, _, _| order1_pixel(i, common, p, waves, bottom, t));
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea order 1", &SEA_ORDER1, gpu, cpu)
@@ -962,9 +968,8 @@ impl Pass for SeaOrder2 {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION).to_vec();
-        run_term(common, frame, progress, &SEA_ORDER2, |i, t, maps| {
-            order2_pixel(i, common, p, waves, bottom, maps, &correction, t)
+        run_term(common, frame, progress, &SEA_ORDER2, |i, t, maps, correction| {
+            order2_pixel(i, common, p, waves, bottom, maps, correction, t)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
@@ -1019,7 +1024,7 @@ impl Pass for SeaBottom {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        run_term(common, frame, progress, &SEA_BOTTOM, |i, t, _| bottom_pixel(i, common, p, waves, bottom, t));
+        run_term(common, frame, progress, &SEA_BOTTOM, |i, t, _, _| bottom_pixel(i, common, p, waves, bottom, t));
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea bottom", &SEA_BOTTOM, gpu, cpu)

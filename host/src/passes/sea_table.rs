@@ -4,7 +4,7 @@
 //! the per-pixel `sea.order2` adds. They run only over a varying bottom
 //! with second-order scattering and `depth_table` > 0.
 
-use anyhow::{ensure, Result};
+use anyhow::Result;
 use glam::Vec4;
 use indicatif::ProgressBar;
 use slicelight_shaders::sea_table::{
@@ -97,19 +97,6 @@ impl Pass for SeaTableSamples {
 
 fn as_f32(v: &[Vec4]) -> &[f32] {
     bytemuck::cast_slice(v)
-}
-
-/// `compare_rgb` for plain values: differences over `rel` of the peak
-/// magnitude (or of the value) counted, at most `allowed` of them.
-fn compare_values(what: &str, gpu: &[f32], cpu: &[f32], rel: f32, allowed: usize) -> Result<String> {
-    ensure!(gpu.len() == cpu.len(), "{what}: {} and {} values", gpu.len(), cpu.len());
-    let peak = cpu.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-    let (outliers, worst) = count_differences(gpu, cpu, |v| rel * peak.max(v.abs()));
-    ensure!(outliers <= allowed, "{what}: {outliers} of {} values differ by more than {rel} of {peak}", cpu.len());
-    Ok(format!(
-        "{what}: {outliers} outliers of {} (allowed {allowed}), others within {worst:.3e} of {peak:.3e}",
-        cpu.len()
-    ))
 }
 
 pub struct SeaDepthTable;

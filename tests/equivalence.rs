@@ -143,7 +143,8 @@ fn sky(name: &str, width: u32, height: u32) -> SceneData {
 /// Every registered pass, on every scene that runs it: the CPU runs all
 /// passes up to and including it; the GPU runs it alone on the CPU's
 /// inputs (so this compares the one kernel), and the pass compares the two
-/// with the tolerances it states. Every pass must be checked at least once.
+/// with the tolerances it states. Every pass must be checked at least once,
+/// in each of its variants (`Pass::variants`).
 #[test]
 fn every_pass_matches_cpu() {
     let ctx = device();
@@ -178,11 +179,13 @@ fn every_pass_matches_cpu() {
                 Ok(line) => println!("{name}: {}: {line}", pass.name()),
                 Err(e) => panic!("{name}: {}: GPU and CPU differ: {e:#}", pass.name()),
             }
-            checked.insert(pass.name());
+            checked.insert(pass.kernel_for(&data));
         }
     }
     for p in PASSES {
-        assert!(checked.contains(p.name()), "pass {} was not checked on any scene", p.name());
+        for kernel in std::iter::once(p.kernel()).chain(p.variants().iter().copied()) {
+            assert!(checked.contains(kernel), "pass {}: entry point {kernel} was not checked on any scene", p.name());
+        }
     }
 }
 

@@ -63,9 +63,24 @@ fn every_pass_binds_what_its_kernel_declares() {
             assert!(host.insert(r.binding, true).is_none(), "{}: {} both read and written", pass.name(), r.name);
         }
         assert_eq!(&host, kernel, "{}: host bindings (binding -> written) differ from the SPIR-V's", pass.name());
+        // A variant compiles some code out, so it may use fewer of the
+        // pass's bindings, but none it does not declare, and writes the same.
+        for variant in pass.variants() {
+            let used = declared.get(*variant).unwrap_or_else(|| panic!("{}: no entry point {variant}", pass.name()));
+            for (binding, writes) in used {
+                assert_eq!(
+                    host.get(binding),
+                    Some(writes),
+                    "{variant}: binding {binding} not as {} declares it",
+                    pass.name()
+                );
+            }
+            assert!(!used.is_empty(), "{variant} binds nothing");
+        }
     }
     // Every entry point belongs to a registered pass.
-    let kernels: BTreeSet<_> = PASSES.iter().map(|p| p.kernel()).collect();
+    let kernels: BTreeSet<_> =
+        PASSES.iter().flat_map(|p| std::iter::once(p.kernel()).chain(p.variants().iter().copied())).collect();
     for name in declared.keys() {
         assert!(kernels.contains(name.as_str()), "entry point {name} is not registered as a pass");
     }

@@ -38,7 +38,8 @@ pub struct GpuContext {
     device: wgpu::Device,
     queue: wgpu::Queue,
     pub adapter: wgpu::AdapterInfo,
-    /// One pipeline per registered pass, by pass name.
+    /// One pipeline per entry point of the registered passes (`Pass::kernel`
+    /// and its `variants`), by entry point.
     pipelines: HashMap<&'static str, wgpu::ComputePipeline>,
     max_binding_bytes: u64,
     /// Largest image band, bytes: `max_binding_bytes` unless lowered.
@@ -77,20 +78,48 @@ impl GpuContext {
                 label: Some("slicelight kernels"),
                 source: wgpu::util::make_spirv(SPIRV),
             });
-            PASSES
-                .iter()
-                .map(|pass| {
+            // One layout per pass, from the resources it declares, shared by
+            // its kernel and its variants (a variant may leave some unused).
+            let mut pipelines = HashMap::new();
+            for pass in PASSES {
+                let entries: Vec<_> = pass
+                    .reads()
+                    .iter()
+                    .map(|r| (r, true))
+                    .chain(pass.writes().iter().map(|r| (r, false)))
+                    .map(|(r, read_only)| wgpu::BindGroupLayoutEntry {
+                        binding: r.binding,
+                        visibility: wgpu::ShaderStages::COMPUTE,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Storage { read_only },
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                        count: None,
+                    })
+                    .collect();
+                let group = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some(pass.name()),
+                    entries: &entries,
+                });
+                let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some(pass.name()),
+                    bind_group_layouts: &[Some(&group)],
+                    immediate_size: 0,
+                });
+                for kernel in std::iter::once(pass.kernel()).chain(pass.variants().iter().copied()) {
                     let p = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(pass.name()),
-                        layout: None,
+                        label: Some(kernel),
+                        layout: Some(&layout),
                         module: &module,
-                        entry_point: Some(pass.kernel()),
+                        entry_point: Some(kernel),
                         compilation_options: Default::default(),
                         cache: None,
                     });
-                    (pass.name(), p)
-                })
-                .collect::<HashMap<_, _>>()
+                    pipelines.insert(kernel, p);
+                }
+            }
+            pipelines
         })?;
         Ok(GpuContext {
             device,
@@ -208,7 +237,7 @@ impl GpuContext {
                             resource: buffers[&r.binding].as_entire_binding(),
                         })
                         .collect();
-                    let layout = self.pipelines[pass.name()].get_bind_group_layout(0);
+                    let layout = self.pipelines[pass.kernel_for(scene)].get_bind_group_layout(0);
                     let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some(pass.name()),
                         layout: &layout,
@@ -218,7 +247,8 @@ impl GpuContext {
                 })
                 .collect::<HashMap<_, _>>()
         })?;
-        let frame = GpuFrame { ctx: self, common: scene.common, buffers, bind_groups };
+        let kernels = passes.iter().map(|p| (p.name(), p.kernel_for(scene))).collect();
+        let frame = GpuFrame { ctx: self, common: scene.common, buffers, bind_groups, kernels };
         frame.set_band(0, band, 0);
         Ok(frame)
     }
@@ -278,6 +308,8 @@ pub struct GpuFrame<'a> {
     common: slicelight_shaders::types::CommonParams,
     buffers: HashMap<u32, wgpu::Buffer>,
     bind_groups: HashMap<&'static str, wgpu::BindGroup>,
+    /// The entry point each pass runs for this scene (`Pass::kernel_for`).
+    kernels: HashMap<&'static str, &'static str>,
 }
 
 impl GpuFrame<'_> {
@@ -353,7 +385,7 @@ impl GpuFrame<'_> {
                 });
                 let mut cpass = encoder
                     .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(pass.name()), timestamp_writes });
-                cpass.set_pipeline(&self.ctx.pipelines[pass.name()]);
+                cpass.set_pipeline(&self.ctx.pipelines[self.kernels[pass.name()]]);
                 cpass.set_bind_group(0, &self.bind_groups[pass.name()], &[]);
                 cpass.dispatch_workgroups(gx, gy, 1);
             }

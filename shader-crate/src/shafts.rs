@@ -317,8 +317,10 @@ pub const MAX_ANGLE_NODES: u32 = 64;
 ///
 /// Without `analytic_inverse_square` (the paper's own form), everything is
 /// sampled at the interval's middle, `1/s^2` included.
+///
+/// `PAPER` as in `shafts_pixel`.
 #[allow(clippy::too_many_arguments)]
-pub fn spot_interval_weight(
+pub fn spot_interval_weight<const PAPER: bool>(
     common: &CommonParams,
     params: &ShaftsParams,
     tables: &[Vec4],
@@ -329,7 +331,7 @@ pub fn spot_interval_weight(
 ) -> Vec4 {
     let h = h.max(LIGHT_RADIUS);
     let smooth = |t: f32, s: f32, cos_alpha: f32, with_inverse_square: bool| -> Vec4 {
-        if params.mode == MODE_TABLES {
+        if PAPER && params.mode == MODE_TABLES {
             let f = phase_from_table(tables, params.phase_table_size, cos_alpha);
             let h_st = attenuation_from_table(
                 tables,
@@ -349,7 +351,7 @@ pub fn spot_interval_weight(
     };
     let t_mid = 0.5 * (a + b);
     let s_mid = (h * h + (t_mid - t_c) * (t_mid - t_c)).sqrt();
-    if params.analytic_inverse_square == 0 {
+    if PAPER && params.analytic_inverse_square == 0 {
         return smooth(t_mid, s_mid, (t_c - t_mid) / s_mid, true) * (b - a);
     }
     // Most intervals span a small angle (`dtheta = h dt / s^2`): one node,
@@ -388,8 +390,15 @@ pub fn spot_interval_weight(
 /// `sigma_s p(alpha) exp(-sigma_t (s + t)) * integral_a^b dt / s^2` at the
 /// interval's middle (spotlights), `sigma_s p(alpha) exp(-sigma_t (z + t)) (b - a)`
 /// (directional lights, `z` the distance travelled from the entry plane).
+///
+/// `PAPER` false compiles the function without the 2002 paper's own
+/// shortcuts (`MODE_TABLES`, `quantize_8bit`, `1/s^2` sampled instead of
+/// integrated), for parameters that ask for none of them (`uses_paper_modes`
+/// false): the same result with less code, which matters where both sides of
+/// a branch cost time whether taken or not (llvmpipe runs eight pixels in
+/// lock-step and skips no branch). `PAPER` true computes every mode.
 #[allow(clippy::too_many_arguments)]
-pub fn shafts_pixel(
+pub fn shafts_pixel<const PAPER: bool>(
     index: u32,
     common: &CommonParams,
     params: &ShaftsParams,
@@ -459,10 +468,10 @@ pub fn shafts_pixel(
                         let f = phase::evaluate(common.phase_kind, cos_alpha, common.phase_g);
                         attenuation(common, z, t_mid, false) * (f * (b - a))
                     } else {
-                        spot_interval_weight(common, params, tables, a, b, t_c, h)
+                        spot_interval_weight::<PAPER>(common, params, tables, a, b, t_c, h)
                     };
                     let contribution = j_mean * g;
-                    radiance += if params.quantize_8bit != 0 {
+                    radiance += if PAPER && params.quantize_8bit != 0 {
                         quantize_8bit(contribution, params.quantize_scale)
                     } else {
                         contribution
@@ -476,6 +485,12 @@ pub fn shafts_pixel(
     Vec4::new(radiance.x, radiance.y, radiance.z, samples as f32)
 }
 
+/// Whether `params` ask for any of the 2002 paper's own shortcuts (see
+/// `shafts_pixel`'s `PAPER`).
+pub fn uses_paper_modes(params: &ShaftsParams) -> bool {
+    params.mode == MODE_TABLES || params.quantize_8bit != 0 || params.analytic_inverse_square == 0
+}
+
 /// Rounds a radiance to the nearest of 256 frame-buffer levels, where level
 /// 255 is radiance `1 / scale` (the 2002 paper blended 8-bit planes).
 pub fn quantize_8bit(v: Vec4, scale: f32) -> Vec4 {
@@ -483,28 +498,54 @@ pub fn quantize_8bit(v: Vec4, scale: f32) -> Vec4 {
     Vec4::new(q(v.x), q(v.y), q(v.z), v.w)
 }
 
-#[allow(clippy::too_many_arguments)]
-#[spirv(compute(threads(64)))]
-pub fn shafts_kernel(
-    #[spirv(global_invocation_id)] id: UVec3,
-    #[spirv(num_workgroups)] groups: UVec3,
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] shadow: &[f32],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 10)] params: &[ShaftsParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 11)] tables: &[Vec4],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 12)] radiance: &mut [Vec4],
-) {
-    let index = crate::flat_index(id, groups);
-    let common = &common[0];
-    if index < common.band_pixels {
-        let distance = gbuffer[index as usize].normal_distance.w;
-        radiance[index as usize] =
-            shafts_pixel(common.band_start + index, common, &params[0], lights, light_map, shadow, tables, distance);
-    }
+/// The shafts pass's entry points: `$name` runs `shafts_pixel::<$paper>`.
+macro_rules! shafts_entry_point {
+    ($(#[$doc:meta])* $name:ident, $paper:literal) => {
+        $(#[$doc])*
+        #[allow(clippy::too_many_arguments)]
+        #[spirv(compute(threads(64)))]
+        pub fn $name(
+            #[spirv(global_invocation_id)] id: UVec3,
+            #[spirv(num_workgroups)] groups: UVec3,
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] shadow: &[f32],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 10)] params: &[ShaftsParams],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 11)] tables: &[Vec4],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 12)] radiance: &mut [Vec4],
+        ) {
+            let index = crate::flat_index(id, groups);
+            let common = &common[0];
+            if index < common.band_pixels {
+                let distance = gbuffer[index as usize].normal_distance.w;
+                radiance[index as usize] = shafts_pixel::<$paper>(
+                    common.band_start + index,
+                    common,
+                    &params[0],
+                    lights,
+                    light_map,
+                    shadow,
+                    tables,
+                    distance,
+                );
+            }
+        }
+    };
 }
+
+shafts_entry_point!(
+    /// The shafts pass's entry point for every mode (`uses_paper_modes` true).
+    shafts_kernel,
+    true
+);
+shafts_entry_point!(
+    /// The shafts pass's entry point for parameters without the paper's own
+    /// shortcuts (`uses_paper_modes` false).
+    shafts_exact_kernel,
+    false
+);
 
 #[cfg(test)]
 mod tests {

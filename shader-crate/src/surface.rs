@@ -131,15 +131,10 @@ pub fn receiver(
     if hit.distance == NO_HIT {
         return r;
     }
-    let p = origin + dir * hit.distance;
     if !is_glass(materials, hit) {
-        r.found = true;
-        r.point = p;
-        r.normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
-        r.material = hit.material;
-        r.weight = transmittance(params.sigma_t, hit.distance);
-        return r;
+        return opaque_receiver(params, origin, dir, hit);
     }
+    let p = origin + dir * hit.distance;
     let n = shading_normal(geometry, glass, hit, p);
     let path = trace_through(geometry, glass, materials, p, n, hit.material, dir, channel, NO_OBJECT, true);
     if path.status != PATH_OUT || path.next.distance == NO_HIT {
@@ -152,6 +147,18 @@ pub fn receiver(
     r.material = next.material;
     r.weight = path.transmittance() * transmittance(params.sigma_t, hit.distance + next.distance);
     r
+}
+
+/// `receiver` of a view ray whose first hit `hit` (a hit) is opaque: the
+/// hit itself.
+pub fn opaque_receiver(params: &CommonParams, origin: Vec3, dir: Vec3, hit: &Hit) -> Receiver {
+    Receiver {
+        found: true,
+        point: origin + dir * hit.distance,
+        normal: if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal },
+        material: hit.material,
+        weight: transmittance(params.sigma_t, hit.distance),
+    }
 }
 
 /// Channels traced separately for a view ray whose first hit is `hit`: 3
@@ -183,8 +190,13 @@ pub fn channel_part(v: Vec4, c: u32, channels: u32) -> Vec4 {
 /// texel: normal toward the viewer, distance `T` (metres), object, material.
 /// A pixel that sees glass gets the opaque surface behind it (`receiver`);
 /// its G-buffer texel is the glass's.
+///
+/// `GLASS` false compiles the function for a scene without glass (every
+/// surface opaque, no caustics maps): the same result without the glass
+/// code, which a GPU (and llvmpipe, which runs both sides of a branch its
+/// lanes disagree on or not) would otherwise carry through every pixel.
 #[allow(clippy::too_many_arguments)]
-pub fn surface_pixel(
+pub fn surface_pixel<const GLASS: bool>(
     index: u32,
     params: &CommonParams,
     lights: &[GpuLight],
@@ -207,21 +219,28 @@ pub fn surface_pixel(
         return (Vec4::ZERO, no_surface());
     }
     let normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
-    let channels = view_channels(materials, &hit);
     let mut radiance = Vec4::ZERO;
     let mut caustic = Vec4::ZERO;
-    let mut c = 0;
-    while c < channels {
-        let r = receiver(params, geometry, glass, materials, origin, dir, &hit, c);
-        if r.found {
-            let albedo = materials[r.material as usize].albedo;
-            let l = direct_radiance(params, lights, geometry, light_map, shadow, r.point, r.normal, albedo) * r.weight;
-            radiance += channel_part(l, c, channels);
-            // The caustic light at the same receiver, for the caustics
-            // layer (the view through glass is traced once, here).
-            caustic += channel_part(caustic_light(caustic_maps, caustics, materials, &r), c, channels);
+    if GLASS {
+        let channels = view_channels(materials, &hit);
+        let mut c = 0;
+        while c < channels {
+            let r = receiver(params, geometry, glass, materials, origin, dir, &hit, c);
+            if r.found {
+                let albedo = materials[r.material as usize].albedo;
+                let l =
+                    direct_radiance(params, lights, geometry, light_map, shadow, r.point, r.normal, albedo) * r.weight;
+                radiance += channel_part(l, c, channels);
+                // The caustic light at the same receiver, for the caustics
+                // layer (the view through glass is traced once, here).
+                caustic += channel_part(caustic_light(caustic_maps, caustics, materials, &r), c, channels);
+            }
+            c += 1;
         }
-        c += 1;
+    } else {
+        let r = opaque_receiver(params, origin, dir, &hit);
+        let albedo = materials[r.material as usize].albedo;
+        radiance = direct_radiance(params, lights, geometry, light_map, shadow, r.point, r.normal, albedo) * r.weight;
     }
     let texel = GBufferTexel {
         normal_distance: normal.extend(hit.distance),
@@ -232,44 +251,61 @@ pub fn surface_pixel(
     (Vec4::new(radiance.x, radiance.y, radiance.z, 0.0), texel)
 }
 
-#[allow(clippy::too_many_arguments)]
-#[spirv(compute(threads(64)))]
-pub fn surface_kernel(
-    #[spirv(global_invocation_id)] id: UVec3,
-    #[spirv(num_workgroups)] groups: UVec3,
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[GpuSphere],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[GpuTriangle],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[GpuBvhNode],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] shadow: &[f32],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &mut [GBufferTexel],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] radiance: &mut [Vec4],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] caustics: &[CausticsParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 34)] caustic_maps: &[u32],
-) {
-    let index = crate::flat_index(id, groups);
-    let params = &common[0];
-    if index < params.band_pixels {
-        let geometry = crate::scene_geometry(params, spheres, triangles, nodes);
-        let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
-        let (color, texel) = surface_pixel(
-            params.band_start + index,
-            params,
-            lights,
-            &geometry,
-            &glass,
-            materials,
-            light_map,
-            shadow,
-            &caustics[0],
-            caustic_maps,
-        );
-        radiance[index as usize] = color;
-        gbuffer[index as usize] = texel;
-    }
+/// The surface pass's entry points: `$name` runs `surface_pixel::<$glass>`.
+macro_rules! surface_entry_point {
+    ($(#[$doc:meta])* $name:ident, $glass:literal) => {
+        $(#[$doc])*
+        #[allow(clippy::too_many_arguments)]
+        #[spirv(compute(threads(64)))]
+        pub fn $name(
+            #[spirv(global_invocation_id)] id: UVec3,
+            #[spirv(num_workgroups)] groups: UVec3,
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[GpuSphere],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[GpuTriangle],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[GpuBvhNode],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] shadow: &[f32],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &mut [GBufferTexel],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 9)] radiance: &mut [Vec4],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] caustics: &[CausticsParams],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 34)] caustic_maps: &[u32],
+        ) {
+            let index = crate::flat_index(id, groups);
+            let params = &common[0];
+            if index < params.band_pixels {
+                let geometry = crate::scene_geometry(params, spheres, triangles, nodes);
+                let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
+                let (color, texel) = surface_pixel::<$glass>(
+                    params.band_start + index,
+                    params,
+                    lights,
+                    &geometry,
+                    &glass,
+                    materials,
+                    light_map,
+                    shadow,
+                    &caustics[0],
+                    caustic_maps,
+                );
+                radiance[index as usize] = color;
+                gbuffer[index as usize] = texel;
+            }
+        }
+    };
 }
+
+surface_entry_point!(
+    /// The surface pass's entry point for a scene with glass.
+    surface_kernel,
+    true
+);
+surface_entry_point!(
+    /// The surface pass's entry point for a scene without glass.
+    surface_opaque_kernel,
+    false
+);

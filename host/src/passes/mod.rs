@@ -180,6 +180,16 @@ pub trait Pass: Sync {
     /// Its SPIR-V entry point (rust-gpu names it by its module path:
     /// `surface::surface_kernel`).
     fn kernel(&self) -> &'static str;
+    /// Other entry points of the same kernel function, compiled with what
+    /// some scenes do not need left out (a const generic); each computes
+    /// what `kernel` computes for the scenes `kernel_for` gives it to.
+    fn variants(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// The entry point a scene runs: `kernel` or one of the `variants`.
+    fn kernel_for(&self, _scene: &SceneData) -> &'static str {
+        self.kernel()
+    }
     /// Resources its kernel only reads.
     fn reads(&self) -> &'static [&'static Resource];
     /// Resources its kernel writes.

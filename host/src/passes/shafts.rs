@@ -6,7 +6,7 @@ use anyhow::{bail, ensure, Result};
 use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use serde::Deserialize;
-use slicelight_shaders::shafts::{shafts_pixel, table_entry, ShaftsParams, MODE_EXACT, MODE_TABLES};
+use slicelight_shaders::shafts::{shafts_pixel, table_entry, uses_paper_modes, ShaftsParams, MODE_EXACT, MODE_TABLES};
 use slicelight_shaders::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL};
 
 use super::*;
@@ -222,6 +222,16 @@ impl Pass for Shafts {
     fn kernel(&self) -> &'static str {
         "shafts::shafts_kernel"
     }
+    fn variants(&self) -> &'static [&'static str] {
+        &["shafts::shafts_exact_kernel"]
+    }
+    fn kernel_for(&self, scene: &SceneData) -> &'static str {
+        if uses_paper_modes(&scene.shafts.params) {
+            self.kernel()
+        } else {
+            "shafts::shafts_exact_kernel"
+        }
+    }
     fn reads(&self) -> &'static [&'static Resource] {
         resources![COMMON, LIGHTS, LIGHT_MAPS, SHADOW_MAPS, GBUFFER, SHAFTS_PARAMS, SHAFT_TABLES]
     }
@@ -274,9 +284,11 @@ impl Pass for Shafts {
         frame.write::<Vec4>(&SHAFTS_RADIANCE, common.band_pixels as usize, |frame, out| {
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
             let shadow = frame.get::<f32>(&SHADOW_MAPS);
+            // The CPU runs the variant the GPU would (`kernel_for`).
+            let pixel = if uses_paper_modes(&s.params) { shafts_pixel::<true> } else { shafts_pixel::<false> };
             for_each_invocation(out, common.band_start, progress, |i, px| {
                 let distance = gbuffer[(i - common.band_start) as usize].normal_distance.w;
-                *px = shafts_pixel(i, common, &s.params, &scene.lights, &scene.light_map, shadow, &s.tables, distance);
+                *px = pixel(i, common, &s.params, &scene.lights, &scene.light_map, shadow, &s.tables, distance);
             });
         });
     }

@@ -51,6 +51,16 @@ impl Pass for Surface {
     fn kernel(&self) -> &'static str {
         "surface::surface_kernel"
     }
+    fn variants(&self) -> &'static [&'static str] {
+        &["surface::surface_opaque_kernel"]
+    }
+    fn kernel_for(&self, scene: &SceneData) -> &'static str {
+        if scene.has_glass() {
+            self.kernel()
+        } else {
+            "surface::surface_opaque_kernel"
+        }
+    }
     fn reads(&self) -> &'static [&'static Resource] {
         resources![
             COMMON,
@@ -103,13 +113,15 @@ impl Pass for Surface {
         let caustic_maps = frame.get::<u32>(&caustics::CAUSTICS_MAPS);
         let no_caustics = slicelight_shaders::caustics::CausticsParams::default();
         let caustics = if caustic_maps.is_empty() { &no_caustics } else { &scene.caustics.params };
+        // The CPU runs the variant the GPU would (`kernel_for`).
+        let pixel = if scene.has_glass() { surface_pixel::<true> } else { surface_pixel::<false> };
         for_each_invocation2(
             radiance.as_mut_slice::<Vec4>(),
             gbuffer.as_mut_slice::<GBufferTexel>(),
             common.band_start,
             progress,
             |i, color, texel| {
-                (*color, *texel) = surface_pixel(
+                (*color, *texel) = pixel(
                     i,
                     common,
                     &scene.lights,

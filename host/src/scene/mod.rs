@@ -85,6 +85,10 @@ impl SceneData {
     pub fn has_geometry(&self) -> bool {
         !self.spheres.is_empty() || !self.triangles.is_empty()
     }
+    /// Whether any object is glass (`surface::surface_pixel`'s `GLASS`).
+    pub fn has_glass(&self) -> bool {
+        self.materials.iter().any(|m| m.kind == slicelight_shaders::types::MATERIAL_GLASS)
+    }
     /// Whether the medium scatters light at all (in any channel).
     pub fn scatters(&self) -> bool {
         self.common.sigma_s.truncate().max_element() > 0.0

@@ -6,6 +6,56 @@ use spirv_std::num_traits::Float;
 
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
 use crate::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT};
+use core::ops::{Add, Div, Mul, Sub};
+
+/// Arithmetic on one value (`f32`) or on four at once (`Vec4`, SIMD on the
+/// CPU), lane by lane. A spot's hard edge, the projective coordinates and
+/// the shadow tests are written once over `Lanes`: `emitted_visible` runs
+/// them for one point, the shafts for four sub-plane samples at once
+/// (`emitted_visible4`), with the same operations in the same order.
+pub trait Lanes: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self> {
+    fn splat(v: f32) -> Self;
+    /// The square root.
+    fn root(self) -> Self;
+    /// The larger of the two.
+    fn larger(self, other: Self) -> Self;
+    /// 1 where `a > b`, 0 elsewhere (and where either is NaN).
+    fn above(a: Self, b: Self) -> Self;
+}
+
+impl Lanes for f32 {
+    fn splat(v: f32) -> Self {
+        v
+    }
+    fn root(self) -> Self {
+        self.sqrt()
+    }
+    fn larger(self, other: Self) -> Self {
+        self.max(other)
+    }
+    fn above(a: Self, b: Self) -> Self {
+        if a > b {
+            1.0
+        } else {
+            0.0
+        }
+    }
+}
+
+impl Lanes for Vec4 {
+    fn splat(v: f32) -> Self {
+        Vec4::splat(v)
+    }
+    fn root(self) -> Self {
+        self.sqrt()
+    }
+    fn larger(self, other: Self) -> Self {
+        self.max(other)
+    }
+    fn above(a: Self, b: Self) -> Self {
+        Vec4::select(a.cmpgt(b), Vec4::ONE, Vec4::ZERO)
+    }
+}
 
 /// Stored in a shadow-map texel whose ray hits nothing.
 pub const SHADOW_FAR: f32 = f32::MAX;
@@ -29,18 +79,176 @@ pub fn light_local(light: &GpuLight, p: Vec3) -> Vec3 {
 /// between them. The hard-edge test is done on tangents (`r <= z tan(cutoff)`),
 /// which keeps its accuracy for cutoffs near 0 where `cos(cutoff)` rounds to 1.
 pub fn cone_falloff(light: &GpuLight, local: Vec3) -> f32 {
-    if local.z <= 0.0 {
-        return 0.0;
-    }
-    let r = (local.x * local.x + local.y * local.y).sqrt();
-    if r > local.z * light.tan_cutoff {
+    let (inside, r) = spot_edge(local.x, local.y, local.z, light.tan_cutoff);
+    if inside == 0.0 {
         return 0.0;
     }
     if light.beam >= light.cutoff {
         return 1.0;
     }
-    let angle = r.atan2(local.z);
+    soft_edge(light, r, local.z)
+}
+
+/// A spot's profile between its beam and cutoff angles at a point `r` from
+/// its axis, `z` along it: linear in the angle.
+fn soft_edge(light: &GpuLight, r: f32, z: f32) -> f32 {
+    let angle = r.atan2(z);
     ((light.cutoff - angle) / (light.cutoff - light.beam)).clamp(0.0, 1.0)
+}
+
+/// A spot's hard edge at the point `(x, y, z)` of its frame: 1 inside the
+/// cone (`z > 0`, `r <= z tan(cutoff)`), else 0; and `r`, the distance from
+/// the axis.
+pub fn spot_edge<L: Lanes>(x: L, y: L, z: L, tan_cutoff: f32) -> (L, L) {
+    let r = (x * x + y * y).root();
+    let inside = L::above(z, L::splat(0.0)) * (L::splat(1.0) - L::above(r, z * L::splat(tan_cutoff)));
+    (inside, r)
+}
+
+/// A spot's projective coordinates (`light_uv`) of the point `(x, y, z)`.
+pub fn spot_uv<L: Lanes>(x: L, y: L, z: L, tan_cutoff: f32) -> (L, L) {
+    let s = L::splat(0.5) / (z * L::splat(tan_cutoff));
+    (L::splat(0.5) + x * s, L::splat(0.5) + y * s)
+}
+
+/// The spot's shadow test at the point `(x, y, z)` of its frame, given the
+/// depth `stored` its texel holds (`SHADOW_FAR` outside the map): 1 if lit.
+/// `texel_slope` is the texel's angular size `2 tan(cutoff) / res` times
+/// `shadow_slope` (see `shadow_visibility`).
+pub fn spot_lit<L: Lanes>(x: L, y: L, z: L, stored: L, texel_slope: f32) -> L {
+    // The distance to the light is |local| (the frame is orthonormal), and
+    // a texel's footprint there `d 2 tan(cutoff) / (res cos^2)`, widened
+    // off-axis by `1/cos^2 = d^2 / z^2` (at most 1e3). The test
+    // `d - bias > stored` multiplied through by `z^2` (the larger of `z^2`
+    // and `1e-3 d^2`, positive) needs no division: it runs for every sample
+    // of every shaft.
+    let d2 = x * x + y * y + z * z;
+    let d = d2.root();
+    let z2 = (z * z).larger(L::splat(1e-3) * d2);
+    let shadowed = L::above((d * L::splat(1.0 - 1e-4) - stored) * z2, L::splat(texel_slope) * d * d2);
+    L::splat(1.0) - shadowed
+}
+
+/// The depth a light's shadow-map texel holds at projective coordinates
+/// `(u, v)`, or `SHADOW_FAR` outside the map (outside the cone or the
+/// window, already dark) or without one.
+// Plain comparisons rather than `Range::contains` in a kernel.
+#[allow(clippy::manual_range_contains)]
+pub fn stored_depth(light: &GpuLight, shadow: &[f32], u: f32, v: f32) -> f32 {
+    let res = light.shadow_resolution;
+    // Written so that NaN coordinates fall outside.
+    if res == 0 || !(u >= 0.0 && u < 1.0 && v >= 0.0 && v < 1.0) {
+        return SHADOW_FAR;
+    }
+    let i = ((u * res as f32) as u32).min(res - 1);
+    let j = ((v * res as f32) as u32).min(res - 1);
+    shadow[(light.shadow_offset + j * res + i) as usize]
+}
+
+/// A directional light's projective coordinates (`light_uv`) of the point
+/// `(x, y)` of its frame.
+pub fn directional_uv<L: Lanes>(x: L, y: L, half_extent_x: f32, half_extent_y: f32) -> (L, L) {
+    (
+        L::splat(0.5) + L::splat(0.5) * x / L::splat(half_extent_x),
+        L::splat(0.5) + L::splat(0.5) * y / L::splat(half_extent_y),
+    )
+}
+
+/// A directional light's shadow test at depth `z` (from its entry plane),
+/// given the depth `stored` its texel holds: 1 if lit. `bias` is the texel's
+/// footprint times `shadow_slope` (see `shadow_visibility`).
+pub fn directional_lit<L: Lanes>(z: L, stored: L, bias: f32) -> L {
+    L::splat(1.0) - L::above(z - (L::splat(bias) + L::splat(1e-4) * z), stored)
+}
+
+/// `emitted_visible(light, light_map, shadow, p, 1.0)` summed over four
+/// points `p` of the medium given lane by lane (`x`, `y`, `z` in the light's
+/// frame), lane `k` counted `used[k]` (1 or 0) times; a spot or a directional
+/// light. The cone's hard edge, the projective coordinates and the shadow
+/// test run on the four lanes at once; a soft edge, a window's bounds, the
+/// shadow-map and light-map reads lane by lane.
+pub fn emitted_visible4(
+    light: &GpuLight,
+    light_map: &[Vec4],
+    shadow: &[f32],
+    x: Vec4,
+    y: Vec4,
+    z: Vec4,
+    used: Vec4,
+) -> Vec4 {
+    let spot = light.kind != LIGHT_DIRECTIONAL;
+    let mut weight;
+    let (u, v);
+    if spot {
+        let (inside, r) = spot_edge(x, y, z, light.tan_cutoff);
+        weight = inside * used;
+        if light.beam < light.cutoff {
+            weight *= Vec4::new(
+                soft_lane(light, weight.x, r.x, z.x),
+                soft_lane(light, weight.y, r.y, z.y),
+                soft_lane(light, weight.z, r.z, z.z),
+                soft_lane(light, weight.w, r.w, z.w),
+            );
+        }
+        (u, v) = spot_uv(x, y, z, light.tan_cutoff);
+    } else {
+        // Past the entry plane (`z >= 0`).
+        weight = (Vec4::ONE - Vec4::above(Vec4::ZERO, z)) * used;
+        (u, v) = directional_uv(x, y, light.half_extent_x, light.half_extent_y);
+        if light.bounded != 0 {
+            weight *= Vec4::new(in_window(u.x, v.x), in_window(u.y, v.y), in_window(u.z, v.z), in_window(u.w, v.w));
+        }
+    }
+    let res = light.shadow_resolution;
+    if res > 0 {
+        let stored = Vec4::new(
+            stored_depth(light, shadow, u.x, v.x),
+            stored_depth(light, shadow, u.y, v.y),
+            stored_depth(light, shadow, u.z, v.z),
+            stored_depth(light, shadow, u.w, v.w),
+        );
+        // Points of the medium: `shadow_slope(1.0)` is 1.
+        weight *= if spot {
+            spot_lit(x, y, z, stored, 2.0 * light.tan_cutoff / res as f32)
+        } else {
+            directional_lit(z, stored, 2.0 * light.half_extent_x.max(light.half_extent_y) / res as f32)
+        };
+    }
+    if light.light_map_width == 0 {
+        return light.power * weight.element_sum();
+    }
+    mapped_lane(light, light_map, weight.x, u.x, v.x)
+        + mapped_lane(light, light_map, weight.y, u.y, v.y)
+        + mapped_lane(light, light_map, weight.z, u.z, v.z)
+        + mapped_lane(light, light_map, weight.w, u.w, v.w)
+}
+
+/// `soft_edge` for a lane inside the cone (`inside` non-zero), else 0.
+fn soft_lane(light: &GpuLight, inside: f32, r: f32, z: f32) -> f32 {
+    if inside == 0.0 {
+        0.0
+    } else {
+        soft_edge(light, r, z)
+    }
+}
+
+/// 1 inside a window's rectangle in projective coordinates, else 0.
+fn in_window(u: f32, v: f32) -> f32 {
+    if u < 0.0 || u > 1.0 || v < 0.0 || v > 1.0 {
+        0.0
+    } else {
+        1.0
+    }
+}
+
+/// `power * weight` times the light map at `(u, v)`; 0 (no read) where
+/// `weight` is 0.
+fn mapped_lane(light: &GpuLight, light_map: &[Vec4], weight: f32, u: f32, v: f32) -> Vec4 {
+    if weight == 0.0 {
+        return Vec4::ZERO;
+    }
+    let map = sample_light_map(light_map, light.light_map_offset, light.light_map_width, light.light_map_height, u, v);
+    light.power * weight * map
 }
 
 /// Bilinear lookup in a light map stored row by row (row 0 at `v = 0`), with
@@ -75,10 +283,9 @@ pub fn cone_terms(cutoff: f32) -> (f32, f32, f32) {
 /// directional: `uv = 0.5 + 0.5 (x / half_extent_x, y / half_extent_y)`.
 pub fn light_uv(light: &GpuLight, local: Vec3) -> (f32, f32) {
     if light.kind == LIGHT_DIRECTIONAL {
-        (0.5 + 0.5 * local.x / light.half_extent_x, 0.5 + 0.5 * local.y / light.half_extent_y)
+        directional_uv(local.x, local.y, light.half_extent_x, light.half_extent_y)
     } else {
-        let s = 0.5 / (local.z * light.tan_cutoff);
-        (0.5 + local.x * s, 0.5 + local.y * s)
+        spot_uv(local.x, local.y, local.z, light.tan_cutoff)
     }
 }
 
@@ -152,6 +359,7 @@ fn emitted_at(light: &GpuLight, light_map: &[Vec4], local: Vec3, uv: (f32, f32))
 /// light: origin and unit direction. Spot: from the light through the texel
 /// centre on the `z = 1` plane of the frustum that covers the cone.
 /// Directional: from the texel centre on the entry plane along the light.
+#[inline]
 pub fn shadow_texel_ray(light: &GpuLight, texel: u32) -> (Vec3, Vec3) {
     let res = light.shadow_resolution;
     let i = texel % res;
@@ -194,35 +402,16 @@ pub fn shadow_visibility(light: &GpuLight, shadow: &[f32], local: Vec3, cos_inci
 /// `shadow_visibility` of a light with a shadow map, given its projective
 /// coordinates `(u, v)` at `local`.
 fn shadow_visibility_at(light: &GpuLight, shadow: &[f32], local: Vec3, cos_incidence: f32, (u, v): (f32, f32)) -> f32 {
-    let res = light.shadow_resolution;
-    if u < 0.0 || u >= 1.0 || v < 0.0 || v >= 1.0 {
-        // Outside the shadow map: outside the cone or the window, already dark.
-        return 1.0;
-    }
-    let i = ((u * res as f32) as u32).min(res - 1);
-    let j = ((v * res as f32) as u32).min(res - 1);
-    let stored = shadow[(light.shadow_offset + j * res + i) as usize];
+    let stored = stored_depth(light, shadow, u, v);
     // `shadow_bias` is `footprint * slope + 1e-4 distance`.
     let slope = shadow_slope(cos_incidence);
+    let res = light.shadow_resolution;
     if light.kind == LIGHT_DIRECTIONAL {
         let footprint = 2.0 * light.half_extent_x.max(light.half_extent_y) / res as f32;
-        return if local.z - (footprint * slope + 1e-4 * local.z) > stored { 0.0 } else { 1.0 };
+        return directional_lit(local.z, stored, footprint * slope);
     }
-    // A spot: the distance to the light is |local| (the frame is
-    // orthonormal), and a texel's footprint there `d 2 tan(cutoff) / (res
-    // cos^2)`, widened off-axis by `1/cos^2 = d^2 / z^2` (at most 1e3).
-    // The test `d - bias > stored` multiplied through by `z^2` (the larger
-    // of `z^2` and `1e-3 d^2`, positive) needs no division: it runs for
-    // every sample of every shaft.
-    let d2 = local.length_squared();
-    let d = d2.sqrt();
-    let z2 = (local.z * local.z).max(1e-3 * d2);
     let texel = 2.0 * light.tan_cutoff / res as f32;
-    if (d * (1.0 - 1e-4) - stored) * z2 > texel * slope * d * d2 {
-        0.0
-    } else {
-        1.0
-    }
+    spot_lit(local.x, local.y, local.z, stored, texel * slope)
 }
 
 /// `shadow_bias`'s factor on the footprint: 1, plus `tan(theta)` (at most
@@ -341,5 +530,75 @@ mod tests {
         assert!((b0 - (0.01 + 1e-3)).abs() < 1e-7);
         let grazing = shadow_bias(0.01, 0.0, 10.0);
         assert!((grazing - (0.11 + 1e-3)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn four_points_at_once_match_one_at_a_time() {
+        // Spots with a hard and a soft edge, with and without a light map,
+        // and a window, each with a shadow map of random depths: the four-lane
+        // evaluation equals the sum of the one-point one, lane by lane (to
+        // rounding: the light map's factors are multiplied in another order),
+        // unused lanes counting nothing.
+        let mut state = 5u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let res = 64u32;
+        let shadow: Vec<f32> = (0..res * res).map(|_| 1.0 + 8.0 * next()).collect();
+        let light_map: Vec<Vec4> = (0..16).map(|_| Vec4::new(next(), next(), next(), 0.0)).collect();
+        let mut lights = Vec::new();
+        for (beam, mapped) in [(30.0f32, false), (20.0, false), (30.0, true), (12.0, true)] {
+            let mut l = spot(30.0, beam);
+            l.power = Vec4::new(3.0, 2.0, 1.0, 0.0);
+            l.shadow_resolution = res;
+            if mapped {
+                (l.light_map_width, l.light_map_height) = (4, 4);
+            }
+            lights.push(l);
+        }
+        lights.push(GpuLight {
+            kind: LIGHT_DIRECTIONAL,
+            axis_x: Vec4::X,
+            axis_y: Vec4::Y,
+            axis_z: Vec4::Z,
+            power: Vec4::new(1.0, 2.0, 3.0, 0.0),
+            half_extent_x: 2.0,
+            half_extent_y: 1.0,
+            bounded: 1,
+            shadow_resolution: res,
+            light_map_width: 4,
+            light_map_height: 4,
+            ..Default::default()
+        });
+        let mut lit_lanes = 0;
+        for light in &lights {
+            for _ in 0..5_000 {
+                let mut p = [Vec3::ZERO; 4];
+                for q in &mut p {
+                    let z = 9.0 * next() - 0.5;
+                    *q = Vec3::new(
+                        (2.4 * next() - 1.2) * z.abs() * 0.6 + next() - 0.5,
+                        (2.4 * next() - 1.2) * z.abs() * 0.6,
+                        z,
+                    );
+                }
+                let used = Vec4::new(1.0, 1.0, 1.0, if next() < 0.5 { 1.0 } else { 0.0 });
+                let lanes = |f: fn(Vec3) -> f32| Vec4::new(f(p[0]), f(p[1]), f(p[2]), f(p[3]));
+                let (x, y, z) = (lanes(|q| q.x), lanes(|q| q.y), lanes(|q| q.z));
+                let four = emitted_visible4(light, &light_map, &shadow, x, y, z, used);
+                let mut one = Vec4::ZERO;
+                for (k, q) in p.iter().enumerate() {
+                    let e = emitted_visible(light, &light_map, &shadow, *q, 1.0);
+                    if used[k] > 0.0 {
+                        one += e;
+                        lit_lanes += (e.max_element() > 0.0) as u32;
+                    }
+                }
+                assert!((four - one).abs().max_element() <= 1e-6 * one.abs().max_element(), "{four} vs {one} at {p:?}");
+            }
+        }
+        // The points light some lanes and leave others dark.
+        assert!(lit_lanes > 20_000 && lit_lanes < 90_000, "{lit_lanes}");
     }
 }

@@ -14,19 +14,24 @@ use spirv_std::spirv;
 pub fn shadow_map_texel(index: u32, params: &CommonParams, lights: &[GpuLight], geometry: &Geometry) -> f32 {
     let mut l = 0;
     while l < params.light_count as usize {
-        let light = lights[l];
-        let count = light.shadow_resolution * light.shadow_resolution;
-        if index >= light.shadow_offset && index < light.shadow_offset + count {
-            if light.kind == LIGHT_SPOT && outside_the_cone(&light, index - light.shadow_offset) {
-                return SHADOW_FAR;
-            }
-            let (origin, dir) = shadow_texel_ray(&light, index - light.shadow_offset);
-            let hit = trace_nearest(origin, dir, 0.0, SHADOW_FAR, geometry);
-            return hit.distance.min(SHADOW_FAR);
+        let (offset, res) = (lights[l].shadow_offset, lights[l].shadow_resolution);
+        if index >= offset && index < offset + res * res {
+            return light_texel(&lights[l], index - offset, geometry);
         }
         l += 1;
     }
     SHADOW_FAR
+}
+
+/// Texel `texel` of `light`'s shadow map (see `shadow_map_texel`). The light
+/// is read where it lies, not copied: on the CPU, a copy of the 144-byte
+/// struct per texel cost as much as tracing the texel's ray.
+fn light_texel(light: &GpuLight, texel: u32, geometry: &Geometry) -> f32 {
+    if light.kind == LIGHT_SPOT && outside_the_cone(light, texel) {
+        return SHADOW_FAR;
+    }
+    let (origin, dir) = shadow_texel_ray(light, texel);
+    trace_nearest(origin, dir, 0.0, SHADOW_FAR, geometry).distance.min(SHADOW_FAR)
 }
 
 /// Whether a spot's shadow-map texel lies wholly outside its cone (the

@@ -18,9 +18,9 @@ use spirv_std::num_traits::Float;
 
 use crate::camera::camera_ray;
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
-use crate::light::{emitted_visible, light_local, transmittance};
+use crate::light::{emitted_visible, emitted_visible4, light_local, transmittance};
 use crate::phase;
-use crate::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL};
+use crate::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT};
 use core::f32::consts::PI;
 use spirv_std::spirv;
 
@@ -397,8 +397,14 @@ pub fn spot_interval_weight<const PAPER: bool>(
 /// false): the same result with less code, which matters where both sides of
 /// a branch cost time whether taken or not (llvmpipe runs eight pixels in
 /// lock-step and skips no branch). `PAPER` true computes every mode.
+///
+/// `PACKED` evaluates the sub-plane samples four at a time
+/// (`light::emitted_visible4`, SIMD on the CPU: the CPU backend's choice),
+/// else one by one (`light::emitted_visible`: the GPU's, where a `Vec4`
+/// costs four lanes' work and six samples would fill eight); both run the
+/// same lane-generic cone, projection and shadow-test functions.
 #[allow(clippy::too_many_arguments)]
-pub fn shafts_pixel<const PAPER: bool>(
+pub fn shafts_pixel<const PAPER: bool, const PACKED: bool>(
     index: u32,
     common: &CommonParams,
     params: &ShaftsParams,
@@ -424,6 +430,7 @@ pub fn shafts_pixel<const PAPER: bool>(
     while l < common.light_count as usize {
         let light = lights[l];
         let directional = light.kind == LIGHT_DIRECTIONAL;
+        let packed = PACKED && light.kind != LIGHT_POINT;
         let (lo, hi) = if light.in_view == 0 {
             (t_far, t_near)
         } else if directional {
@@ -448,17 +455,33 @@ pub fn shafts_pixel<const PAPER: bool>(
                 let a = (z0 / cos_view).max(lo);
                 let b = ((z0 + dz) / cos_view).min(hi);
                 if b > a {
-                    // Eq. 9: J = mean of H I_l over the sub-planes.
-                    let mut j_sum = Vec4::ZERO;
-                    let mut j = 0;
-                    while j < sub {
-                        let u = a + (b - a) * (j as f32 + 0.5) / sub as f32;
-                        let local = q + v * u;
-                        j_sum += emitted_visible(&light, light_map, shadow, local, 1.0);
-                        j += 1;
-                    }
+                    // Eq. 9: J = mean of H I_l over the sub-planes (four at
+                    // a time if `PACKED`, but for a point light).
+                    let j_mean = if packed {
+                        let mut j_sum = Vec4::ZERO;
+                        let mut j = 0;
+                        while j < sub {
+                            let lane = Vec4::new(j as f32, (j + 1) as f32, (j + 2) as f32, (j + 3) as f32);
+                            let u = Vec4::splat(a) + Vec4::splat(b - a) * (lane + Vec4::splat(0.5)) / sub as f32;
+                            let (x, y, z) =
+                                (Vec4::splat(q.x) + v.x * u, Vec4::splat(q.y) + v.y * u, Vec4::splat(q.z) + v.z * u);
+                            let used = Vec4::select(lane.cmplt(Vec4::splat(sub as f32)), Vec4::ONE, Vec4::ZERO);
+                            j_sum += emitted_visible4(&light, light_map, shadow, x, y, z, used);
+                            j += 4;
+                        }
+                        j_sum / sub as f32
+                    } else {
+                        let mut j_sum = Vec4::ZERO;
+                        let mut j = 0;
+                        while j < sub {
+                            let u = a + (b - a) * (j as f32 + 0.5) / sub as f32;
+                            let local = q + v * u;
+                            j_sum += emitted_visible(&light, light_map, shadow, local, 1.0);
+                            j += 1;
+                        }
+                        j_sum / sub as f32
+                    };
                     samples += sub;
-                    let j_mean = j_sum / sub as f32;
                     let g = if directional {
                         // g at the interval's middle: nothing in it varies
                         // fast along the ray.
@@ -498,7 +521,7 @@ pub fn quantize_8bit(v: Vec4, scale: f32) -> Vec4 {
     Vec4::new(q(v.x), q(v.y), q(v.z), v.w)
 }
 
-/// The shafts pass's entry points: `$name` runs `shafts_pixel::<$paper>`.
+/// The shafts pass's entry points: `$name` runs `shafts_pixel::<$paper, false>`.
 macro_rules! shafts_entry_point {
     ($(#[$doc:meta])* $name:ident, $paper:literal) => {
         $(#[$doc])*
@@ -520,7 +543,7 @@ macro_rules! shafts_entry_point {
             let common = &common[0];
             if index < common.band_pixels {
                 let distance = gbuffer[index as usize].normal_distance.w;
-                radiance[index as usize] = shafts_pixel::<$paper>(
+                radiance[index as usize] = shafts_pixel::<$paper, false>(
                     common.band_start + index,
                     common,
                     &params[0],

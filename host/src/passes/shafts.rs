@@ -284,8 +284,10 @@ impl Pass for Shafts {
         frame.write::<Vec4>(&SHAFTS_RADIANCE, common.band_pixels as usize, |frame, out| {
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
             let shadow = frame.get::<f32>(&SHADOW_MAPS);
-            // The CPU runs the variant the GPU would (`kernel_for`).
-            let pixel = if uses_paper_modes(&s.params) { shafts_pixel::<true> } else { shafts_pixel::<false> };
+            // The CPU runs the variant the GPU would (`kernel_for`), with
+            // its samples in SIMD packets.
+            let pixel =
+                if uses_paper_modes(&s.params) { shafts_pixel::<true, true> } else { shafts_pixel::<false, true> };
             for_each_invocation(out, common.band_start, progress, |i, px| {
                 let distance = gbuffer[(i - common.band_start) as usize].normal_distance.w;
                 *px = pixel(i, common, &s.params, &scene.lights, &scene.light_map, shadow, &s.tables, distance);

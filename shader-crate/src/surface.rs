@@ -82,14 +82,17 @@ pub fn direct_radiance(
 }
 
 /// 1 if the segment from the surface point `p` (unit `normal`, facing the
-/// light) toward the light is free of geometry, else 0. It starts a hair off
-/// the surface along the normal and stops a hair short of the light (or of
-/// a directional light's entry plane), both relative to the scene's scale
-/// at `p` and to the distance, so the surface does not shadow itself in f32.
+/// light) toward the light is free of geometry, else 0. The ray starts at
+/// `p` itself and counts hits from `1e-5` of the scene's scale at `p` on,
+/// divided by the cosine of incidence (where f32 rounding of `p` could meet
+/// its own surface again), to a hair short of the light (or of a
+/// directional light's entry plane). An origin moved off the surface along
+/// the normal instead would move every shadow's outline by that much: 57 µm
+/// in Fig. 6, where the sphere's outline passes 3 µm from a pixel centre.
 pub fn shadow_ray_visibility(geometry: &Geometry, p: Vec3, normal: Vec3, to_light: Vec3, distance: f32) -> f32 {
     let scale = p.abs().max_element().max(distance).max(1.0);
-    let origin = p + normal * (1e-5 * scale);
-    if occluded(origin, to_light, 1e-5 * scale, distance * (1.0 - 1e-5), geometry) {
+    let t_min = 1e-5 * scale / normal.dot(to_light).max(1e-3);
+    if occluded(p, to_light, t_min, distance * (1.0 - 1e-5), geometry) {
         0.0
     } else {
         1.0
@@ -309,3 +312,49 @@ surface_entry_point!(
     surface_opaque_kernel,
     false
 );
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shadow_outlines_lie_where_the_geometry_puts_them() {
+        // Fig. 6's light and sphere; floor points whose segment to the light
+        // passes the sphere's surface within 2e-5 of its radius (11 µm),
+        // inside or outside: the shadow ray must decide as the exact
+        // geometry does (an origin moved 57 µm off the floor moved the
+        // outline past such points).
+        let (light, center, radius) = (Vec3::new(0.0, 5.5, 0.0), Vec3::new(0.0, 3.4, 0.0), 0.55f32);
+        let spheres = [GpuSphere { center_radius: center.extend(radius), ..Default::default() }];
+        let geometry = Geometry { spheres: &spheres, sphere_count: 1, triangles: &[], nodes: &[], node_count: 0 };
+        // The outline on the floor is a circle of radius R around the axis:
+        // sin(half-angle) = radius / |light - center|.
+        let (lc, h) = ((light - center).length() as f64, light.y as f64);
+        let half = (radius as f64 / lc).asin();
+        let outline = h * half.tan();
+        let mut checked = 0;
+        for k in 0..64 {
+            let phi = k as f64 * 0.0981;
+            for (margin, lit) in [(1.0 + 2e-5, true), (1.0 - 2e-5, false)] {
+                let r = outline * margin;
+                let p = Vec3::new((r * phi.cos()) as f32, 0.0, (r * phi.sin()) as f32);
+                // Where the f32 point really is, the exact distance from the
+                // segment to the centre decides (f64).
+                let (pd, ld, cd) = (p.as_dvec3(), light.as_dvec3(), center.as_dvec3());
+                let dir = (ld - pd).normalize();
+                let w = cd - pd;
+                let gap = (w - dir * w.dot(dir)).length() - radius as f64;
+                if gap.abs() < 2e-6 {
+                    continue;
+                }
+                assert_eq!(gap > 0.0, lit, "the point's f32 rounding crossed the outline");
+                let to_light = light - p;
+                let distance = to_light.length();
+                let seen = shadow_ray_visibility(&geometry, p, Vec3::Y, to_light / distance, distance);
+                assert_eq!(seen, if lit { 1.0 } else { 0.0 }, "{p}: {gap:e} m from the sphere");
+                checked += 1;
+            }
+        }
+        assert!(checked > 120, "{checked}");
+    }
+}

@@ -62,8 +62,13 @@ pub const SHADOW_FAR: f32 = f32::MAX;
 
 /// Beer-Lambert transmittance `exp(-sigma_t d)` per channel (the `exp(-rho kappa s)`
 /// factors of eq. 1 and eq. 3 of the 2002 paper); `sigma_t` in 1/m, `distance` in m.
+/// A grey medium (the same `sigma_t` in every channel) takes one exponential.
 pub fn transmittance(sigma_t: Vec4, distance: f32) -> Vec4 {
-    Vec4::new((-sigma_t.x * distance).exp(), (-sigma_t.y * distance).exp(), (-sigma_t.z * distance).exp(), 1.0)
+    let r = (-sigma_t.x * distance).exp();
+    if sigma_t.y == sigma_t.x && sigma_t.z == sigma_t.x {
+        return Vec4::new(r, r, r, 1.0);
+    }
+    Vec4::new(r, (-sigma_t.y * distance).exp(), (-sigma_t.z * distance).exp(), 1.0)
 }
 
 /// `p` in the light's frame: `(x along axis_x, y along axis_y, z along axis_z)`,

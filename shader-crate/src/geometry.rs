@@ -79,13 +79,20 @@ pub fn ray_sphere(origin: Vec3, dir: Vec3, center: Vec3, radius: f32, t_min: f32
     NO_HIT
 }
 
-/// How far outside a triangle (in barycentric units) a hit still counts:
-/// a ray through a shared edge or vertex of a mesh meets at least one of
-/// the triangles around it, instead of slipping between them when the
-/// rounding of each triangle's test puts it just outside all of them (a
+/// How far outside a triangle (in barycentric units) a hit still counts, at
+/// least: a ray through a shared edge or vertex of a mesh meets at least
+/// one of the triangles around it, instead of slipping between them when
+/// the rounding of each triangle's test puts it just outside all of them (a
 /// ray through a tessellated ball's centre hits the opposite vertex
-/// exactly).
+/// exactly). `ray_triangle` widens it by `EDGE_SLACK` for small triangles
+/// far from the ray's origin.
 pub const EDGE_TOLERANCE: f32 = 1e-6;
+
+/// Positions in f32 are off by about `f32::EPSILON` times their magnitude;
+/// a triangle's test counts hits within 4 times that distance of its
+/// edges (the ray's origin and the triangle's first vertex taken as the
+/// magnitudes), converted to barycentric units.
+pub const EDGE_SLACK: f32 = 4.0 * f32::EPSILON;
 
 /// Möller-Trumbore ray/triangle intersection: distance along `dir` (unit) to
 /// the triangle, metres, if it is beyond `t_min`; `NO_HIT` otherwise.
@@ -99,13 +106,17 @@ pub fn ray_triangle(origin: Vec3, dir: Vec3, v0: Vec3, v1: Vec3, v2: Vec3, t_min
     }
     let inv_det = 1.0 / det;
     let s = origin - v0;
+    // A move of the ray by `delta` metres moves `u` by up to `delta |p| /
+    // |det|` and `v` by `delta |e1| / |det|` (max norms: a bound within 3x).
+    let reach = (origin.abs().max_element() + v0.abs().max_element()) * EDGE_SLACK;
+    let tolerance = EDGE_TOLERANCE + reach * p.abs().max_element().max(e1.abs().max_element()) * inv_det.abs();
     let u = s.dot(p) * inv_det;
-    if u < -EDGE_TOLERANCE || u > 1.0 + EDGE_TOLERANCE {
+    if u < -tolerance || u > 1.0 + tolerance {
         return NO_HIT;
     }
     let q = s.cross(e1);
     let v = dir.dot(q) * inv_det;
-    if v < -EDGE_TOLERANCE || u + v > 1.0 + EDGE_TOLERANCE {
+    if v < -tolerance || u + v > 1.0 + tolerance {
         return NO_HIT;
     }
     let t = e2.dot(q) * inv_det;

@@ -254,7 +254,7 @@ pub mod cache {
 
     const MAGIC: &[u8; 8] = b"SLCTABLE";
     /// Bump when the table's contents change for the same inputs.
-    const VERSION: u32 = 7;
+    const VERSION: u32 = 8;
     const HEADER: usize = 8 + 4 + 16 + 8;
 
     /// `SLICELIGHT_CACHE_DIR` (`off`: no cache), else

@@ -109,7 +109,7 @@ pub fn ray_triangle(origin: Vec3, dir: Vec3, v0: Vec3, v1: Vec3, v2: Vec3, t_min
     // A move of the ray by `delta` metres moves `u` by up to `delta |p| /
     // |det|` and `v` by `delta |e1| / |det|` (max norms: a bound within 3x).
     let reach = (origin.abs().max_element() + v0.abs().max_element()) * EDGE_SLACK;
-    let tolerance = EDGE_TOLERANCE + reach * p.abs().max_element().max(e1.abs().max_element()) * inv_det.abs();
+    let tolerance = EDGE_TOLERANCE + reach * p.abs().max(e1.abs()).max_element() * inv_det.abs();
     let u = s.dot(p) * inv_det;
     if u < -tolerance || u > 1.0 + tolerance {
         return NO_HIT;

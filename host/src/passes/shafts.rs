@@ -229,7 +229,7 @@ impl Pass for Shafts {
         if uses_paper_modes(&scene.shafts.params) {
             self.kernel()
         } else {
-            "shafts::shafts_exact_kernel"
+            self.variants()[0]
         }
     }
     fn reads(&self) -> &'static [&'static Resource] {

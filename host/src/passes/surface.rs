@@ -58,7 +58,7 @@ impl Pass for Surface {
         if scene.has_glass() {
             self.kernel()
         } else {
-            "surface::surface_opaque_kernel"
+            self.variants()[0]
         }
     }
     fn reads(&self) -> &'static [&'static Resource] {

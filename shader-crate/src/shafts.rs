@@ -18,7 +18,7 @@ use spirv_std::num_traits::Float;
 
 use crate::camera::camera_ray;
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
-use crate::light::{emitted_visible, emitted_visible4, light_local, transmittance};
+use crate::light::{emitted_visible, emitted_visible4, light_local, transmittance, Lanes};
 use crate::phase;
 use crate::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT};
 use core::f32::consts::PI;
@@ -394,9 +394,9 @@ pub fn spot_interval_weight<const PAPER: bool>(
 /// `PAPER` false compiles the function without the 2002 paper's own
 /// shortcuts (`MODE_TABLES`, `quantize_8bit`, `1/s^2` sampled instead of
 /// integrated), for parameters that ask for none of them (`uses_paper_modes`
-/// false): the same result with less code, which matters where both sides of
-/// a branch cost time whether taken or not (llvmpipe runs eight pixels in
-/// lock-step and skips no branch). `PAPER` true computes every mode.
+/// false): the same result with less code, which llvmpipe (eight pixels in
+/// lock-step) runs measurably faster though the branches it leaves out were
+/// never taken. `PAPER` true computes every mode.
 ///
 /// `PACKED` evaluates the sub-plane samples four at a time
 /// (`light::emitted_visible4`, SIMD on the CPU: the CPU backend's choice),
@@ -467,30 +467,24 @@ pub fn shafts_pixel<const PAPER: bool, const PACKED: bool>(
                 if b > a {
                     // Eq. 9: J = mean of H I_l over the sub-planes (four at
                     // a time if `PACKED`, but for a point light).
-                    let j_mean = if packed {
-                        let mut j_sum = Vec4::ZERO;
-                        let mut j = 0;
-                        while j < sub {
+                    let mut j_sum = Vec4::ZERO;
+                    let mut j = 0;
+                    while j < sub {
+                        if packed {
                             let lane = Vec4::new(j as f32, (j + 1) as f32, (j + 2) as f32, (j + 3) as f32);
-                            let u = Vec4::splat(a) + Vec4::splat(b - a) * (lane + Vec4::splat(0.5)) / sub as f32;
+                            let u = sub_plane(a, b, lane, sub);
                             let (x, y, z) =
                                 (Vec4::splat(q.x) + v.x * u, Vec4::splat(q.y) + v.y * u, Vec4::splat(q.z) + v.z * u);
                             let used = Vec4::select(lane.cmplt(Vec4::splat(sub as f32)), Vec4::ONE, Vec4::ZERO);
                             j_sum += emitted_visible4(light, light_map, shadow, x, y, z, used);
                             j += 4;
-                        }
-                        j_sum / sub as f32
-                    } else {
-                        let mut j_sum = Vec4::ZERO;
-                        let mut j = 0;
-                        while j < sub {
-                            let u = a + (b - a) * (j as f32 + 0.5) / sub as f32;
-                            let local = q + v * u;
+                        } else {
+                            let local = q + v * sub_plane(a, b, j as f32, sub);
                             j_sum += emitted_visible(light, light_map, shadow, local, 1.0);
                             j += 1;
                         }
-                        j_sum / sub as f32
-                    };
+                    }
+                    let j_mean = j_sum / sub as f32;
                     samples += sub;
                     let g = if directional {
                         // g at the interval's middle: nothing in it varies
@@ -516,6 +510,13 @@ pub fn shafts_pixel<const PAPER: bool, const PACKED: bool>(
         l += 1;
     }
     Vec4::new(radiance.x, radiance.y, radiance.z, samples as f32)
+}
+
+/// Where sub-plane `j` (eq. 9: the middles of `sub` equal parts) lies in the
+/// plane interval `[a, b]` of a view ray, metres along it; for one `j` or,
+/// lane by lane, four.
+pub fn sub_plane<L: Lanes>(a: f32, b: f32, j: L, sub: u32) -> L {
+    L::splat(a) + L::splat(b - a) * (j + L::splat(0.5)) / L::splat(sub as f32)
 }
 
 /// Whether `params` ask for any of the 2002 paper's own shortcuts (see

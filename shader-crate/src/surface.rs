@@ -196,8 +196,9 @@ pub fn channel_part(v: Vec4, c: u32, channels: u32) -> Vec4 {
 ///
 /// `GLASS` false compiles the function for a scene without glass (every
 /// surface opaque, no caustics maps): the same result without the glass
-/// code, which a GPU (and llvmpipe, which runs both sides of a branch its
-/// lanes disagree on or not) would otherwise carry through every pixel.
+/// code, which a GPU would otherwise carry through every pixel (on
+/// llvmpipe, Fig. 6's surface pass takes 97 ms without it, 287 ms with it,
+/// though no pixel takes it).
 #[allow(clippy::too_many_arguments)]
 pub fn surface_pixel<const GLASS: bool>(
     index: u32,

@@ -19,6 +19,7 @@ use std::path::Path;
 
 use crate::bench::median;
 use crate::passes::sea::{order2_at, table_rows, EPSILON};
+use crate::passes::{Dispatch, PASSES};
 use crate::reference::{SEA_HEIGHT_FIELD_TOLERANCE, SEA_TOLERANCE};
 use crate::render::{self, Backend};
 use crate::scene::{self, SceneData};
@@ -225,18 +226,17 @@ pub fn run(
                     let r = render::render_layers(&d, backend, false)?;
                     let st = &r.stats;
                     totals.push(st.total_seconds);
-                    let pass = |prefix: &[&str]| -> f64 {
-                        st.passes.iter().filter(|p| prefix.contains(&p.name)).map(|p| p.seconds).sum()
+                    // The sea's passes, once per frame (maps, tables) or per pixel.
+                    let sea = |dispatch: Dispatch| -> f64 {
+                        let names: Vec<&str> = PASSES
+                            .iter()
+                            .filter(|p| p.name().starts_with("sea.") && p.dispatch() == dispatch)
+                            .map(|p| p.name())
+                            .collect();
+                        st.passes.iter().filter(|p| names.contains(&p.name)).map(|p| p.seconds).sum()
                     };
-                    maps.push(pass(&[
-                        "sea.radiance_map",
-                        "sea.scattering_maps",
-                        "sea.accumulated_map",
-                        "sea.table_samples",
-                        "sea.depth_table",
-                        "sea.bottom_correction",
-                    ]));
-                    per_pixel.push(pass(&["sea.reflection", "sea.order1", "sea.order2", "sea.bottom"]));
+                    maps.push(sea(Dispatch::Whole));
+                    per_pixel.push(sea(Dispatch::PerPixel));
                     last = Some(r);
                 }
                 let r = last.expect("at least one repeat");

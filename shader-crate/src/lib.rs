@@ -54,3 +54,14 @@ pub fn scene_geometry<'a>(
 ) -> Geometry<'a> {
     Geometry { spheres, sphere_count: params.sphere_count, triangles, nodes, node_count: params.bvh_node_count }
 }
+
+/// The unit tests' uniform numbers in [0, 1): a 32-bit linear congruential
+/// generator (Numerical Recipes' constants), top 24 bits of each state.
+#[cfg(test)]
+pub(crate) fn test_uniforms(seed: u32) -> impl FnMut() -> f32 {
+    let mut state = seed;
+    move || {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (state >> 8) as f32 / (1u32 << 24) as f32
+    }
+}

@@ -499,11 +499,7 @@ mod tests {
         light.shadow_resolution = 64;
         let res = light.shadow_resolution;
         let texel = 2.0 * light.tan_cutoff / res as f32;
-        let mut state = 12345u32;
-        let mut next = || {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut next = crate::test_uniforms(12345);
         let (mut checked, mut shadowed) = (0, 0);
         for _ in 0..20_000 {
             let z = 0.05 + 20.0 * next();
@@ -544,11 +540,7 @@ mod tests {
         // evaluation equals the sum of the one-point one, lane by lane (to
         // rounding: the light map's factors are multiplied in another order),
         // unused lanes counting nothing.
-        let mut state = 5u32;
-        let mut next = || {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut next = crate::test_uniforms(5);
         let res = 64u32;
         let shadow: Vec<f32> = (0..res * res).map(|_| 1.0 + 8.0 * next()).collect();
         let light_map: Vec<Vec4> = (0..16).map(|_| Vec4::new(next(), next(), next(), 0.0)).collect();

@@ -88,11 +88,7 @@ mod tests {
         // Points inside cones of 5 to 85 degrees, up to the rim, at several
         // resolutions: the texel each reads is never one `outside_the_cone`
         // skips; and the skipped share is about 1 - pi/4 at 512^2.
-        let mut state = 7u32;
-        let mut next = || {
-            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (state >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut next = crate::test_uniforms(7);
         for (deg, res) in [(5.0f32, 64u32), (30.0, 512), (60.0, 129), (85.0, 1024)] {
             let (tan_cutoff, cos2_cutoff, sin2_cutoff) = cone_terms(deg.to_radians());
             let light = GpuLight {

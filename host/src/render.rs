@@ -10,6 +10,7 @@
 use anyhow::Result;
 use glam::Vec4;
 use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -119,6 +120,9 @@ pub struct Rendered {
 pub fn plan(data: &SceneData) -> Vec<PassStats> {
     plans(data).into_iter().map(|(pass, plan)| stats_of(pass, &plan, data)).collect()
 }
+
+/// Pixels per rayon task in the frame's own per-pixel loops (summing layers).
+const PIXEL_CHUNK: usize = 16384;
 
 fn plans(data: &SceneData) -> Vec<(&'static dyn Pass, Plan)> {
     PASSES.iter().map(|&p| (p, p.plan(data))).collect()
@@ -312,16 +316,23 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     }
     // The image: the mean over samples of the sum of the layers (box filter).
     let inv = 1.0 / spp as f32;
-    let mut image = vec![Vec4::ZERO; pixels];
     let mut named = Vec::new();
     for pass in &layers {
         let mut layer = result.remove(pass.radiance_layer().expect("a layer")).expect("inserted above");
-        for (px, s) in image.iter_mut().zip(layer.as_mut_slice::<Vec4>()) {
-            *s = (*s * inv).truncate().extend(0.0);
-            *px += *s;
-        }
+        layer.as_mut_slice::<Vec4>().par_chunks_mut(PIXEL_CHUNK).for_each(|chunk| {
+            for s in chunk {
+                *s = (*s * inv).truncate().extend(0.0);
+            }
+        });
         named.push((pass.name(), layer));
     }
+    // Collected in parallel: the new image's first touch of its pages (a
+    // page fault each) is shared among the threads.
+    let image: Vec<Vec4> = (0..pixels)
+        .into_par_iter()
+        .with_min_len(PIXEL_CHUNK)
+        .map(|i| named.iter().map(|(_, layer)| layer.as_slice::<Vec4>()[i]).sum())
+        .collect();
     let stats = RenderStats {
         backend: backend.name(),
         device: backend.device(),

@@ -38,9 +38,13 @@ pub struct GpuContext {
     device: wgpu::Device,
     queue: wgpu::Queue,
     pub adapter: wgpu::AdapterInfo,
-    /// One pipeline per entry point of the registered passes (`Pass::kernel`
-    /// and its `variants`), by entry point.
-    pipelines: HashMap<&'static str, wgpu::ComputePipeline>,
+    /// Every registered pass's kernels, in one module.
+    module: wgpu::ShaderModule,
+    /// The pipelines built so far, by entry point: each is built the first
+    /// time a frame runs it (`pipeline`), so that a scene pays only for the
+    /// kernels it runs (on lavapipe, building all of them took 0.94 s; Fig. 6
+    /// runs three, 0.12 s of it).
+    pipelines: std::sync::Mutex<HashMap<&'static str, wgpu::ComputePipeline>>,
     max_binding_bytes: u64,
     /// Largest image band, bytes: `max_binding_bytes` unless lowered.
     band_limit_bytes: u64,
@@ -50,7 +54,8 @@ pub struct GpuContext {
 
 impl GpuContext {
     /// Opens the first Vulkan device wgpu finds (a discrete GPU if there is
-    /// one, else lavapipe) and builds every registered pass's pipeline.
+    /// one, else lavapipe) and loads the kernels; pipelines are built when
+    /// a frame first needs them.
     pub fn new() -> Result<Self> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
@@ -73,59 +78,18 @@ impl GpuContext {
             ..Default::default()
         }))
         .with_context(|| format!("cannot open device {}", info.name))?;
-        let pipelines = checked(&device, "building the kernels", || {
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        let module = checked(&device, "loading the kernels", || {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("slicelight kernels"),
                 source: wgpu::util::make_spirv(SPIRV),
-            });
-            // One layout per pass, from the resources it declares, shared by
-            // its kernel and its variants (a variant may leave some unused).
-            let mut pipelines = HashMap::new();
-            for pass in PASSES {
-                let entries: Vec<_> = pass
-                    .reads()
-                    .iter()
-                    .map(|r| (r, true))
-                    .chain(pass.writes().iter().map(|r| (r, false)))
-                    .map(|(r, read_only)| wgpu::BindGroupLayoutEntry {
-                        binding: r.binding,
-                        visibility: wgpu::ShaderStages::COMPUTE,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Storage { read_only },
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    })
-                    .collect();
-                let group = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some(pass.name()),
-                    entries: &entries,
-                });
-                let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some(pass.name()),
-                    bind_group_layouts: &[Some(&group)],
-                    immediate_size: 0,
-                });
-                for kernel in std::iter::once(pass.kernel()).chain(pass.variants().iter().copied()) {
-                    let p = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(kernel),
-                        layout: Some(&layout),
-                        module: &module,
-                        entry_point: Some(kernel),
-                        compilation_options: Default::default(),
-                        cache: None,
-                    });
-                    pipelines.insert(kernel, p);
-                }
-            }
-            pipelines
+            })
         })?;
         Ok(GpuContext {
             device,
             queue,
             adapter: info,
-            pipelines,
+            module,
+            pipelines: Default::default(),
             max_binding_bytes: limits.max_storage_buffer_binding_size as u64,
             band_limit_bytes: limits.max_storage_buffer_binding_size as u64,
             timestamps,
@@ -139,6 +103,69 @@ impl GpuContext {
     /// Whether per-pass times are the device's own (timestamp queries).
     pub fn has_timestamps(&self) -> bool {
         self.timestamps
+    }
+
+    /// The pipeline of `pass`'s entry point `kernel` (its `kernel` or one of
+    /// its `variants`), built on first use. The layout comes from the
+    /// resources the pass declares, the same for all its entry points (a
+    /// variant may leave some unused).
+    fn pipeline(&self, pass: &dyn Pass, kernel: &'static str) -> Result<wgpu::ComputePipeline> {
+        let mut built = self.pipelines.lock().map_err(|_| anyhow!("a thread building a pipeline panicked"))?;
+        if let Some(p) = built.get(kernel) {
+            return Ok(p.clone());
+        }
+        let pipeline = checked(&self.device, &format!("building the kernel {kernel}"), || {
+            let entries: Vec<_> = pass
+                .reads()
+                .iter()
+                .map(|r| (r, true))
+                .chain(pass.writes().iter().map(|r| (r, false)))
+                .map(|(r, read_only)| wgpu::BindGroupLayoutEntry {
+                    binding: r.binding,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                })
+                .collect();
+            let group = self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(pass.name()),
+                entries: &entries,
+            });
+            let layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(pass.name()),
+                bind_group_layouts: &[Some(&group)],
+                immediate_size: 0,
+            });
+            self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(kernel),
+                layout: Some(&layout),
+                module: &self.module,
+                entry_point: Some(kernel),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        })?;
+        built.insert(kernel, pipeline.clone());
+        Ok(pipeline)
+    }
+
+    /// Builds the pipelines `passes` run for `scene` that are not built yet
+    /// (`frame` would build them on first use; a render builds them before
+    /// it starts its clock, so that frame times leave out this one-time cost).
+    pub fn prepare(&self, scene: &SceneData, passes: &[&'static dyn Pass]) -> Result<()> {
+        for pass in passes {
+            self.pipeline(*pass, pass.kernel_for(scene))?;
+        }
+        Ok(())
+    }
+
+    /// The entry points whose pipelines have been built so far.
+    pub fn built_kernels(&self) -> Vec<&'static str> {
+        self.pipelines.lock().map(|p| p.keys().copied().collect()).unwrap_or_default()
     }
 
     /// A storage buffer of `bytes` bytes; wgpu zero-fills it.
@@ -224,6 +251,10 @@ impl GpuContext {
             };
             buffers.insert(r.binding, buffer);
         }
+        let pipelines = passes
+            .iter()
+            .map(|pass| Ok((pass.name(), self.pipeline(*pass, pass.kernel_for(scene))?)))
+            .collect::<Result<HashMap<_, _>>>()?;
         let bind_groups = checked(&self.device, "binding the scene's buffers", || {
             passes
                 .iter()
@@ -237,7 +268,7 @@ impl GpuContext {
                             resource: buffers[&r.binding].as_entire_binding(),
                         })
                         .collect();
-                    let layout = self.pipelines[pass.kernel_for(scene)].get_bind_group_layout(0);
+                    let layout = pipelines[pass.name()].get_bind_group_layout(0);
                     let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some(pass.name()),
                         layout: &layout,
@@ -247,8 +278,7 @@ impl GpuContext {
                 })
                 .collect::<HashMap<_, _>>()
         })?;
-        let kernels = passes.iter().map(|p| (p.name(), p.kernel_for(scene))).collect();
-        let frame = GpuFrame { ctx: self, common: scene.common, buffers, bind_groups, kernels };
+        let frame = GpuFrame { ctx: self, common: scene.common, buffers, bind_groups, pipelines };
         frame.set_band(0, band, 0);
         Ok(frame)
     }
@@ -308,8 +338,8 @@ pub struct GpuFrame<'a> {
     common: slicelight_shaders::types::CommonParams,
     buffers: HashMap<u32, wgpu::Buffer>,
     bind_groups: HashMap<&'static str, wgpu::BindGroup>,
-    /// The entry point each pass runs for this scene (`Pass::kernel_for`).
-    kernels: HashMap<&'static str, &'static str>,
+    /// The pipeline each pass runs for this scene (its `Pass::kernel_for`).
+    pipelines: HashMap<&'static str, wgpu::ComputePipeline>,
 }
 
 impl GpuFrame<'_> {
@@ -385,7 +415,7 @@ impl GpuFrame<'_> {
                 });
                 let mut cpass = encoder
                     .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(pass.name()), timestamp_writes });
-                cpass.set_pipeline(&self.ctx.pipelines[self.kernels[pass.name()]]);
+                cpass.set_pipeline(&self.pipelines[pass.name()]);
                 cpass.set_bind_group(0, &self.bind_groups[pass.name()], &[]);
                 cpass.dispatch_workgroups(gx, gy, 1);
             }

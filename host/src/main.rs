@@ -238,6 +238,9 @@ fn run(cli: Cli) -> Result<()> {
                 "  total         {:>9.3} s  ({} sample(s) per pixel; pass times: {})",
                 st.total_seconds, st.samples_per_pixel, st.pass_timing
             );
+            if st.kernel_build_seconds > 0.0 {
+                eprintln!("  (before it: {:.3} s building the GPU kernels it runs)", st.kernel_build_seconds);
+            }
             if st.counter("shaft_samples_naive") > 0 {
                 eprintln!(
                     "  shaft samples {} of a naive {} ({:.1}%)",

@@ -96,6 +96,10 @@ pub struct RenderStats {
     pub pass_timing: &'static str,
     /// Wall time of the whole render, including uploads and read-back on the GPU.
     pub total_seconds: f64,
+    /// Wall time spent before the render building the GPU pipelines of the
+    /// kernels it runs that were not built yet (a backend reused for later
+    /// renders builds each once); 0 on the CPU.
+    pub kernel_build_seconds: f64,
     /// The passes' named work counts (`shaft_samples`, ...).
     pub counters: BTreeMap<&'static str, u64>,
 }
@@ -194,6 +198,14 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         .collect();
     let total: u64 = stats.iter().map(|p| p.invocations).sum();
     let pb = if show_progress { progress_bar(total) } else { ProgressBar::hidden() };
+    let kernel_build_seconds = match backend {
+        Backend::Gpu(ctx) => {
+            let t = Instant::now();
+            ctx.prepare(data, &running.iter().map(|r| r.1).collect::<Vec<_>>())?;
+            t.elapsed().as_secs_f64()
+        }
+        Backend::Cpu => 0.0,
+    };
     let start = Instant::now();
     let layers: Vec<&'static dyn Pass> = running.iter().map(|r| r.1).filter(|p| p.radiance_layer().is_some()).collect();
     let pixels = data.pixel_count() as usize;
@@ -342,6 +354,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         passes: stats,
         pass_timing,
         total_seconds: start.elapsed().as_secs_f64(),
+        kernel_build_seconds,
         counters,
     };
     Ok(Rendered { image, layers: named, stats })

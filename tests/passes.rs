@@ -324,3 +324,34 @@ fn the_plan_lists_every_registered_pass() {
     let check = plan.iter().find(|p| p.name == "scatter_check").unwrap();
     assert!(!check.ran, "the self-check runs only when asked for");
 }
+
+#[test]
+fn a_dropped_buffers_storage_is_reused_and_zeroed_again() {
+    // An unusual size, so that no other test's buffers match it.
+    let len = 4 * ((1 << 16) + 7919);
+    let mut a = slicelight::passes::Buffer::zeroed::<f32>(len);
+    a.as_mut_slice::<f32>().fill(1.0);
+    let storage = a.as_slice::<f32>().as_ptr();
+    drop(a);
+    let b = slicelight::passes::Buffer::zeroed::<f32>(len);
+    assert_eq!(b.as_slice::<f32>().as_ptr(), storage, "the kept storage was not reused");
+    assert!(b.as_slice::<f32>().iter().all(|&x| x == 0.0), "reused storage not zeroed");
+}
+
+#[test]
+fn frames_in_one_process_do_not_see_each_others_buffers() {
+    // Pass outputs reuse the storage of the previous frame's buffers without
+    // zeroing it (`Frame::write_all`): a pixel a kernel failed to write
+    // would keep another scene's value. Fig. 6, then the stage (the same
+    // size, so its buffers take Fig. 6's storage), then Fig. 6 again: the
+    // two Fig. 6 images are the same to the bit.
+    let load = |name: &str| slicelight::scene::load(&common::root().join(format!("scenes/{name}.toml"))).unwrap();
+    let (fig6, stage) = (load("fig6_sphere"), load("fig7_stage"));
+    let first = render::render_layers(&fig6, &Backend::Cpu, false).unwrap();
+    let first_image = first.image.clone();
+    drop(first);
+    let other = render::render(&stage, &Backend::Cpu, false).unwrap().0;
+    assert_ne!(other, first_image);
+    let again = render::render(&fig6, &Backend::Cpu, false).unwrap().0;
+    assert!(again == first_image, "Fig. 6 rendered differently after the stage");
+}

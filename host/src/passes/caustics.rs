@@ -765,7 +765,7 @@ impl Pass for Caustics {
         )
     }
     fn run_cpu(&self, _scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        frame.write::<Vec4>(&CAUSTICS_RADIANCE, common.band_pixels as usize, |f, out| {
+        frame.write_all::<Vec4>(&CAUSTICS_RADIANCE, common.band_pixels as usize, |f, out| {
             let gbuffer = f.get::<GBufferTexel>(&GBUFFER);
             for_each_invocation(out, common.band_start, progress, |i, v| {
                 *v = caustics_pixel(&gbuffer[(i - common.band_start) as usize]);

@@ -848,7 +848,7 @@ impl Pass for SeaReflection {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, sky) = (&scene.sea.params, &scene.sky.params);
         let blank = slicelight_shaders::surface::no_surface();
-        frame.write::<Vec4>(&SEA_REFLECTION, common.band_pixels as usize, |frame, out| {
+        frame.write_all::<Vec4>(&SEA_REFLECTION, common.band_pixels as usize, |frame, out| {
             let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
             let sky_view = frame.get::<Vec4>(&SKY_VIEW);
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
@@ -876,7 +876,7 @@ fn run_term(
     term: impl Fn(u32, &GBufferTexel, &[Vec4], &[Vec4]) -> Vec4 + Sync,
 ) {
     let blank = slicelight_shaders::surface::no_surface();
-    frame.write::<Vec4>(out, common.band_pixels as usize, |frame, values| {
+    frame.write_all::<Vec4>(out, common.band_pixels as usize, |frame, values| {
         let maps = frame.get::<Vec4>(&SEA_ACCUMULATED_MAP);
         let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION);
         let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);

@@ -49,7 +49,7 @@ impl Pass for ShadowMaps {
 
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let geometry = scene.geometry();
-        frame.write::<f32>(&SHADOW_MAPS, common.shadow_texel_count as usize, |_, out| {
+        frame.write_all::<f32>(&SHADOW_MAPS, common.shadow_texel_count as usize, |_, out| {
             for_each_invocation(out, 0, progress, |i, v| *v = shadow_map_texel(i, common, &scene.lights, &geometry));
         });
     }

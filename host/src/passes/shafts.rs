@@ -285,7 +285,7 @@ impl Pass for Shafts {
 
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let s = &scene.shafts;
-        frame.write::<Vec4>(&SHAFTS_RADIANCE, common.band_pixels as usize, |frame, out| {
+        frame.write_all::<Vec4>(&SHAFTS_RADIANCE, common.band_pixels as usize, |frame, out| {
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
             let shadow = frame.get::<f32>(&SHADOW_MAPS);
             // The CPU runs the variant the GPU would (`kernel_for`), with

@@ -468,7 +468,7 @@ impl Pass for Sky {
         let n = common.band_pixels as usize;
         let p = &scene.sky.params;
         let blank = slicelight_shaders::surface::no_surface();
-        frame.write::<Vec4>(&SKY_RADIANCE, n, |frame, out| {
+        frame.write_all::<Vec4>(&SKY_RADIANCE, n, |frame, out| {
             let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
             let sky_view = frame.get::<Vec4>(&SKY_VIEW);
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);

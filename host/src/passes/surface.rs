@@ -102,8 +102,9 @@ impl Pass for Surface {
 
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let n = common.band_pixels as usize;
-        let mut radiance = Buffer::zeroed::<Vec4>(n);
-        let mut gbuffer = Buffer::zeroed::<GBufferTexel>(n);
+        // Every pixel of both is assigned below.
+        let mut radiance = Buffer::overwritten::<Vec4>(n);
+        let mut gbuffer = Buffer::overwritten::<GBufferTexel>(n);
         let geometry = scene.geometry();
         let glass =
             slicelight_shaders::glass::Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };

@@ -267,17 +267,21 @@ impl Buffer {
     /// new pages are zero and cost nothing until touched (a sparse caustics
     /// map, a layer most pixels of which a pass leaves at 0).
     pub fn zeroed<T: Pod>(len: usize) -> Buffer {
-        let bytes = len * std::mem::size_of::<T>();
-        let blocks = recycled(bytes.div_ceil(16)).unwrap_or_else(|| bytemuck::zeroed_vec::<Block>(bytes.div_ceil(16)));
-        Buffer { blocks: std::sync::Arc::new(blocks), bytes }
+        Buffer::of::<T>(len, recycled)
     }
 
     /// `len` `T`s of unspecified value (kept storage reused as it is, else
     /// zeroed), for a pass that assigns every element before anything reads
     /// the buffer: `cpu::for_each_invocation` over all of it.
     pub fn overwritten<T: Pod>(len: usize) -> Buffer {
+        Buffer::of::<T>(len, take_kept)
+    }
+
+    /// `len` `T`s in storage from `kept` (by its number of blocks), or else
+    /// fresh and zeroed.
+    fn of<T: Pod>(len: usize, kept: fn(usize) -> Option<Vec<Block>>) -> Buffer {
         let bytes = len * std::mem::size_of::<T>();
-        let blocks = take_kept(bytes.div_ceil(16)).unwrap_or_else(|| bytemuck::zeroed_vec::<Block>(bytes.div_ceil(16)));
+        let blocks = kept(bytes.div_ceil(16)).unwrap_or_else(|| bytemuck::zeroed_vec::<Block>(bytes.div_ceil(16)));
         Buffer { blocks: std::sync::Arc::new(blocks), bytes }
     }
 
@@ -387,17 +391,17 @@ impl Frame {
     /// Runs `fill` on a zeroed buffer of `len` `T`s that becomes the
     /// contents of `r`, while the rest of the frame stays readable.
     pub fn write<T: Pod>(&mut self, r: &Resource, len: usize, fill: impl FnOnce(&Frame, &mut [T])) {
-        let mut buffer = Buffer::zeroed::<T>(len);
-        self.buffers.remove(&r.binding);
-        fill(self, buffer.as_mut_slice());
-        self.buffers.insert(r.binding, buffer);
+        self.fill_into(r, Buffer::zeroed::<T>(len), fill);
     }
 
     /// As `write`, for a `fill` that assigns every element (a kernel run
     /// over the whole buffer by `cpu::for_each_invocation`): the buffer
     /// starts with unspecified values (`Buffer::overwritten`), not zeroed.
     pub fn write_all<T: Pod>(&mut self, r: &Resource, len: usize, fill: impl FnOnce(&Frame, &mut [T])) {
-        let mut buffer = Buffer::overwritten::<T>(len);
+        self.fill_into(r, Buffer::overwritten::<T>(len), fill);
+    }
+
+    fn fill_into<T: Pod>(&mut self, r: &Resource, mut buffer: Buffer, fill: impl FnOnce(&Frame, &mut [T])) {
         self.buffers.remove(&r.binding);
         fill(self, buffer.as_mut_slice());
         self.buffers.insert(r.binding, buffer);

@@ -77,9 +77,13 @@ pub fn camera_ray(params: &CommonParams, x: u32, y: u32) -> (Vec3, Vec3) {
         };
         return (params.camera_position.xyz(), (forward * theta.cos() + side * theta.sin()).normalize());
     }
-    let ndc = pixel_ndc(params, x, y, offset);
-    let dir = forward + params.camera_right.xyz() * ndc.x + params.camera_up.xyz() * ndc.y;
-    (params.camera_position.xyz(), dir.normalize())
+    (params.camera_position.xyz(), pinhole_direction(params, pixel_ndc(params, x, y, offset)))
+}
+
+/// The unit direction of a pinhole camera's ray through the point `ndc`
+/// (normalised device coordinates, `pixel_ndc`).
+pub fn pinhole_direction(params: &CommonParams, ndc: Vec2) -> Vec3 {
+    (params.camera_forward.xyz() + params.camera_right.xyz() * ndc.x + params.camera_up.xyz() * ndc.y).normalize()
 }
 
 #[cfg(test)]

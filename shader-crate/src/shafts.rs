@@ -16,11 +16,13 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use crate::camera::camera_ray;
-use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
+use crate::camera::{camera_ray, pinhole_direction, pixel_ndc};
+use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::light::{emitted_visible, emitted_visible4, light_local, transmittance, Lanes};
 use crate::phase;
-use crate::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT};
+use crate::types::{
+    CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, PROJECTION_FISHEYE,
+};
 use core::f32::consts::PI;
 use spirv_std::spirv;
 
@@ -153,6 +155,87 @@ fn forward_half_line(qz: f32, vz: f32) -> (f32, f32) {
     } else {
         (f32::MAX, -f32::MAX)
     }
+}
+
+/// Pixels on a side of the square tiles of the shafts' light culling.
+pub const TILE: u32 = 8;
+
+/// Tiles across the image (a partial tile at the right edge included).
+pub fn tiles_across(common: &CommonParams) -> u32 {
+    common.width.div_ceil(TILE)
+}
+
+/// Tiles in the image.
+pub fn tile_count(common: &CommonParams) -> u32 {
+    tiles_across(common) * common.height.div_ceil(TILE)
+}
+
+/// The lights whose volume a pixel of tile `index` (row by row) may see,
+/// as a bit mask (bit `l` for light `l < 32`; lights from 32 on are always
+/// kept): the shafts' per-pixel loop skips the others, and a pixel of a
+/// tile with none skips the pass (Fig. 6's cone covers a third of its
+/// image). Conservative, never dropping a light a pixel's ray meets:
+///
+/// every view ray of the tile is within the angle `rho` of the ray through
+/// the tile's centre (`rho` the largest angle to its corners: the angle to
+/// the centre ray is quasi-convex over the image plane), so up to the
+/// distance `t_max` the tile's rays stay within `delta = 2 t_max sin(rho/2)`
+/// of that centre ray; and every point within `delta` of a spot's cone lies
+/// in the same cone with its apex moved back along the axis by
+/// `delta / sin(cutoff)`. So a tile whose centre ray misses the moved cone
+/// (`clip_to_cone`, between the planes' nearest and farthest distances)
+/// has no pixel whose ray meets the light's. Only spots are culled;
+/// directional and point lights are kept, and a fisheye keeps every light.
+pub fn tile_lights(index: u32, common: &CommonParams, params: &ShaftsParams, lights: &[GpuLight]) -> u32 {
+    let count = common.light_count.min(32);
+    let every = if count == 32 { u32::MAX } else { (1u32 << count) - 1 };
+    if common.projection == PROJECTION_FISHEYE {
+        return every;
+    }
+    let across = tiles_across(common);
+    let (x0, y0) = ((index % across) * TILE, (index / across) * TILE);
+    let (x1, y1) = ((x0 + TILE).min(common.width), (y0 + TILE).min(common.height));
+    let forward = common.camera_forward.xyz();
+    let centre =
+        pinhole_direction(common, pixel_ndc(common, x0, y0, Vec2::new(0.5 * (x1 - x0) as f32, 0.5 * (y1 - y0) as f32)));
+    // The smallest cosine to a corner: of the angle to the centre ray, and
+    // of the view angle (`t = depth / cos`).
+    let mut cos_rho = 1.0f32;
+    let mut cos_view = centre.dot(forward);
+    let mut k = 0;
+    while k < 4 {
+        let (cx, cy) = (if k % 2 == 0 { x0 } else { x1 }, if k < 2 { y0 } else { y1 });
+        let corner = pinhole_direction(common, pixel_ndc(common, cx, cy, Vec2::ZERO));
+        cos_rho = cos_rho.min(corner.dot(centre));
+        cos_view = cos_view.min(corner.dot(forward));
+        k += 1;
+    }
+    let t_max = params.depth_far / cos_view.max(1e-6);
+    // 2 sin(rho / 2) = sqrt(2 - 2 cos rho); widened by 1 % and a micrometre
+    // per metre of reach for rounding.
+    let delta = ((2.0 - 2.0 * cos_rho).max(0.0).sqrt() * 1.01 + 1e-6) * t_max;
+    let origin = common.camera_position.xyz();
+    let mut mask = 0u32;
+    let mut l = 0;
+    while l < count as usize {
+        let light = &lights[l];
+        let sin_cutoff = light.sin2_cutoff.sqrt();
+        let keep = if light.in_view == 0 {
+            false
+        } else if light.kind != LIGHT_SPOT || sin_cutoff < 1e-6 {
+            true
+        } else {
+            let mut moved = *light;
+            moved.position = (light.position.xyz() - light.axis_z.xyz() * (delta / sin_cutoff)).extend(1.0);
+            let (lo, hi) = clip_to_cone(&moved, origin, centre, params.depth_near, t_max);
+            lo <= hi
+        };
+        if keep {
+            mask |= 1 << l;
+        }
+        l += 1;
+    }
+    mask
 }
 
 /// The interval of a view ray inside a directional light's lit volume: past
@@ -405,10 +488,15 @@ pub fn shafts_pixel<const PAPER: bool, const PACKED: bool>(
     light_map: &[Vec4],
     shadow: &[f32],
     tables: &[Vec4],
+    tiles: &[u32],
     surface_distance: f32,
 ) -> Vec4 {
     let x = index % common.width;
     let y = index / common.width;
+    let lit = tiles[((y / TILE) * tiles_across(common) + x / TILE) as usize];
+    if lit == 0 && common.light_count <= 32 {
+        return Vec4::ZERO;
+    }
     let (o, d) = camera_ray(common, x, y);
     let cos_view = d.dot(common.camera_forward.xyz());
     let planes = params.plane_count;
@@ -434,7 +522,8 @@ pub fn shafts_pixel<const PAPER: bool, const PACKED: bool>(
         let light = &lights[l];
         let directional = light.kind == LIGHT_DIRECTIONAL;
         let packed = PACKED && light.kind != LIGHT_POINT;
-        let (lo, hi) = if light.in_view == 0 {
+        let culled = l < 32 && lit & (1 << l) == 0;
+        let (lo, hi) = if light.in_view == 0 || culled {
             (t_far, t_near)
         } else if directional {
             clip_to_beam(light, o, d, t_near, t_far)
@@ -542,6 +631,7 @@ macro_rules! shafts_entry_point {
             #[spirv(storage_buffer, descriptor_set = 0, binding = 10)] params: &[ShaftsParams],
             #[spirv(storage_buffer, descriptor_set = 0, binding = 11)] tables: &[Vec4],
             #[spirv(storage_buffer, descriptor_set = 0, binding = 12)] radiance: &mut [Vec4],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 39)] tiles: &[u32],
         ) {
             let index = crate::flat_index(id, groups);
             let common = &common[0];
@@ -555,6 +645,7 @@ macro_rules! shafts_entry_point {
                     light_map,
                     shadow,
                     tables,
+                    tiles,
                     distance,
                 );
             }
@@ -573,6 +664,24 @@ shafts_entry_point!(
     shafts_exact_kernel,
     false
 );
+
+/// The shafts' light-culling entry point: one invocation per tile
+/// (`tile_lights`).
+#[spirv(compute(threads(64)))]
+pub fn shafts_tiles_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 10)] params: &[ShaftsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 39)] tiles: &mut [u32],
+) {
+    let index = crate::flat_index(id, groups);
+    let common = &common[0];
+    if index < tile_count(common) {
+        tiles[index as usize] = tile_lights(index, common, &params[0], lights);
+    }
+}
 
 #[cfg(test)]
 mod tests {
@@ -677,6 +786,77 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn tile_culling_keeps_every_light_a_pixel_of_the_tile_sees() {
+        let mut next = crate::test_uniforms(99);
+        let (mut pairs, mut culled) = (0u32, 0u32);
+        for case in 0..80u32 {
+            let eye = Vec3::new(12.0 * next() - 6.0, 0.5 + 3.5 * next(), 4.0 + 6.0 * next());
+            let target = Vec3::new(2.0 * next() - 1.0, 3.0 * next(), 2.0 * next() - 1.0);
+            let forward = (target - eye).normalize();
+            let right = forward.cross(Vec3::Y).normalize();
+            let up = right.cross(forward);
+            let (width, height) = (40 + case, 30 + case / 2);
+            let tan_half = (0.2 + 0.6 * next()).tan();
+            let common = CommonParams {
+                camera_position: eye.extend(1.0),
+                camera_forward: forward.extend(0.0),
+                camera_right: (right * tan_half * width as f32 / height as f32).extend(0.0),
+                camera_up: (up * tan_half).extend(0.0),
+                width,
+                height,
+                light_count: 3,
+                samples_per_pixel: 1,
+                ..Default::default()
+            };
+            let lights: [GpuLight; 3] = core::array::from_fn(|_| {
+                let mut light = spot(3.0 + 60.0 * next());
+                let z = Vec3::new(2.0 * next() - 1.0, -1.0, 2.0 * next() - 1.0).normalize();
+                let x = z.cross(Vec3::Z).normalize();
+                light.position = Vec3::new(6.0 * next() - 3.0, 2.0 + 4.0 * next(), 6.0 * next() - 3.0).extend(1.0);
+                (light.axis_x, light.axis_y, light.axis_z) = (x.extend(0.0), z.cross(x).extend(0.0), z.extend(0.0));
+                light.kind = LIGHT_SPOT;
+                light.in_view = 1;
+                light
+            });
+            let params =
+                ShaftsParams { depth_near: 0.1 + next(), depth_far: 5.0 + 15.0 * next(), ..Default::default() };
+            for tile in 0..tile_count(&common) {
+                let mask = tile_lights(tile, &common, &params, &lights);
+                let (tx, ty) = (tile % tiles_across(&common), tile / tiles_across(&common));
+                for (l, light) in lights.iter().enumerate() {
+                    let kept = mask & (1 << l) != 0;
+                    pairs += 1;
+                    culled += (!kept) as u32;
+                    if kept {
+                        continue;
+                    }
+                    // A culled light: no ray through any pixel of the tile
+                    // (corners, middle) meets its cone between the planes.
+                    for y in ty * TILE..((ty + 1) * TILE).min(height) {
+                        for x in tx * TILE..((tx + 1) * TILE).min(width) {
+                            for offset in [
+                                Vec2::ZERO,
+                                Vec2::splat(0.5),
+                                Vec2::new(0.999, 0.0),
+                                Vec2::new(0.0, 0.999),
+                                Vec2::splat(0.999),
+                            ] {
+                                let d = pinhole_direction(&common, pixel_ndc(&common, x, y, offset));
+                                let cos = d.dot(forward);
+                                let (lo, hi) =
+                                    clip_to_cone(light, eye, d, params.depth_near / cos, params.depth_far / cos);
+                                assert!(lo >= hi, "case {case}: pixel ({x}, {y}) sees light {l} in [{lo}, {hi}], culled in tile {tile}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // The culling does cull: most (tile, light) pairs here see nothing.
+        assert!(culled > pairs / 3, "{culled} of {pairs} culled");
     }
 
     #[test]

@@ -54,6 +54,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &sea_table::SeaBottomCorrection,
     &surface::Surface,
     &caustics::Caustics,
+    &shafts::ShaftsTiles,
     &shafts::Shafts,
     &sky::Sky,
     &sea::SeaReflection,

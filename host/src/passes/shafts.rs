@@ -7,7 +7,9 @@ use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Deserialize;
-use slicelight_shaders::shafts::{shafts_pixel, table_entry, uses_paper_modes, ShaftsParams, MODE_EXACT, MODE_TABLES};
+use slicelight_shaders::shafts::{
+    shafts_pixel, table_entry, tile_count, tile_lights, uses_paper_modes, ShaftsParams, MODE_EXACT, MODE_TABLES,
+};
 use slicelight_shaders::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL};
 
 use super::*;
@@ -25,6 +27,10 @@ pub static SHAFT_TABLES: Resource = Resource {
     name: "shaft tables",
     kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.shafts.tables)),
 };
+/// Per tile of `TILE x TILE` pixels, the lights whose volume its pixels may
+/// see (`tile_lights`).
+pub static SHAFT_TILES: Resource =
+    Resource { binding: 39, name: "shaft tiles", kind: ResourceKind::Frame(|s| tile_count(&s.common) as u64 * 4) };
 /// In-scattered radiance per pixel (rgb); w = the `H I_l` samples evaluated.
 pub static SHAFTS_RADIANCE: Resource =
     Resource { binding: 12, name: "shafts radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
@@ -214,6 +220,68 @@ fn light_in_view(p: &CommonParams, shafts: &ShaftsParams, l: &GpuLight) -> bool 
         })
 }
 
+/// Why a scene has no shafts (the reason the plan gives), or `None`.
+fn why_no_shafts(scene: &SceneData) -> Option<String> {
+    if !scene.scatters() {
+        Some("the medium does not scatter (sigma_s = 0)".into())
+    } else if scene.lights.iter().all(|l| l.in_view == 0) {
+        Some(format!("no light's volume is in view ({} light(s))", scene.lights.len()))
+    } else {
+        None
+    }
+}
+
+/// The shafts' light culling per tile of pixels (kernel `tile_lights`), run
+/// wherever the shafts run.
+pub struct ShaftsTiles;
+
+impl Pass for ShaftsTiles {
+    fn name(&self) -> &'static str {
+        "shafts.tiles"
+    }
+    fn kernel(&self) -> &'static str {
+        "shafts::shafts_tiles_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, LIGHTS, SHAFTS_PARAMS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SHAFT_TILES]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        match why_no_shafts(scene) {
+            Some(why) => Plan::skip(why),
+            None => Plan::run(
+                format!("lights each {0}x{0}-pixel tile may see", slicelight_shaders::shafts::TILE),
+                tile_count(&scene.common) as u64,
+            ),
+        }
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        frame.write_all::<u32>(&SHAFT_TILES, tile_count(common) as usize, |_, out| {
+            for_each_invocation(out, 0, progress, |i, v| {
+                *v = tile_lights(i, common, &scene.shafts.params, &scene.lights)
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // One clipping of a ray per tile and light, with the tolerances of
+        // `clip_to_cone`: a light whose moved cone the centre ray grazes may
+        // be kept on one backend only (either keeps the culling
+        // conservative); at most 1e-3 of the tiles may differ.
+        let (g, c) = (gpu.get::<u32>(&SHAFT_TILES), cpu.get::<u32>(&SHAFT_TILES));
+        ensure!(g.len() == c.len(), "{} and {} tiles", g.len(), c.len());
+        let differ = g.iter().zip(c).filter(|(a, b)| a != b).count();
+        let allowed = c.len() / 1000 + 1;
+        ensure!(differ <= allowed, "{differ} of {} tiles differ (allowed {allowed})", c.len());
+        let culled = c.iter().filter(|m| **m == 0).count();
+        Ok(format!("{} tiles, {culled} with no light, {differ} differ", c.len()))
+    }
+}
+
 pub struct Shafts;
 
 impl Pass for Shafts {
@@ -234,7 +302,7 @@ impl Pass for Shafts {
         }
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, LIGHTS, LIGHT_MAPS, SHADOW_MAPS, GBUFFER, SHAFTS_PARAMS, SHAFT_TABLES]
+        resources![COMMON, LIGHTS, LIGHT_MAPS, SHADOW_MAPS, GBUFFER, SHAFTS_PARAMS, SHAFT_TABLES, SHAFT_TILES]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SHAFTS_RADIANCE]
@@ -250,18 +318,15 @@ impl Pass for Shafts {
         let lights = scene.lights.len();
         let visible = scene.lights.iter().filter(|l| l.in_view != 0).count();
         let s = &scene.shafts.settings;
-        if !scene.scatters() {
-            Plan::skip("the medium does not scatter (sigma_s = 0)")
-        } else if visible == 0 {
-            Plan::skip(format!("no light's volume is in view ({lights} light(s))"))
-        } else {
-            Plan::run(
+        match why_no_shafts(scene) {
+            Some(why) => Plan::skip(why),
+            None => Plan::run(
                 format!(
                     "{visible} of {lights} light(s) in view, {} planes x {} sub-planes, {:?} mode",
                     s.planes, s.subplanes, s.mode
                 ),
                 0,
-            )
+            ),
         }
     }
 
@@ -292,9 +357,10 @@ impl Pass for Shafts {
             // its samples in SIMD packets.
             let pixel =
                 if uses_paper_modes(&s.params) { shafts_pixel::<true, true> } else { shafts_pixel::<false, true> };
+            let tiles = frame.get::<u32>(&SHAFT_TILES);
             for_each_invocation(out, common.band_start, progress, |i, px| {
                 let distance = gbuffer[(i - common.band_start) as usize].normal_distance.w;
-                *px = pixel(i, common, &s.params, &scene.lights, &scene.light_map, shadow, &s.tables, distance);
+                *px = pixel(i, common, &s.params, &scene.lights, &scene.light_map, shadow, &s.tables, tiles, distance);
             });
         });
     }

@@ -95,6 +95,7 @@ fn good_scene_writes_png_exr_and_stats() {
             "sea.bottom_correction",
             "surface",
             "caustics",
+            "shafts.tiles",
             "shafts",
             "sky",
             "sea.reflection",

@@ -184,8 +184,10 @@ pub fn tile_count(common: &CommonParams) -> u32 {
 /// in the same cone with its apex moved back along the axis by
 /// `delta / sin(cutoff)`. So a tile whose centre ray misses the moved cone
 /// (`clip_to_cone`, between the planes' nearest and farthest distances)
-/// has no pixel whose ray meets the light's. Only spots are culled;
-/// directional and point lights are kept, and a fisheye keeps every light.
+/// has no pixel whose ray meets the light's. A directional light's volume
+/// is widened likewise (its window by `delta` on every side, its entry
+/// plane moved back by `delta`). Point lights are kept, and a fisheye keeps
+/// every light.
 pub fn tile_lights(index: u32, common: &CommonParams, params: &ShaftsParams, lights: &[GpuLight]) -> u32 {
     let count = common.light_count.min(32);
     let every = if count == 32 { u32::MAX } else { (1u32 << count) - 1 };
@@ -222,6 +224,15 @@ pub fn tile_lights(index: u32, common: &CommonParams, params: &ShaftsParams, lig
         let sin_cutoff = light.sin2_cutoff.sqrt();
         let keep = if light.in_view == 0 {
             false
+        } else if light.kind == LIGHT_DIRECTIONAL {
+            // Points within `delta` of the lit volume lie past the entry
+            // plane moved back by `delta`, inside the window widened by it.
+            let mut widened = *light;
+            widened.position = (light.position.xyz() - light.axis_z.xyz() * delta).extend(1.0);
+            widened.half_extent_x += delta;
+            widened.half_extent_y += delta;
+            let (lo, hi) = clip_to_beam(&widened, origin, centre, params.depth_near, t_max);
+            lo <= hi
         } else if light.kind != LIGHT_SPOT || sin_cutoff < 1e-6 {
             true
         } else {
@@ -790,8 +801,9 @@ mod tests {
 
     #[test]
     fn tile_culling_keeps_every_light_a_pixel_of_the_tile_sees() {
+        // Three spots and a window's directional light per case.
         let mut next = crate::test_uniforms(99);
-        let (mut pairs, mut culled) = (0u32, 0u32);
+        let (mut pairs, mut culled, mut windows_culled) = (0u32, 0u32, 0u32);
         for case in 0..80u32 {
             let eye = Vec3::new(12.0 * next() - 6.0, 0.5 + 3.5 * next(), 4.0 + 6.0 * next());
             let target = Vec3::new(2.0 * next() - 1.0, 3.0 * next(), 2.0 * next() - 1.0);
@@ -821,6 +833,23 @@ mod tests {
                 light.in_view = 1;
                 light
             });
+            // And a directional light through a window.
+            let z = Vec3::new(0.6 * next() - 0.3, -1.0, 0.6 * next() - 0.3).normalize();
+            let x = z.cross(Vec3::Z).normalize();
+            let window = GpuLight {
+                kind: LIGHT_DIRECTIONAL,
+                position: Vec3::new(4.0 * next() - 2.0, 5.0, 4.0 * next() - 2.0).extend(1.0),
+                axis_x: x.extend(0.0),
+                axis_y: z.cross(x).extend(0.0),
+                axis_z: z.extend(0.0),
+                half_extent_x: 0.2 + next(),
+                half_extent_y: 0.2 + next(),
+                bounded: 1,
+                in_view: 1,
+                ..Default::default()
+            };
+            let lights = [lights[0], lights[1], lights[2], window];
+            let common = CommonParams { light_count: 4, ..common };
             let params =
                 ShaftsParams { depth_near: 0.1 + next(), depth_far: 5.0 + 15.0 * next(), ..Default::default() };
             for tile in 0..tile_count(&common) {
@@ -830,6 +859,7 @@ mod tests {
                     let kept = mask & (1 << l) != 0;
                     pairs += 1;
                     culled += (!kept) as u32;
+                    windows_culled += (!kept && light.kind == LIGHT_DIRECTIONAL) as u32;
                     if kept {
                         continue;
                     }
@@ -846,8 +876,8 @@ mod tests {
                             ] {
                                 let d = pinhole_direction(&common, pixel_ndc(&common, x, y, offset));
                                 let cos = d.dot(forward);
-                                let (lo, hi) =
-                                    clip_to_cone(light, eye, d, params.depth_near / cos, params.depth_far / cos);
+                                let clip = if light.kind == LIGHT_DIRECTIONAL { clip_to_beam } else { clip_to_cone };
+                                let (lo, hi) = clip(light, eye, d, params.depth_near / cos, params.depth_far / cos);
                                 assert!(lo >= hi, "case {case}: pixel ({x}, {y}) sees light {l} in [{lo}, {hi}], culled in tile {tile}");
                             }
                         }
@@ -855,8 +885,9 @@ mod tests {
                 }
             }
         }
-        // The culling does cull: most (tile, light) pairs here see nothing.
+        // The culling does cull: many (tile, light) pairs here see nothing.
         assert!(culled > pairs / 3, "{culled} of {pairs} culled");
+        assert!(windows_culled > pairs / 16, "{windows_culled} of {pairs} culled for the windows");
     }
 
     #[test]

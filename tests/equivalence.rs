@@ -85,7 +85,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
     let mut fog = fog_spot();
     fog.requested_passes.push("scatter_check".into());
     let mut mapped = window_scene();
-    mapped.common.surface_shadows = slicelight::shaders::types::SHADOWS_MAP;
+    mapped.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
     let mut direct = sky("sky_sunset", 180, 120);
     direct.sky.params.use_sky_view = 0;
     vec![

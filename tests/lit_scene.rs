@@ -266,7 +266,7 @@ fn surfaces_with_shadow_rays_agree_with_the_reference_to_two_levels() {
     // and the reference's f64 angle test part at the pixel centre).
     assert_eq!(other, 0);
     assert!(edge <= 5, "{edge} edge pixels");
-    data.common.surface_shadows = slicelight::shaders::types::SHADOWS_MAP;
+    data.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
     let (edge, other) = off_by_more_than_two_levels(&data);
     println!("shadow map: {other} pixels off by more than 2 levels, {edge} more where the reference changes within the pixel");
     // Measured: 30, all on the shadow's outline.

@@ -293,7 +293,7 @@ fn clear_air_skips_the_shafts_pass() {
     // with shadow-mapped surfaces they run again.
     let maps = plan.iter().find(|p| p.name == "shadow_maps").unwrap();
     assert!(!maps.ran, "{maps:?}");
-    data.common.surface_shadows = slicelight::shaders::types::SHADOWS_MAP;
+    data.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
     assert!(render::plan(&data).iter().any(|p| p.name == "shadow_maps" && p.ran));
 }
 
@@ -416,4 +416,76 @@ fn looking_across_a_lights_apex_stays_within_one_percent() {
         let (mean, worst) = apex_error(phase);
         assert!(mean < 0.01 && worst < 0.05, "{phase}: mean {mean}, worst {worst}");
     }
+}
+
+#[test]
+fn shadow_maps_default_to_what_they_serve() {
+    // Two spots, one with its own resolution, and the maps lie one after the
+    // other. The default one's resolution follows the footprint rule while
+    // only the shafts read it (`shadow_maps::shafts_resolution`), and is 512
+    // once surfaces are shadowed by the maps too.
+    use slicelight::passes::shadow_maps::shafts_resolution;
+    use slicelight::scene::{SHAFTS_MIN_SHADOW_MAP_RESOLUTION as MIN, SURFACE_SHADOW_MAP_RESOLUTION as MAX};
+    let spot = |res: u32| {
+        format!("[[spotlight]]\nposition = [1.0, 4.0, 0.0]\ndirection = [0.0, -1.0, 0.0]\ncutoff_deg = 20.0\nintensity = [5.0, 5.0, 5.0]\nshadow_map_resolution = {res}\n")
+    };
+    let toml = stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 30.0, [0.0, 1.5, 6.0], ISO)
+        .replace("shadow_map_resolution = 128", "")
+        + &spot(100);
+    let mut data = common::scene_from_str(&toml);
+    let layout = |d: &slicelight::scene::SceneData| {
+        let maps: Vec<_> = d.lights.iter().map(|l| (l.shadow_resolution, l.shadow_offset)).collect();
+        (maps, d.common.shadow_texel_count)
+    };
+    // 49x33 pixels: a pixel spans 8 cm at the sphere, far more than a
+    // 128-texel map's texel there; the least resolution is the default.
+    assert_eq!(layout(&data), (vec![(MIN, 0), (100, MIN * MIN)], MIN * MIN + 100 * 100));
+    data.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
+    assert_eq!(layout(&data), (vec![(MAX, 0), (100, MAX * MAX)], MAX * MAX + 100 * 100));
+    data.set_surface_shadows(slicelight::shaders::types::SHADOWS_RAYS).unwrap();
+    assert_eq!(layout(&data).1, MIN * MIN + 100 * 100);
+
+    // The rule itself: texels no wider than a pixel where the cone is seen.
+    // Twice the image height halves the pixels' footprint and doubles the
+    // resolution (to the next multiple of 32), until it reaches the cap; a
+    // camera inside the cone, whose pixels shrink to nothing at the eye,
+    // gets the cap; a view that misses the cone gets the least.
+    let fig6 = slicelight::scene::load(&common::root().join("scenes/fig6_sphere.toml")).unwrap();
+    let light = fig6.lights[0];
+    let at_height = |h: u32, eye: glam::Vec3, look: glam::Vec3| {
+        let mut d = fig6.clone();
+        d.common.height = h;
+        d.common.width = h * 3 / 2;
+        let forward = (look - eye).normalize();
+        let right = forward.cross(glam::Vec3::Y).normalize();
+        let up = right.cross(forward);
+        let tan = (22.5f32).to_radians().tan();
+        d.common.camera_position = eye.extend(1.0);
+        d.common.camera_forward = forward.extend(0.0);
+        d.common.camera_right = (right * tan * 1.5).extend(0.0);
+        d.common.camera_up = (up * tan).extend(0.0);
+        shafts_resolution(&d.common, &light, &d.geometry(), 100.0, 32, 4096)
+    };
+    let (eye, look) = (glam::Vec3::new(0.0, 1.8, 8.0), glam::Vec3::new(0.0, 1.8, 0.0));
+    let (r1, r2) = (at_height(120, eye, look), at_height(240, eye, look));
+    println!("fig6 view: {r1} texels at 120 rows, {r2} at 240");
+    assert!(r1 > 32 && r2 < 4096, "{r1} {r2}");
+    assert!(r2.abs_diff(2 * r1) <= 64, "{r1} -> {r2}");
+    // Eye in the cone, looking down its axis.
+    let inside = at_height(240, glam::Vec3::new(0.0, 5.0, 0.0), glam::Vec3::new(0.0, 0.0, 0.01));
+    assert_eq!(inside, 4096);
+    // Looking away from the cone: nothing of it is seen.
+    let away = at_height(240, glam::Vec3::new(6.0, 1.8, 8.0), glam::Vec3::new(12.0, 1.8, 16.0));
+    assert_eq!(away, 32);
+
+    // Too many texels in all (65 maps of 8192^2 pass 2^32) is an error
+    // naming the field, not a wrap-around.
+    let mut huge = toml.clone();
+    for _ in 0..65 {
+        huge += &spot(8192);
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("huge.toml"), huge).unwrap();
+    let err = slicelight::scene::load(&dir.path().join("huge.toml")).map(|_| ()).unwrap_err();
+    assert!(format!("{err:#}").contains("shadow_map_resolution"), "{err:#}");
 }

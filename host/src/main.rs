@@ -210,7 +210,7 @@ fn run(cli: Cli) -> Result<()> {
             shafts.apply(&mut data)?;
             set_spp(&mut data, spp)?;
             if let Some(s) = surface_shadows {
-                data.common.surface_shadows = s.code();
+                data.set_surface_shadows(s.code())?;
             }
             for name in &passes {
                 if slicelight::passes::by_name(name).is_none() {

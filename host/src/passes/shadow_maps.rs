@@ -2,8 +2,13 @@
 
 use anyhow::{ensure, Result};
 use indicatif::ProgressBar;
+use slicelight_shaders::camera::pinhole_direction;
+use slicelight_shaders::geometry::{trace_nearest, Geometry, NO_HIT};
+use slicelight_shaders::glam::Vec4Swizzles;
+use slicelight_shaders::light::light_local;
 use slicelight_shaders::shadow_map::shadow_map_texel;
-use slicelight_shaders::types::CommonParams;
+use slicelight_shaders::shafts::{clip_to_beam, clip_to_cone};
+use slicelight_shaders::types::{CommonParams, GpuLight, LIGHT_DIRECTIONAL, PROJECTION_PINHOLE};
 
 use super::{
     count_differences, Dispatch, Frame, Pass, Plan, Resource, BVH_NODES, COMMON, LIGHTS, SHADOW_MAPS, SPHERES,
@@ -43,7 +48,13 @@ impl Pass for ShadowMaps {
         {
             Plan::skip("surfaces use shadow rays and no shafts are rendered")
         } else {
-            Plan::run(format!("{lights} light(s), {texels} shadow-map texels"), texels as u64)
+            let sizes: Vec<String> = scene
+                .lights
+                .iter()
+                .filter(|l| l.shadow_resolution > 0)
+                .map(|l| format!("{0}x{0}", l.shadow_resolution))
+                .collect();
+            Plan::run(format!("{lights} light(s), {texels} shadow-map texels ({})", sizes.join(", ")), texels as u64)
         }
     }
 
@@ -66,4 +77,78 @@ impl Pass for ShadowMaps {
         ensure!(outliers <= allowed, "{outliers} of {} shadow texels differ (allowed {allowed})", c.len());
         Ok(format!("{} texels, {outliers} silhouette flips, worst other difference {worst:e} m", c.len()))
     }
+}
+
+/// View rays per image side that `shafts_resolution` follows.
+const FOOTPRINT_RAYS: u32 = 24;
+/// Points per ray, evenly spaced over the stretch inside the light's volume.
+const FOOTPRINT_POINTS: u32 = 16;
+
+/// The default resolution of `light`'s shadow map where it serves only the
+/// shafts: the smallest multiple of 32 from `min` to `max` whose texels are no
+/// wider than a pixel wherever the view sees the light's volume. A texel of a
+/// spot's perspective map spans `2 z tan(cutoff) / N` metres at depth `z`
+/// along the light's axis, a directional light's orthographic one `2 h / N`
+/// (`h` the larger half-extent); a pixel spans `d 2 tan(vfov / 2) / height`
+/// at depth `d` along the camera's axis. The ratio is taken at
+/// `FOOTPRINT_POINTS` points along each of `FOOTPRINT_RAYS^2` view rays,
+/// from the camera to the first surface (or to `t_far`, metres, where the
+/// scene's bounds end), clipped to the light's volume
+/// (`clip_to_cone`, `clip_to_beam`: the shafts' own clipping), and its
+/// largest value decides. Shadow edges in the medium are seen through the
+/// shafts' integral along each ray, which averages a map's steps; finer
+/// texels than a pixel change no image measurably (docs/measurements.md).
+/// A fisheye camera (no shafts) gets `max`.
+pub fn shafts_resolution(
+    common: &CommonParams,
+    light: &GpuLight,
+    geometry: &Geometry,
+    t_far: f32,
+    min: u32,
+    max: u32,
+) -> u32 {
+    if common.projection != PROJECTION_PINHOLE {
+        return max;
+    }
+    let pixel_per_depth = 2.0 * common.camera_up.xyz().length() / common.height as f32;
+    let texel_span = |local_z: f32| {
+        if light.kind == LIGHT_DIRECTIONAL {
+            2.0 * light.half_extent_x.max(light.half_extent_y)
+        } else {
+            2.0 * local_z.max(0.0) * light.tan_cutoff
+        }
+    };
+    let forward = common.camera_forward.xyz();
+    let mut needed = 0.0f32;
+    for j in 0..FOOTPRINT_RAYS {
+        for i in 0..FOOTPRINT_RAYS {
+            let ndc = glam::Vec2::new(
+                2.0 * (i as f32 + 0.5) / FOOTPRINT_RAYS as f32 - 1.0,
+                1.0 - 2.0 * (j as f32 + 0.5) / FOOTPRINT_RAYS as f32,
+            );
+            let o = common.camera_position.xyz();
+            let d = pinhole_direction(common, ndc);
+            let surface = trace_nearest(o, d, 0.0, NO_HIT, geometry).distance.min(t_far);
+            let (lo, hi) = if light.kind == LIGHT_DIRECTIONAL {
+                clip_to_beam(light, o, d, 0.0, surface)
+            } else {
+                clip_to_cone(light, o, d, 0.0, surface)
+            };
+            if hi <= lo {
+                continue;
+            }
+            for k in 0..FOOTPRINT_POINTS {
+                let t = lo + (hi - lo) * k as f32 / (FOOTPRINT_POINTS - 1) as f32;
+                let p = o + d * t;
+                let pixel = (p - o).dot(forward) * pixel_per_depth;
+                let texels = texel_span(light_local(light, p).z) / pixel;
+                if texels.is_finite() {
+                    needed = needed.max(texels);
+                } else {
+                    needed = f32::MAX;
+                }
+            }
+        }
+    }
+    ((needed.min(max as f32).ceil() as u32).next_multiple_of(32)).clamp(min, max)
 }

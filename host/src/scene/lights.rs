@@ -8,13 +8,15 @@ use std::path::Path;
 use super::schema::{DirectionalLight, LineLight, PointLight, Spotlight};
 use super::validate::{finite3, invalid, non_negative3, shadow_resolution, unit3};
 
-/// Every light of a scene, their light maps' texels, and the total number
-/// of shadow-map texels.
+/// Every light of a scene, their light maps' texels, and each light's
+/// shadow-map resolution as the file gives it (`None`: the default, which
+/// depends on what the maps serve, `SceneData::lay_out_shadow_maps`; point
+/// lights have no map and `None`).
 #[derive(Default)]
 pub struct Lights {
     pub lights: Vec<GpuLight>,
     pub light_map: Vec<Vec4>,
-    pub shadow_texels: u32,
+    pub shadow_resolutions: Vec<Option<u32>>,
     /// The line lights as defined (the kernels see their point lights).
     pub lines: Vec<LineSource>,
 }
@@ -32,15 +34,9 @@ pub struct LineSource {
 }
 
 impl Lights {
-    /// Appends a light, laying out its shadow map after the others' and its
-    /// light map's texels after theirs.
-    fn push(&mut self, field: &str, mut light: GpuLight, map: Option<(u32, u32, Vec<Vec4>)>) -> Result<()> {
-        let res = light.shadow_resolution;
-        light.shadow_offset = self.shadow_texels;
-        self.shadow_texels = self
-            .shadow_texels
-            .checked_add(res * res)
-            .ok_or_else(|| invalid(&format!("{field}.shadow_map_resolution"), "fewer shadow-map texels in all", res))?;
+    /// Appends a light (with the shadow-map resolution its file gives) and
+    /// lays out its light map's texels after the others'.
+    fn push(&mut self, mut light: GpuLight, shadow_resolution: Option<u32>, map: LightMap) {
         if let Some((w, h, texels)) = map {
             light.light_map_offset = self.light_map.len() as u32;
             light.light_map_width = w;
@@ -48,7 +44,7 @@ impl Lights {
             self.light_map.extend(texels);
         }
         self.lights.push(light);
-        Ok(())
+        self.shadow_resolutions.push(shadow_resolution);
     }
 }
 
@@ -67,7 +63,7 @@ pub fn build(
         let field = format!("point_light[{i}]");
         let position = finite3(&format!("{field}.position"), p.position)?;
         let power = non_negative3(&format!("{field}.intensity"), p.intensity)?;
-        out.push(&field, point_light(position, power), None)?;
+        out.push(point_light(position, power), None, None);
     }
     for (i, l) in lines.iter().enumerate() {
         let field = format!("line_light[{i}]");
@@ -88,18 +84,18 @@ pub fn build(
         // Point k at the middle of the k-th of n equal pieces, with that piece's intensity.
         for k in 0..n {
             let p = from + (to - from) * ((k as f32 + 0.5) / n as f32);
-            out.push(&field, point_light(p, per_metre * (length / n as f32)), None)?;
+            out.push(point_light(p, per_metre * (length / n as f32)), None, None);
         }
     }
     for (i, s) in spots.iter().enumerate() {
         let field = format!("spotlight[{i}]");
         let (light, map) = spotlight(&field, s, base)?;
-        out.push(&field, light, map)?;
+        out.push(light, shadow_resolution(&format!("{field}.shadow_map_resolution"), s.shadow_map_resolution)?, map);
     }
     for (i, d) in directionals.iter().enumerate() {
         let field = format!("directional_light[{i}]");
         let (light, map) = directional(&field, d, base, bounds)?;
-        out.push(&field, light, map)?;
+        out.push(light, shadow_resolution(&format!("{field}.shadow_map_resolution"), d.shadow_map_resolution)?, map);
     }
     Ok(out)
 }
@@ -149,7 +145,6 @@ fn spotlight(field: &str, s: &Spotlight, base: &Path) -> Result<(GpuLight, Light
         tan_cutoff,
         cos2_cutoff,
         sin2_cutoff,
-        shadow_resolution: shadow_resolution(&format!("{field}.shadow_map_resolution"), s.shadow_map_resolution)?,
         ..Default::default()
     };
     let map = match &s.light_map {
@@ -186,7 +181,6 @@ fn directional(
         kind: LIGHT_DIRECTIONAL,
         half_extent_x: radius,
         half_extent_y: radius,
-        shadow_resolution: shadow_resolution(&format!("{field}.shadow_map_resolution"), d.shadow_map_resolution)?,
         ..Default::default()
     };
     if let Some(size) = d.size {

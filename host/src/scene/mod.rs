@@ -22,7 +22,7 @@ pub use crate::passes::shafts::{Settings as Shafts, ShaftMode};
 pub use lights::srgb_to_linear;
 pub use schema::*;
 use validate::{finite3, non_negative3, unit3};
-pub use validate::{invalid, DEFAULT_SHADOW_MAP_RESOLUTION};
+pub use validate::{invalid, SHAFTS_MIN_SHADOW_MAP_RESOLUTION, SURFACE_SHADOW_MAP_RESOLUTION};
 
 /// Most sub-pixel samples per pixel a scene or `--spp` may ask for.
 pub const MAX_SAMPLES_PER_PIXEL: u32 = 4096;
@@ -48,6 +48,9 @@ pub struct SceneData {
     /// cache key of a glass object's table; `geometry::Objects::shape_keys`).
     pub shape_keys: Vec<u128>,
     pub light_map: Vec<Vec4>,
+    /// Per light, the shadow-map resolution its file gives (`None`: the
+    /// default, see `lay_out_shadow_maps`).
+    pub shadow_resolutions: Vec<Option<u32>>,
     /// Axis-aligned bounds of the geometry, if there is any.
     pub bounds: Option<(Vec3, Vec3)>,
     pub exposure: f32,
@@ -113,14 +116,62 @@ impl SceneData {
         Ok(())
     }
 
-    /// Turns shadow maps off (every light then sees every point), for scenes
-    /// with nothing to cast a shadow.
-    pub fn without_shadow_maps(&mut self) {
-        for l in &mut self.lights {
-            l.shadow_resolution = 0;
-            l.shadow_offset = 0;
+    /// Sets how directly seen surfaces are shadowed (`SHADOWS_RAYS` or
+    /// `SHADOWS_MAP`) and lays the shadow maps out again, since their default
+    /// resolution depends on it.
+    pub fn set_surface_shadows(&mut self, code: u32) -> Result<()> {
+        self.common.surface_shadows = code;
+        self.lay_out_shadow_maps()
+    }
+
+    /// Gives each spot and directional light its shadow map, one after the
+    /// other in one buffer: the resolution its file gives, else, where the
+    /// maps serve only the shafts, the smallest whose texels are no wider
+    /// than a pixel where the view sees the light's volume (at least
+    /// `SHAFTS_MIN_SHADOW_MAP_RESOLUTION`, at most
+    /// `SURFACE_SHADOW_MAP_RESOLUTION`: `shadow_maps::shafts_resolution`),
+    /// and `SURFACE_SHADOW_MAP_RESOLUTION` where they also shadow surfaces.
+    /// A scene without geometry has no maps (every light sees every point).
+    pub fn lay_out_shadow_maps(&mut self) -> Result<()> {
+        let geometry = self.has_geometry();
+        let surfaces = self.common.surface_shadows == slicelight_shaders::types::SHADOWS_MAP;
+        // Where the view rays that see no surface leave the scene's bounds.
+        let t_far = self.bounds.map_or(0.0, |(lo, hi)| {
+            let eye = self.common.camera_position.truncate();
+            (eye - (lo + hi) * 0.5).length() + (hi - lo).length() * 0.5
+        });
+        let resolutions: Vec<u32> = self
+            .lights
+            .iter()
+            .zip(&self.shadow_resolutions)
+            .map(|(light, given)| match given {
+                _ if !geometry || light.kind == slicelight_shaders::types::LIGHT_POINT => 0,
+                Some(r) => *r,
+                None if surfaces => SURFACE_SHADOW_MAP_RESOLUTION,
+                None => crate::passes::shadow_maps::shafts_resolution(
+                    &self.common,
+                    light,
+                    &self.geometry(),
+                    t_far,
+                    SHAFTS_MIN_SHADOW_MAP_RESOLUTION,
+                    SURFACE_SHADOW_MAP_RESOLUTION,
+                ),
+            })
+            .collect();
+        let mut texels = 0u64;
+        for (light, res) in self.lights.iter_mut().zip(resolutions) {
+            light.shadow_resolution = res;
+            light.shadow_offset = if res > 0 { texels as u32 } else { 0 };
+            texels += res as u64 * res as u64;
         }
-        self.common.shadow_texel_count = 0;
+        self.common.shadow_texel_count = u32::try_from(texels).map_err(|_| {
+            invalid(
+                "shadow_map_resolution",
+                "fewer shadow-map texels in all lights' maps together (at most 2^32 - 1)",
+                texels,
+            )
+        })?;
+        Ok(())
     }
 }
 
@@ -292,7 +343,6 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     common.sphere_count = objects.spheres.len() as u32;
     common.triangle_count = bvh.triangles.len() as u32;
     common.bvh_node_count = bvh.nodes.len() as u32;
-    common.shadow_texel_count = lights.shadow_texels;
     let mut data = SceneData {
         common,
         lights: lights.lights,
@@ -305,6 +355,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         glass_triangles: objects.glass_triangles,
         shape_keys: objects.shape_keys,
         light_map: lights.light_map,
+        shadow_resolutions: lights.shadow_resolutions,
         bounds,
         exposure: file.camera.exposure,
         shafts: Default::default(),
@@ -313,9 +364,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         caustics: Default::default(),
         requested_passes: Vec::new(),
     };
-    if !data.has_geometry() {
-        data.without_shadow_maps();
-    }
+    data.lay_out_shadow_maps()?;
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;
     data.caustics = crate::passes::caustics::configure(&file.caustics, &data).map_err(|e| anyhow!("caustics.{e}"))?;
     Ok(data)

@@ -3,10 +3,19 @@
 use anyhow::{anyhow, Result};
 use glam::{Vec3, Vec4};
 
-/// The default shadow-map resolution. Measured on the Fig. 7 stage at
-/// 720x480 (surface term against shadow rays): 512 costs 0.05 % RMS of the
-/// 8-bit range, a quarter of the time of 1024.
-pub const DEFAULT_SHADOW_MAP_RESOLUTION: u32 = 512;
+/// The least default shadow-map resolution where the maps serve the shafts
+/// alone (surfaces shadowed by shadow rays, the default); the default there
+/// is the smallest resolution whose texels are no wider than a pixel where
+/// the view sees the light (`passes::shadow_maps::shafts_resolution`), up to
+/// `SURFACE_SHADOW_MAP_RESOLUTION`.
+pub const SHAFTS_MIN_SHADOW_MAP_RESOLUTION: u32 = 128;
+
+/// The default shadow-map resolution where the maps also shadow the
+/// surfaces seen (`[surface] shadows = "shadow-map"` or `--surface-shadows shadow-map`), where each texel's step
+/// shows on a shadow's outline. Measured on the Fig. 7 stage at 720x480
+/// (surface term against shadow rays): 512 costs 0.05 % RMS of the 8-bit
+/// range, a quarter of the time of 1024.
+pub const SURFACE_SHADOW_MAP_RESOLUTION: u32 = 512;
 
 /// One validation failure: the field's path and what was expected.
 pub fn invalid(field: &str, expected: &str, got: impl std::fmt::Debug) -> anyhow::Error {
@@ -46,10 +55,11 @@ pub fn albedo(field: &str, v: [f32; 3]) -> Result<Vec4> {
     }
 }
 
-pub fn shadow_resolution(field: &str, r: Option<u32>) -> Result<u32> {
+/// A light's `shadow_map_resolution`, checked; `None` if the file gives none.
+pub fn shadow_resolution(field: &str, r: Option<u32>) -> Result<Option<u32>> {
     match r {
-        None => Ok(DEFAULT_SHADOW_MAP_RESOLUTION),
-        Some(r) if (1..=8192).contains(&r) => Ok(r),
+        None => Ok(None),
+        Some(r) if (1..=8192).contains(&r) => Ok(Some(r)),
         Some(r) => Err(invalid(field, "a resolution in 1..=8192", r)),
     }
 }

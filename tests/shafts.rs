@@ -424,7 +424,7 @@ fn shadow_maps_default_to_what_they_serve() {
     // other. The default one's resolution follows the footprint rule while
     // only the shafts read it (`shadow_maps::shafts_resolution`), and is 512
     // once surfaces are shadowed by the maps too.
-    use slicelight::passes::shadow_maps::shafts_resolution;
+    use slicelight::passes::shadow_maps::{footprint_rays, shafts_resolution};
     use slicelight::scene::{SHAFTS_MIN_SHADOW_MAP_RESOLUTION as MIN, SURFACE_SHADOW_MAP_RESOLUTION as MAX};
     let spot = |res: u32| {
         format!("[[spotlight]]\nposition = [1.0, 4.0, 0.0]\ndirection = [0.0, -1.0, 0.0]\ncutoff_deg = 20.0\nintensity = [5.0, 5.0, 5.0]\nshadow_map_resolution = {res}\n")
@@ -464,7 +464,7 @@ fn shadow_maps_default_to_what_they_serve() {
         d.common.camera_forward = forward.extend(0.0);
         d.common.camera_right = (right * tan * 1.5).extend(0.0);
         d.common.camera_up = (up * tan).extend(0.0);
-        shafts_resolution(&d.common, &light, &d.geometry(), 100.0, 32, 4096)
+        shafts_resolution(&d.common, &light, &footprint_rays(&d.common, &d.geometry(), 100.0), 32, 4096)
     };
     let (eye, look) = (glam::Vec3::new(0.0, 1.8, 8.0), glam::Vec3::new(0.0, 1.8, 0.0));
     let (r1, r2) = (at_height(120, eye, look), at_height(240, eye, look));

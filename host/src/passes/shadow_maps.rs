@@ -4,7 +4,7 @@ use anyhow::{ensure, Result};
 use indicatif::ProgressBar;
 use slicelight_shaders::camera::pinhole_direction;
 use slicelight_shaders::geometry::{trace_nearest, Geometry, NO_HIT};
-use slicelight_shaders::glam::Vec4Swizzles;
+use slicelight_shaders::glam::{Vec2, Vec3, Vec4Swizzles};
 use slicelight_shaders::light::light_local;
 use slicelight_shaders::shadow_map::shadow_map_texel;
 use slicelight_shaders::shafts::{clip_to_beam, clip_to_cone};
@@ -84,6 +84,29 @@ const FOOTPRINT_RAYS: u32 = 24;
 /// Points per ray, evenly spaced over the stretch inside the light's volume.
 const FOOTPRINT_POINTS: u32 = 16;
 
+/// A view ray of the footprint rule: origin, unit direction, and where it
+/// ends (metres): at the first surface, or at `t_far`.
+pub type FootprintRay = (Vec3, Vec3, f32);
+
+/// The `FOOTPRINT_RAYS^2` view rays `shafts_resolution` follows, evenly
+/// spread over a pinhole camera's image, each to the first surface it meets
+/// (or to `t_far`, metres, where the scene's bounds end). They do not
+/// depend on the light, so a scene traces them once for all its lights.
+pub fn footprint_rays(common: &CommonParams, geometry: &Geometry, t_far: f32) -> Vec<FootprintRay> {
+    if common.projection != PROJECTION_PINHOLE {
+        return Vec::new();
+    }
+    let o = common.camera_position.xyz();
+    let cell = |i: u32| 2.0 * (i as f32 + 0.5) / FOOTPRINT_RAYS as f32 - 1.0;
+    (0..FOOTPRINT_RAYS * FOOTPRINT_RAYS)
+        .map(|k| {
+            let (i, j) = (k % FOOTPRINT_RAYS, k / FOOTPRINT_RAYS);
+            let d = pinhole_direction(common, Vec2::new(cell(i), -cell(j)));
+            (o, d, trace_nearest(o, d, 0.0, NO_HIT, geometry).distance.min(t_far))
+        })
+        .collect()
+}
+
 /// The default resolution of `light`'s shadow map where it serves only the
 /// shafts: the smallest multiple of 32 from `min` to `max` whose texels are no
 /// wider than a pixel wherever the view sees the light's volume. A texel of a
@@ -91,22 +114,14 @@ const FOOTPRINT_POINTS: u32 = 16;
 /// along the light's axis, a directional light's orthographic one `2 h / N`
 /// (`h` the larger half-extent); a pixel spans `d 2 tan(vfov / 2) / height`
 /// at depth `d` along the camera's axis. The ratio is taken at
-/// `FOOTPRINT_POINTS` points along each of `FOOTPRINT_RAYS^2` view rays,
-/// from the camera to the first surface (or to `t_far`, metres, where the
-/// scene's bounds end), clipped to the light's volume
-/// (`clip_to_cone`, `clip_to_beam`: the shafts' own clipping), and its
-/// largest value decides. Shadow edges in the medium are seen through the
-/// shafts' integral along each ray, which averages a map's steps; finer
-/// texels than a pixel change no image measurably (docs/measurements.md).
-/// A fisheye camera (no shafts) gets `max`.
-pub fn shafts_resolution(
-    common: &CommonParams,
-    light: &GpuLight,
-    geometry: &Geometry,
-    t_far: f32,
-    min: u32,
-    max: u32,
-) -> u32 {
+/// `FOOTPRINT_POINTS` points along each of the view rays `rays`
+/// (`footprint_rays`), clipped to the light's volume (`clip_to_cone`,
+/// `clip_to_beam`: the shafts' own clipping), and its largest value decides.
+/// Shadow edges in the medium are seen through the shafts' integral along
+/// each ray, which averages a map's steps; finer texels than a pixel change
+/// no image measurably (docs/measurements.md). A fisheye camera (no shafts)
+/// gets `max`.
+pub fn shafts_resolution(common: &CommonParams, light: &GpuLight, rays: &[FootprintRay], min: u32, max: u32) -> u32 {
     if common.projection != PROJECTION_PINHOLE {
         return max;
     }
@@ -120,34 +135,22 @@ pub fn shafts_resolution(
     };
     let forward = common.camera_forward.xyz();
     let mut needed = 0.0f32;
-    for j in 0..FOOTPRINT_RAYS {
-        for i in 0..FOOTPRINT_RAYS {
-            let ndc = glam::Vec2::new(
-                2.0 * (i as f32 + 0.5) / FOOTPRINT_RAYS as f32 - 1.0,
-                1.0 - 2.0 * (j as f32 + 0.5) / FOOTPRINT_RAYS as f32,
-            );
-            let o = common.camera_position.xyz();
-            let d = pinhole_direction(common, ndc);
-            let surface = trace_nearest(o, d, 0.0, NO_HIT, geometry).distance.min(t_far);
-            let (lo, hi) = if light.kind == LIGHT_DIRECTIONAL {
-                clip_to_beam(light, o, d, 0.0, surface)
-            } else {
-                clip_to_cone(light, o, d, 0.0, surface)
-            };
-            if hi <= lo {
-                continue;
-            }
-            for k in 0..FOOTPRINT_POINTS {
-                let t = lo + (hi - lo) * k as f32 / (FOOTPRINT_POINTS - 1) as f32;
-                let p = o + d * t;
-                let pixel = (p - o).dot(forward) * pixel_per_depth;
-                let texels = texel_span(light_local(light, p).z) / pixel;
-                if texels.is_finite() {
-                    needed = needed.max(texels);
-                } else {
-                    needed = f32::MAX;
-                }
-            }
+    for &(o, d, t_max) in rays {
+        let (lo, hi) = if light.kind == LIGHT_DIRECTIONAL {
+            clip_to_beam(light, o, d, 0.0, t_max)
+        } else {
+            clip_to_cone(light, o, d, 0.0, t_max)
+        };
+        if hi <= lo {
+            continue;
+        }
+        for k in 0..FOOTPRINT_POINTS {
+            let t = lo + (hi - lo) * k as f32 / (FOOTPRINT_POINTS - 1) as f32;
+            let p = o + d * t;
+            let pixel = (p - o).dot(forward) * pixel_per_depth;
+            let texels = texel_span(light_local(light, p).z) / pixel;
+            // A point at the eye (a camera inside the volume) needs every texel.
+            needed = needed.max(if texels.is_finite() { texels } else { f32::MAX });
         }
     }
     ((needed.min(max as f32).ceil() as u32).next_multiple_of(32)).clamp(min, max)

@@ -140,37 +140,42 @@ impl SceneData {
             let eye = self.common.camera_position.truncate();
             (eye - (lo + hi) * 0.5).length() + (hi - lo).length() * 0.5
         });
-        let resolutions: Vec<u32> = self
-            .lights
-            .iter()
-            .zip(&self.shadow_resolutions)
-            .map(|(light, given)| match given {
+        // The view rays the footprint rule follows, traced once for every light
+        // that needs them.
+        let mut rays = None;
+        let mut resolutions = Vec::with_capacity(self.lights.len());
+        for (light, given) in self.lights.iter().zip(&self.shadow_resolutions) {
+            resolutions.push(match given {
                 _ if !geometry || light.kind == slicelight_shaders::types::LIGHT_POINT => 0,
                 Some(r) => *r,
                 None if surfaces => SURFACE_SHADOW_MAP_RESOLUTION,
                 None => crate::passes::shadow_maps::shafts_resolution(
                     &self.common,
                     light,
-                    &self.geometry(),
-                    t_far,
+                    rays.get_or_insert_with(|| {
+                        crate::passes::shadow_maps::footprint_rays(&self.common, &self.geometry(), t_far)
+                    }),
                     SHAFTS_MIN_SHADOW_MAP_RESOLUTION,
                     SURFACE_SHADOW_MAP_RESOLUTION,
                 ),
-            })
-            .collect();
-        let mut texels = 0u64;
-        for (light, res) in self.lights.iter_mut().zip(resolutions) {
-            light.shadow_resolution = res;
-            light.shadow_offset = if res > 0 { texels as u32 } else { 0 };
-            texels += res as u64 * res as u64;
+            });
         }
-        self.common.shadow_texel_count = u32::try_from(texels).map_err(|_| {
+        // Checked before any light changes, so a failed layout leaves the scene as it was.
+        let texels: u64 = resolutions.iter().map(|&r| r as u64 * r as u64).sum();
+        let count = u32::try_from(texels).map_err(|_| {
             invalid(
                 "shadow_map_resolution",
                 "fewer shadow-map texels in all lights' maps together (at most 2^32 - 1)",
                 texels,
             )
         })?;
+        let mut offset = 0u32;
+        for (light, res) in self.lights.iter_mut().zip(resolutions) {
+            light.shadow_resolution = res;
+            light.shadow_offset = if res > 0 { offset } else { 0 };
+            offset += res * res;
+        }
+        self.common.shadow_texel_count = count;
         Ok(())
     }
 }

@@ -11,8 +11,8 @@ use glam::{Vec3, Vec4};
 pub const SHAFTS_MIN_SHADOW_MAP_RESOLUTION: u32 = 128;
 
 /// The default shadow-map resolution where the maps also shadow the
-/// surfaces seen (`[surface] shadows = "shadow-map"` or `--surface-shadows shadow-map`), where each texel's step
-/// shows on a shadow's outline. Measured on the Fig. 7 stage at 720x480
+/// surfaces seen (`[surface] shadows = "shadow-map"` or `--surface-shadows
+/// shadow-map`), where each texel's step shows on a shadow's outline. Measured on the Fig. 7 stage at 720x480
 /// (surface term against shadow rays): 512 costs 0.05 % RMS of the 8-bit
 /// range, a quarter of the time of 1024.
 pub const SURFACE_SHADOW_MAP_RESOLUTION: u32 = 512;

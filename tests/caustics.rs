@@ -3,8 +3,8 @@
 mod common;
 
 use glam::{DVec3, Vec4};
-use slicelight::bench_caustics::{not_glass, select};
-use slicelight::caustics_reference::caustic_image;
+use slicelight::caustics::bench::{not_glass, select};
+use slicelight::caustics::reference::caustic_image;
 use slicelight::metrics::{difference, to_f64};
 use slicelight::scene::SceneData;
 

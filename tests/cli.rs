@@ -82,9 +82,11 @@ fn good_scene_writes_png_exr_and_stats() {
         names,
         [
             "shadow_maps",
+            "scatter_check",
             "caustics.table",
             "caustics.lookup",
             "caustics.maps",
+            "shafts.tiles",
             "sky_transmittance",
             "sky_view",
             "sea.radiance_map",
@@ -95,14 +97,12 @@ fn good_scene_writes_png_exr_and_stats() {
             "sea.bottom_correction",
             "surface",
             "caustics",
-            "shafts.tiles",
             "shafts",
             "sky",
             "sea.reflection",
             "sea.order1",
             "sea.order2",
-            "sea.bottom",
-            "scatter_check"
+            "sea.bottom"
         ]
     );
     // Every pass the scene needs ran; the self-check waits to be asked for,

@@ -6,9 +6,9 @@ mod common;
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use slicelight::passes::sea::order2_by_maps;
 use slicelight::scene::SceneData;
-use slicelight::sea_reference::SeaReference;
+use slicelight::sea::order2_by_maps;
+use slicelight::sea::reference::SeaReference;
 use slicelight_shaders::sea::{order1_radiance, SeaParams};
 
 /// Clear ocean water (scenes/README's preset) under a sun `sun_zenith`
@@ -211,7 +211,7 @@ fn stress_image_sizes() {
     assert!(layer(&one, "sea.order1")[0].max_element() > 0.0, "the one pixel sees the sea");
     let big = scene(8192, 8192);
     let p = &big.sea.params;
-    let blank = slicelight_shaders::surface::no_surface();
+    let blank = slicelight_shaders::common::surface::no_surface();
     let waves = &big.sea.waves;
     let n = 8192u32;
     for (x, y) in [(0, 0), (n - 1, 0), (0, n - 1), (n - 1, n - 1), (n / 2, n / 2), (n / 2, n - 1), (0, n / 2)] {
@@ -381,9 +381,9 @@ fn shore_against_a_path_tracer_over_the_height_field() {
     let (o1, o2) = (layer(&r, "sea.order1"), layer(&r, "sea.order2"));
     let p = &data.sea.params;
     let grid = &data.sea.bottom;
-    let bottom = slicelight::sea_reference::grid_depth(p, grid);
+    let bottom = slicelight::sea::reference::grid_depth(p, grid);
     let reference = SeaReference::new(p, 1e-5);
-    let blank = slicelight_shaders::surface::no_surface();
+    let blank = slicelight_shaders::common::surface::no_surface();
     let mut worst = (0.0f64, 0.0f64);
     for y in [26u32, 30, 38, 47] {
         let i = y * 72 + 36;
@@ -425,7 +425,7 @@ fn the_height_field_quadrature_over_a_level_bottom_is_the_flat_one() {
     let p = &data.sea.params;
     let reference = SeaReference::new(p, 1e-4);
     let level = |_: f64, _: f64| 12.0;
-    let field = slicelight::sea_reference::HeightField { depth: &level, step: 0.7, deepest: 12.0 };
+    let field = slicelight::sea::reference::HeightField { depth: &level, step: 0.7, deepest: 12.0 };
     for (zenith, azimuth) in [(0.0, 0.0), (50.0, 30.0), (75.0, 200.0)] {
         let v = in_water(p, zenith, azimuth).as_dvec3();
         let (over, flat) = (reference.order2_over(&field, (3.0, -4.0), v), reference.order2(v));
@@ -459,10 +459,10 @@ fn shore_order2_against_the_height_field_quadrature() {
     let p = &data.sea.params;
     assert!(p.table_width > 0, "sea_shore renders with a depth table");
     let grid = &data.sea.bottom;
-    let depth = slicelight::sea_reference::grid_depth(p, grid);
-    let field = slicelight::sea_reference::HeightField::of_sea(p, &depth);
+    let depth = slicelight::sea::reference::grid_depth(p, grid);
+    let field = slicelight::sea::reference::HeightField::of_sea(p, &depth);
     let reference = SeaReference::new(p, 1e-3);
-    let blank = slicelight_shaders::surface::no_surface();
+    let blank = slicelight_shaders::common::surface::no_surface();
     let pixels = [(36u32, 26u32), (36, 30), (36, 38), (36, 47), (5, 40), (66, 33)];
     let rows: Vec<_> = pixels
         .par_iter()

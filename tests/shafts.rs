@@ -424,7 +424,7 @@ fn shadow_maps_default_to_what_they_serve() {
     // other. The default one's resolution follows the footprint rule while
     // only the shafts read it (`shadow_maps::shafts_resolution`), and is 512
     // once surfaces are shadowed by the maps too.
-    use slicelight::passes::shadow_maps::{footprint_rays, shafts_resolution};
+    use slicelight::common::shadow_maps::{footprint_rays, shafts_resolution};
     use slicelight::scene::{SHAFTS_MIN_SHADOW_MAP_RESOLUTION as MIN, SURFACE_SHADOW_MAP_RESOLUTION as MAX};
     let spot = |res: u32| {
         format!("[[spotlight]]\nposition = [1.0, 4.0, 0.0]\ndirection = [0.0, -1.0, 0.0]\ncutoff_deg = 20.0\nintensity = [5.0, 5.0, 5.0]\nshadow_map_resolution = {res}\n")

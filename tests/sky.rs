@@ -4,11 +4,12 @@
 mod common;
 
 use glam::{DVec3, Vec4};
-use slicelight::bench_sky::{sky_error, sky_pixels};
+use slicelight::metrics::relative_error;
 use slicelight::reference;
 use slicelight::render::{self, Backend};
 use slicelight::scene::SceneData;
-use slicelight::sky_reference::SkyReference;
+use slicelight::sky::bench::sky_pixels;
+use slicelight::sky::reference::SkyReference;
 use std::f64::consts::PI;
 
 /// A fisheye sky scene (Rayleigh, Mie and ozone as in scenes/sky_noon.toml)
@@ -118,7 +119,7 @@ fn sky_matches_reference_for_every_sun_angle() {
             let (image, _) = render::render(&data, &Backend::Cpu, false).unwrap();
             let values = rgb(&image, &pixels);
             assert!(values.iter().all(|v| v.is_finite() && v.min_element() >= 0.0));
-            let (rms, max) = sky_error(&values, &refvals);
+            let (rms, max) = relative_error(&values, &refvals);
             println!(
                 "sun zenith {zenith:>4}, {mode:<14}: rms {:.3}% max {:.2}% of the sky's peak",
                 rms * 100.0,
@@ -183,7 +184,7 @@ fn sky_is_finite_at_the_edges() {
                 if scale == 1.0 && zenith == 0.0 {
                     let pixels = sky_pixels(&data, 1);
                     let (refvals, _) = reference::render_converged_at(&data, &pixels, 2e-4);
-                    let (rms, _) = sky_error(&rgb(&image, &pixels), &refvals);
+                    let (rms, _) = relative_error(&rgb(&image, &pixels), &refvals);
                     println!("altitude {altitude}: rms {:.3}% of the peak", rms * 100.0);
                     assert!(rms < 0.01, "altitude {altitude}: {rms}");
                 }

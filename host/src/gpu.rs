@@ -10,8 +10,9 @@ use std::time::Instant;
 use crate::passes::{Buffer, Frame, Pass, Resource, ResourceKind, COMMON, PASSES};
 use crate::scene::SceneData;
 
-/// The kernels compiled by `build.rs` from `shader-crate`.
-pub const SPIRV: &[u8] = include_bytes!(env!("SLICELIGHT_SPV"));
+/// The kernels, compiled from `shader-crate` by `cargo xtask shaders` and kept
+/// in `host/spirv/` (the build script warns when they are older than the sources).
+pub const SPIRV: &[u8] = include_bytes!("../spirv/slicelight_shaders.spv");
 
 /// wgpu cannot bind an empty buffer, nor one smaller than one element of the
 /// array the kernel declares; a stand-in as large as the largest element type

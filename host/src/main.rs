@@ -4,7 +4,7 @@ use anyhow::{anyhow, Context, Result};
 use clap::{Parser, Subcommand};
 use glam::{DVec3, Vec4};
 use slicelight::render::{Backend, BackendChoice};
-use slicelight::{bench, metrics, output, reference, render, scene};
+use slicelight::{metrics, output, reference, render, scene};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -20,18 +20,28 @@ struct Cli {
 enum Command {
     /// Render a scene file to one or more images (.png tone-mapped sRGB, .exr linear).
     Render {
+        /// The scene file (TOML; see scenes/README.md).
         scene: PathBuf,
         /// Output image; give it more than once for several formats.
         #[arg(short, long = "output", required = true)]
         output: Vec<PathBuf>,
+        /// gpu: a Vulkan device (an error without one); cpu: the same kernel
+        /// functions on every core; auto: a device if there is one.
         #[arg(long, value_enum, default_value = "auto")]
         backend: BackendChoice,
         /// Write the device, the pass plan and each pass's time as JSON.
         #[arg(long)]
         stats: Option<PathBuf>,
-        /// No progress bar.
-        #[arg(short, long)]
+        /// Print nothing but errors: no progress bar, no summary.
+        #[arg(short, long, conflicts_with = "verbose")]
         quiet: bool,
+        /// Also list the passes the scene skips, and why.
+        #[arg(short, long)]
+        verbose: bool,
+        /// Exposure of the PNG's tone mapping (overrides `[camera] exposure`;
+        /// the EXR is linear and unaffected).
+        #[arg(long)]
+        exposure: Option<f32>,
         #[command(flatten)]
         shafts: ShaftOverrides,
         /// Sub-pixel samples per pixel, stratified and box-filtered
@@ -40,7 +50,7 @@ enum Command {
         spp: Option<u32>,
         /// How directly seen surfaces find their shadows (overrides `[surface] shadows`).
         #[arg(long, value_enum)]
-        surface_shadows: Option<slicelight::passes::surface::SurfaceShadows>,
+        surface_shadows: Option<slicelight::common::surface::SurfaceShadows>,
         /// Also run a pass no scene needs, by name (`scatter_check`: the
         /// scatter accumulation's self-check). Give it more than once for several.
         #[arg(long = "pass")]
@@ -48,7 +58,9 @@ enum Command {
     },
     /// Render the f64 reference (shadow rays against the real geometry, no maps or tables).
     Reference {
+        /// The scene file (TOML; see scenes/README.md).
         scene: PathBuf,
+        /// Output image (.png or .exr); give it more than once for several formats.
         #[arg(short, long = "output", required = true)]
         output: Vec<PathBuf>,
         /// Stop doubling the ray-march samples when the image changes by less
@@ -96,17 +108,26 @@ enum Command {
         /// A shorter sweep (3 plane counts, 3 sub-plane counts, 2 table sizes).
         #[arg(long)]
         quick: bool,
+        /// Folder for the CSVs and plots (created if missing).
         #[arg(long, default_value = "bench")]
         out_dir: PathBuf,
     },
     /// Print the RMS and max difference of IMAGE against REFERENCE.
     Compare {
+        /// The image to judge (.png or .exr).
         image: PathBuf,
+        /// The image it is judged against (.png or .exr, the same size).
         reference: PathBuf,
-        /// Exposure of the 8-bit tone mapping the % figures are taken after.
-        #[arg(long, default_value_t = 1.0)]
-        exposure: f32,
-        /// Write |image - reference| as a PNG, scaled so the largest difference is white.
+        /// Exposure of the 8-bit tone mapping the % figures are taken after
+        /// [default: the --scene's exposure, else 1].
+        #[arg(long)]
+        exposure: Option<f32>,
+        /// The scene the images were rendered from: its exposure is used
+        /// unless --exposure is given.
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Write |image - reference| as a linear greyscale-per-channel PNG,
+        /// scaled so that the largest difference (printed) is white.
         #[arg(long)]
         diff: Option<PathBuf>,
     },
@@ -115,16 +136,19 @@ enum Command {
 /// Command-line overrides of the scene's `[shafts]` settings.
 #[derive(clap::Args, Default, Clone)]
 struct ShaftOverrides {
-    /// Sample planes (eq. 5).
+    /// Sample planes (eq. 5) [default: the scene's `[shafts] planes`, else 30].
     #[arg(long)]
     planes: Option<u32>,
-    /// Sub-sample planes per plane interval (eq. 9).
+    /// Sub-sample planes per plane interval (eq. 9) [default: the scene's
+    /// `[shafts] subplanes`, else 6].
     #[arg(long)]
     subplanes: Option<u32>,
-    /// exact: evaluate the phase and attenuation functions; tables: the paper's lookup tables.
+    /// exact: evaluate the phase and attenuation functions; tables: the
+    /// paper's lookup tables [default: the scene's `[shafts] mode`, else exact].
     #[arg(long, value_enum)]
     mode: Option<scene::ShaftMode>,
-    /// Do not offset the planes per pixel.
+    /// Do not offset the planes per pixel (the scene's `[shafts] jitter`
+    /// otherwise decides; on by default).
     #[arg(long)]
     no_jitter: bool,
 }
@@ -184,12 +208,53 @@ fn write_outputs(
     pixels: &[Vec4],
     layers: &[(&str, &[Vec4])],
     data: &scene::SceneData,
+    quiet: bool,
 ) -> Result<()> {
     for o in outputs {
         output::write_layered(o, pixels, layers, data.width(), data.height(), data.exposure)?;
-        eprintln!("wrote {}", o.display());
+        if !quiet {
+            eprintln!("wrote {}", o.display());
+        }
     }
     Ok(())
+}
+
+/// The render's summary on stderr: each pass that ran with its time and why
+/// it ran (with `all`, also those skipped and why), in aligned columns, then
+/// the total.
+fn print_summary(st: &render::RenderStats, all: bool) {
+    let shown: Vec<_> = st.passes.iter().filter(|p| p.ran || all).collect();
+    let width = shown.iter().map(|p| p.name.len()).max().unwrap_or(0).max("total".len());
+    for p in &shown {
+        if p.ran {
+            eprintln!("  {:<width$} {:>9.3} s  {}", p.name, p.seconds, p.reason);
+        } else {
+            eprintln!("  {:<width$}   skipped  {}", p.name, p.reason);
+        }
+        if let Some(report) = &p.report {
+            eprintln!("  {:<width$}            {report}", "");
+        }
+    }
+    let skipped = st.passes.len() - st.passes.iter().filter(|p| p.ran).count();
+    eprintln!(
+        "  {:<width$} {:>9.3} s  ({} sample(s) per pixel; pass times: {}{})",
+        "total",
+        st.total_seconds,
+        st.samples_per_pixel,
+        st.pass_timing,
+        if all || skipped == 0 { String::new() } else { format!("; {skipped} passes skipped, -v lists them") }
+    );
+    if st.kernel_build_seconds > 0.0 {
+        eprintln!("  (before it: {:.3} s building the GPU kernels it runs)", st.kernel_build_seconds);
+    }
+    if st.counter("shaft_samples_naive") > 0 {
+        eprintln!(
+            "  shaft samples {} of a naive {} ({:.1}%)",
+            st.counter("shaft_samples"),
+            st.counter("shaft_samples_naive"),
+            100.0 * st.counter("shaft_samples") as f64 / st.counter("shaft_samples_naive") as f64
+        );
+    }
 }
 
 fn set_spp(data: &mut scene::SceneData, spp: Option<u32>) -> Result<()> {
@@ -201,7 +266,19 @@ fn set_spp(data: &mut scene::SceneData, spp: Option<u32>) -> Result<()> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Render { scene, output, backend, stats, quiet, shafts, spp, surface_shadows, passes } => {
+        Command::Render {
+            scene,
+            output,
+            backend,
+            stats,
+            quiet,
+            verbose,
+            exposure,
+            shafts,
+            spp,
+            surface_shadows,
+            passes,
+        } => {
             check_outputs(&output)?;
             if let Some(path) = &stats {
                 check_outputs_dir(path)?;
@@ -209,6 +286,12 @@ fn run(cli: Cli) -> Result<()> {
             let mut data = scene::load(&scene)?;
             shafts.apply(&mut data)?;
             set_spp(&mut data, spp)?;
+            if let Some(e) = exposure {
+                if !(e.is_finite() && e > 0.0) {
+                    return Err(anyhow!("command line: --exposure: expected a positive number, got {e}"));
+                }
+                data.exposure = e;
+            }
             if let Some(s) = surface_shadows {
                 data.set_surface_shadows(s.code())?;
             }
@@ -220,41 +303,16 @@ fn run(cli: Cli) -> Result<()> {
             }
             data.requested_passes = passes;
             let backend = Backend::open(backend)?;
-            eprintln!("backend: {} on {}", backend.name(), backend.device());
+            if !quiet {
+                eprintln!("backend: {} on {}", backend.name(), backend.device());
+            }
             let show = !quiet && std::io::stderr().is_terminal();
             let rendered = render::render_layers(&data, &backend, show)?;
             let st = &rendered.stats;
-            for p in &st.passes {
-                if p.ran {
-                    eprintln!("  {:<13} {:>9.3} s  {}", p.name, p.seconds, p.reason);
-                } else {
-                    eprintln!("  {:<13}   skipped  {}", p.name, p.reason);
-                }
-                if let Some(report) = &p.report {
-                    eprintln!("  {:<13}            {report}", "");
-                }
+            if !quiet {
+                print_summary(st, verbose || stats.is_some());
             }
-            eprintln!(
-                "  total         {:>9.3} s  ({} sample(s) per pixel; pass times: {})",
-                st.total_seconds, st.samples_per_pixel, st.pass_timing
-            );
-            if st.kernel_build_seconds > 0.0 {
-                eprintln!("  (before it: {:.3} s building the GPU kernels it runs)", st.kernel_build_seconds);
-            }
-            if st.counter("shaft_samples_naive") > 0 {
-                eprintln!(
-                    "  shaft samples {} of a naive {} ({:.1}%)",
-                    st.counter("shaft_samples"),
-                    st.counter("shaft_samples_naive"),
-                    100.0 * st.counter("shaft_samples") as f64 / st.counter("shaft_samples_naive") as f64
-                );
-            }
-            if let Some(failed) =
-                st.passes.iter().find(|p| p.report.as_deref().is_some_and(|r| r.starts_with("FAILED")))
-            {
-                return Err(anyhow!("pass {}: {}", failed.name, failed.report.as_deref().unwrap_or_default()));
-            }
-            write_outputs(&output, &rendered.image, &rendered.layer_slices(), &data)?;
+            write_outputs(&output, &rendered.image, &rendered.layer_slices(), &data, quiet)?;
             if let Some(path) = stats {
                 let json = serde_json::to_vec_pretty(st)?;
                 output::write_atomically(&path, &json)?;
@@ -267,10 +325,14 @@ fn run(cli: Cli) -> Result<()> {
             set_spp(&mut data, spp)?;
             let t = Instant::now();
             let (mut image, samples) = reference::render_converged(&data, tolerance);
-            eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
+            if data.scatters() {
+                eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
+            } else {
+                eprintln!("reference: {:.3} s (the medium does not scatter: no ray march)", t.elapsed().as_secs_f64());
+            }
             if !data.glass_vertices.is_empty() && !data.lights.is_empty() {
                 let t = Instant::now();
-                let (caustics, n) = slicelight::caustics_reference::caustic_image_converged(
+                let (caustics, n) = slicelight::caustics::reference::caustic_image_converged(
                     &data,
                     paths,
                     paths << 6,
@@ -287,7 +349,7 @@ fn run(cli: Cli) -> Result<()> {
                 );
             }
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
-            write_outputs(&output, &pixels, &[], &data)
+            write_outputs(&output, &pixels, &[], &data, false)
         }
         Command::Bench { scenes, sky, sea, caustics, backend, repeats, stride, quick, out_dir } => {
             let scenes: Vec<PathBuf> = if scenes.is_empty() {
@@ -323,7 +385,7 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
             if !shaft_scenes.is_empty() {
-                let opts = bench::Options {
+                let opts = slicelight::shafts::bench::Options {
                     scenes: shaft_scenes,
                     backends: backend.clone(),
                     repeats,
@@ -331,7 +393,7 @@ fn run(cli: Cli) -> Result<()> {
                     quick,
                     out_dir: out_dir.clone(),
                 };
-                bench::run(&opts)?;
+                slicelight::shafts::bench::run(&opts)?;
                 eprintln!(
                     "wrote {0}/bench.csv, {0}/error_vs_planes.png, {0}/error_vs_subplanes.png, {0}/time_vs_error.png",
                     out_dir.display()
@@ -340,13 +402,13 @@ fn run(cli: Cli) -> Result<()> {
             if !sky_scenes.is_empty() {
                 let backends: Vec<render::Backend> =
                     backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
-                slicelight::bench_sky::run(&sky_scenes, &backends, repeats, stride, quick, &out_dir)?;
+                slicelight::sky::bench::run(&sky_scenes, &backends, repeats, stride, quick, &out_dir)?;
                 eprintln!("wrote {0}/sky_bench.csv, {0}/sky_time_vs_error.png", out_dir.display());
             }
             if !caustic_scenes.is_empty() {
                 let backends: Vec<render::Backend> =
                     backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
-                slicelight::bench_caustics::run(&caustic_scenes, &backends, repeats, stride, quick, &out_dir)?;
+                slicelight::caustics::bench::run(&caustic_scenes, &backends, repeats, stride, quick, &out_dir)?;
                 eprintln!(
                     "wrote {0}/caustics_bench.csv, {0}/caustics_time_vs_error.png, {0}/caustics_precompute.png",
                     out_dir.display()
@@ -356,7 +418,7 @@ fn run(cli: Cli) -> Result<()> {
                 let backends: Vec<render::Backend> =
                     backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
                 // The sea's reference costs ~0.2 s a pixel: a coarser lattice.
-                slicelight::bench_sea::run(&sea_scenes, &backends, repeats, stride.max(40), quick, &out_dir)?;
+                slicelight::sea::bench::run(&sea_scenes, &backends, repeats, stride.max(40), quick, &out_dir)?;
                 eprintln!(
                     "wrote {0}/sea_bench.csv, {0}/sea_time_vs_error_*.png, {0}/sea_convergence.csv, {0}/sea_fig7_planes.png, {0}/sea_fig8_directions.png",
                     out_dir.display()
@@ -364,7 +426,15 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Compare { image, reference, exposure, diff } => {
+        Command::Compare { image, reference, exposure, scene, diff } => {
+            let exposure = match (exposure, &scene) {
+                (Some(e), _) => e,
+                (None, Some(path)) => scene::load(path)?.exposure,
+                (None, None) => 1.0,
+            };
+            if !(exposure.is_finite() && exposure > 0.0) {
+                return Err(anyhow!("command line: --exposure: expected a positive number, got {exposure}"));
+            }
             let (w, h, a) = read_linear(&image)?;
             let (rw, rh, b) = read_linear(&reference)?;
             if (w, h) != (rw, rh) {
@@ -381,7 +451,10 @@ fn run(cli: Cli) -> Result<()> {
                 let pixels: Vec<Vec4> =
                     a.iter().zip(&b).map(|(x, y)| ((*x - *y).abs() / largest).as_vec3().extend(0.0)).collect();
                 output::write_image(&path, &pixels, w, h, 1.0)?;
-                eprintln!("wrote {} (white = {largest:.4e})", path.display());
+                eprintln!(
+                    "wrote {}: per channel |image - reference| / {largest:.4e} (white: that difference; linear, no tone mapping)",
+                    path.display()
+                );
             }
             Ok(())
         }

@@ -15,17 +15,29 @@ pub struct Difference {
     pub max_8bit_percent: f64,
 }
 
+/// The RMS and the largest difference over all pixels and channels, each
+/// divided by the reference's largest channel value: the one relative
+/// measure of the project (whole images, the sky bench's pixels, the
+/// references' convergence between rounds).
+pub fn relative_error(image: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
+    assert_eq!(image.len(), reference.len(), "images of different sizes");
+    let peak = reference.iter().map(|p| p.max_element()).fold(0.0f64, f64::max).max(1e-300);
+    let (mut sum2, mut max) = (0.0, 0.0f64);
+    for (a, b) in image.iter().zip(reference) {
+        let d = (*a - *b).abs();
+        sum2 += d.length_squared();
+        max = max.max(d.max_element());
+    }
+    ((sum2 / (3 * image.len().max(1)) as f64).sqrt() / peak, max / peak)
+}
+
 /// Compares `image` against `reference` (both linear rgb radiance), with the
 /// 8-bit measures taken after the PNG tone mapping at `exposure`.
 pub fn difference(image: &[DVec3], reference: &[DVec3], exposure: f32) -> Difference {
-    assert_eq!(image.len(), reference.len(), "images of different sizes");
-    let scale = reference.iter().map(|p| p.max_element()).fold(0.0f64, f64::max).max(1e-300);
-    let (mut sum2, mut max, mut sum2_8, mut max_8) = (0.0, 0.0f64, 0.0, 0.0f64);
+    let (rms_relative, max_relative) = relative_error(image, reference);
+    let (mut sum2_8, mut max_8) = (0.0, 0.0f64);
     for (a, b) in image.iter().zip(reference) {
         for c in 0..3 {
-            let d = (a[c] - b[c]).abs();
-            sum2 += d * d;
-            max = max.max(d);
             let a8 = crate::output::to_8bit(a[c] as f32, exposure) as f64;
             let b8 = crate::output::to_8bit(b[c] as f32, exposure) as f64;
             let d8 = (a8 - b8).abs() / 255.0 * 100.0;
@@ -34,12 +46,7 @@ pub fn difference(image: &[DVec3], reference: &[DVec3], exposure: f32) -> Differ
         }
     }
     let n = (image.len() * 3).max(1) as f64;
-    Difference {
-        rms_relative: (sum2 / n).sqrt() / scale,
-        max_relative: max / scale,
-        rms_8bit_percent: (sum2_8 / n).sqrt(),
-        max_8bit_percent: max_8,
-    }
+    Difference { rms_relative, max_relative, rms_8bit_percent: (sum2_8 / n).sqrt(), max_8bit_percent: max_8 }
 }
 
 pub fn to_f64(pixels: &[Vec4]) -> Vec<DVec3> {

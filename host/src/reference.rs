@@ -16,10 +16,11 @@
 use glam::{DVec3, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 use slicelight_shaders::camera::sample_offset;
+use slicelight_shaders::optics;
 use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT, MATERIAL_GLASS, PROJECTION_FISHEYE};
 
-use crate::sea_reference::{grid_depth, HeightField, SeaReference};
-use crate::sky_reference::SkyReference;
+use crate::sea::reference::{grid_depth, HeightField, SeaReference};
+use crate::sky::reference::SkyReference;
 
 /// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`;
 /// the `reference_converges` test measures its error: below 1e-4 of the sky's peak).
@@ -257,7 +258,7 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         // Through glass: the opaque surface behind, lit directly, per channel.
         let mut radiance = DVec3::ZERO;
         for c in 0..3 {
-            if let Some((q, dir, weight, behind)) = crate::caustics_reference::through_glass(data, o, d, &hit, c) {
+            if let Some((q, dir, weight, behind)) = crate::caustics::reference::through_glass(data, o, d, &hit, c) {
                 let l = direct(data, q, dir, &behind) * (-sigma_t * behind.t).exp();
                 radiance[c] += l[c] * weight;
             }
@@ -328,15 +329,6 @@ fn incident(
     e * attenuation * (cos * falloff)
 }
 
-/// Unpolarised Fresnel reflectance from air onto index `n` at incidence cosine `cos_i`, f64.
-fn fresnel(cos_i: f64, n: f64) -> f64 {
-    let sin_t = (1.0 - cos_i * cos_i).max(0.0).sqrt() / n;
-    let cos_t = (1.0 - sin_t * sin_t).sqrt();
-    let rs = (cos_i - n * cos_t) / (cos_i + n * cos_t);
-    let rp = (cos_t - n * cos_i) / (cos_t + n * cos_i);
-    0.5 * (rs * rs + rp * rp)
-}
-
 /// The sea along the view ray `(o, d)` (downward, from above the surface),
 /// f64: the sky and sun reflected (the sky's reference), and orders 1, 2 and
 /// the bottom below the refracting surface (the sea's quadrature), times
@@ -353,13 +345,13 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     }
     let n = p.extinction.w as f64;
     let cos_i = -d.dot(normal);
-    let r = fresnel(cos_i, n);
+    let r = optics::reflectance(cos_i, 1.0 / n);
     let reflected = d + normal * (2.0 * cos_i);
     let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
     let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(reflected);
     // Snell: the refracted ray, reversed, is the direction light leaves the water toward the eye.
     let eta = 1.0 / n;
-    let cos_t = (1.0 - eta * eta * (1.0 - cos_i * cos_i)).sqrt();
+    let (cos_t, _) = optics::transmitted_cosine(cos_i, eta);
     let mut view = -(d * eta + normal * (eta * cos_i - cos_t)).normalize();
     if view.y < 1e-4 {
         view = DVec3::new(view.x, 1e-4, view.z).normalize();
@@ -500,21 +492,13 @@ pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> 
     while samples < 65536 {
         samples *= 2;
         let next = with_inscatter(samples);
-        let change = relative_rms_change(&next, &image);
+        let change = crate::metrics::relative_error(&image, &next).0;
         image = next;
         if change < tolerance {
             break;
         }
     }
     (image, samples)
-}
-
-/// RMS of `next - last` over pixels and channels, relative to `next`'s peak:
-/// the references' convergence measure.
-pub fn relative_rms_change(next: &[DVec3], last: &[DVec3]) -> f64 {
-    let peak = next.iter().map(|p| p.max_element()).fold(1e-300, f64::max);
-    let sum2: f64 = next.iter().zip(last).map(|(a, b)| (*a - *b).length_squared()).sum();
-    (sum2 / (3 * next.len().max(1)) as f64).sqrt() / peak
 }
 
 /// The whole reference image at convergence (see `render_converged_at`).

@@ -109,6 +109,14 @@ impl RenderStats {
     pub fn counter(&self, name: &str) -> u64 {
         self.counters.get(name).copied().unwrap_or(0)
     }
+
+    /// The summed time of `passes` (a family's `PASSES`, or some of them):
+    /// the benches time a family by its registered passes, so a pass added
+    /// to it is counted without naming it.
+    pub fn seconds_of(&self, passes: &[&dyn Pass]) -> f64 {
+        let names: Vec<&str> = passes.iter().map(|p| p.name()).collect();
+        self.passes.iter().filter(|p| names.contains(&p.name)).map(|p| p.seconds).sum()
+    }
 }
 
 /// A rendered frame: the image (rgb radiance, W/(m^2 sr); w unused), and
@@ -217,7 +225,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     let spp = data.samples_per_pixel();
     // Outputs known before the frame (a cached table).
     let mut known = Frame::default();
-    for pass in PASSES {
+    for pass in PASSES.iter() {
         if let Some((r, buffer)) = pass.cached(data) {
             known.insert(r, buffer);
         }
@@ -323,7 +331,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
     let mut counters = BTreeMap::new();
     for &(k, pass, _) in &running {
         pass.persist(data, &result);
-        stats[k].report = pass.report(data, &result);
+        stats[k].report = pass.report(data, &result).map_err(|e| e.context(format!("pass {}", pass.name())))?;
         counters.extend(pass.counters(data, &result));
     }
     // The image: the mean over samples of the sum of the layers (box filter).

@@ -9,6 +9,7 @@
 
 use crate::geometry::{trace_object, Geometry, Hit, NO_HIT};
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
+use crate::optics::{refract, transmittance};
 use crate::types::{GlassTriangle, GlassVertex, GpuMaterial, MATERIAL_GLASS, NO_OBJECT};
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
@@ -33,35 +34,6 @@ pub const PATH_LOST: u32 = 3;
 pub struct Glass<'a> {
     pub vertices: &'a [GlassVertex],
     pub triangles: &'a [GlassTriangle],
-}
-
-/// Fraction of unpolarised light transmitted through an interface, from
-/// the cosine of the incidence angle `cos_i` (in [0, 1]) and the relative
-/// index `eta = n_incident / n_transmitted`; 0 past the critical angle.
-/// The mean of the s and p Fresnel reflectances, `R = (R_s + R_p) / 2`.
-pub fn fresnel_transmittance(cos_i: f32, eta: f32) -> f32 {
-    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
-    if sin2_t >= 1.0 {
-        return 0.0;
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-    let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-    (1.0 - 0.5 * (rs * rs + rp * rp)).clamp(0.0, 1.0)
-}
-
-/// Snell's law: the unit direction refracted from unit `d` at a surface of
-/// unit normal `n` facing against `d` (`n . d < 0`), with
-/// `eta = n_incident / n_transmitted`. Returns the direction and whether
-/// it exists (false: total internal reflection).
-pub fn refract(d: Vec3, n: Vec3, eta: f32) -> (Vec3, bool) {
-    let cos_i = (-n.dot(d)).clamp(0.0, 1.0);
-    let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
-    if sin2_t >= 1.0 {
-        return (d - n * (2.0 * n.dot(d)), false);
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    ((d * eta + n * (eta * cos_i - cos_t)).normalize(), true)
 }
 
 /// The smooth normal (unit, outward) at point `p` on the glass triangle
@@ -170,7 +142,7 @@ pub fn trace_through(
         let cos_i = (-facing.dot(dir)).clamp(0.0, 1.0);
         let (refracted, ok) = refract(dir, facing, eta);
         if ok {
-            path.fresnel *= fresnel_transmittance(cos_i, eta);
+            path.fresnel *= transmittance(cos_i, eta);
             inside = !inside;
         } else if !follow_reflection {
             path.position = point;
@@ -234,39 +206,5 @@ pub fn pick(v: Vec4, channel: u32) -> f32 {
         v.y
     } else {
         v.z
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn fresnel_at_normal_incidence_and_past_the_critical_angle() {
-        // Normal incidence: R = ((n1 - n2) / (n1 + n2))^2 = 0.04 for 1 -> 1.5.
-        assert!((fresnel_transmittance(1.0, 1.0 / 1.5) - 0.96).abs() < 1e-6);
-        // Same both ways at normal incidence.
-        assert!((fresnel_transmittance(1.0, 1.5) - 0.96).abs() < 1e-6);
-        // Critical angle from glass: asin(1/1.5) = 41.8 degrees.
-        assert_eq!(fresnel_transmittance(45f32.to_radians().cos(), 1.5), 0.0);
-        assert!(fresnel_transmittance(40f32.to_radians().cos(), 1.5) > 0.0);
-        // Grazing from air: nothing gets in.
-        assert!(fresnel_transmittance(1e-4, 1.0 / 1.5) < 1e-3);
-    }
-
-    #[test]
-    fn refraction_obeys_snell() {
-        let n = Vec3::Y;
-        for deg in [0.0f32, 10.0, 30.0, 60.0, 89.0] {
-            let a = deg.to_radians();
-            let d = Vec3::new(a.sin(), -a.cos(), 0.0);
-            let (t, ok) = refract(d, n, 1.0 / 1.5);
-            assert!(ok);
-            let sin_t = t.x;
-            assert!((a.sin() - 1.5 * sin_t).abs() < 1e-5, "{deg}: {t}");
-            assert!((t.length() - 1.0).abs() < 1e-5 && t.y < 0.0);
-        }
-        let (_, ok) = refract(Vec3::new(0.8, -0.6, 0.0), n, 1.5);
-        assert!(!ok, "sin 0.8 x 1.5 > 1: total internal reflection");
     }
 }

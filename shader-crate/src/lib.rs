@@ -1,7 +1,7 @@
 //! slicelight's kernels.
 //!
 //! Every pass has a module here holding its pure per-invocation function
-//! (`shadow_map::shadow_map_texel`, `surface::surface_pixel`,
+//! (`common::shadow_maps::shadow_map_texel`, `common::surface::surface_pixel`,
 //! `shafts::shafts_pixel`, ...) and a thin `#[spirv(compute)]` entry point that
 //! reads the invocation id, calls it and stores the result. The host's CPU
 //! backend calls the same functions for every invocation id. There is one
@@ -14,21 +14,24 @@
 //! the host's.
 #![cfg_attr(target_arch = "spirv", no_std)]
 
+// Shared math: the camera, ray-geometry intersection, the glass meshes,
+// lights, optics (Fresnel, Snell), phase functions, the scattering
+// integrals, and the structs the host uploads.
 pub mod camera;
-pub mod caustics;
 pub mod geometry;
 pub mod glass;
 pub mod light;
+pub mod optics;
 pub mod phase;
 pub mod scatter;
-pub mod scatter_check;
+pub mod types;
+
+// The families, each a folder named as its host folder (`host/src/<family>`).
+pub mod caustics;
+pub mod common;
 pub mod sea;
-pub mod sea_table;
-pub mod shadow_map;
 pub mod shafts;
 pub mod sky;
-pub mod surface;
-pub mod types;
 
 pub use spirv_std::glam;
 

@@ -18,7 +18,7 @@ pub mod lights;
 pub mod schema;
 pub mod validate;
 
-pub use crate::passes::shafts::{Settings as Shafts, ShaftMode};
+pub use crate::shafts::{Settings as Shafts, ShaftMode};
 pub use lights::srgb_to_linear;
 pub use schema::*;
 use validate::{finite3, non_negative3, unit3};
@@ -55,13 +55,13 @@ pub struct SceneData {
     pub bounds: Option<(Vec3, Vec3)>,
     pub exposure: f32,
     /// The shafts pass's settings, parameter block and tables.
-    pub shafts: crate::passes::shafts::Setup,
+    pub shafts: crate::shafts::Setup,
     /// The sky passes' parameter block (`enabled` false without `[sky]`).
-    pub sky: crate::passes::sky::Setup,
+    pub sky: crate::sky::Setup,
     /// The sea passes' parameter block and wave normals (`enabled` false without `[sea]`).
-    pub sea: crate::passes::sea::Setup,
+    pub sea: crate::sea::Setup,
     /// The caustics passes' parameter block (`enabled` false without glass and light on it).
-    pub caustics: crate::passes::caustics::Setup,
+    pub caustics: crate::caustics::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
 }
@@ -102,9 +102,9 @@ impl SceneData {
         slicelight_shaders::scene_geometry(&self.common, &self.spheres, &self.triangles, &self.bvh_nodes)
     }
 
-    /// Applies shaft settings (see `passes::shafts::configure`).
+    /// Applies shaft settings (see `shafts::configure`).
     pub fn configure_shafts(&mut self, s: Shafts) -> Result<()> {
-        crate::passes::shafts::configure(self, s)
+        crate::shafts::configure(self, s)
     }
 
     /// Sets the sub-pixel samples per pixel (`[camera] samples_per_pixel`, `--spp`).
@@ -149,11 +149,11 @@ impl SceneData {
                 _ if !geometry || light.kind == slicelight_shaders::types::LIGHT_POINT => 0,
                 Some(r) => *r,
                 None if surfaces => SURFACE_SHADOW_MAP_RESOLUTION,
-                None => crate::passes::shadow_maps::shafts_resolution(
+                None => crate::common::shadow_maps::shafts_resolution(
                     &self.common,
                     light,
                     rays.get_or_insert_with(|| {
-                        crate::passes::shadow_maps::footprint_rays(&self.common, &self.geometry(), t_far)
+                        crate::common::shadow_maps::footprint_rays(&self.common, &self.geometry(), t_far)
                     }),
                     SHAFTS_MIN_SHADOW_MAP_RESOLUTION,
                     SURFACE_SHADOW_MAP_RESOLUTION,
@@ -298,7 +298,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     let objects = geometry::build(&file.object, base)?;
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
     let mut sky = match &file.sky {
-        Some(s) => crate::passes::sky::configure(s)?,
+        Some(s) => crate::sky::configure(s)?,
         None => Default::default(),
     };
     let sea = match &file.sea {
@@ -306,7 +306,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
             if common.projection == PROJECTION_FISHEYE {
                 bail!(invalid("camera.projection", "a pinhole camera over a sea", "fisheye"));
             }
-            crate::passes::sea::configure(s, &sky, &common, base)?
+            crate::sea::configure(s, &sky, &common, base)?
         }
         None => Default::default(),
     };
@@ -371,6 +371,6 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     };
     data.lay_out_shadow_maps()?;
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;
-    data.caustics = crate::passes::caustics::configure(&file.caustics, &data).map_err(|e| anyhow!("caustics.{e}"))?;
+    data.caustics = crate::caustics::configure(&file.caustics, &data).map_err(|e| anyhow!("caustics.{e}"))?;
     Ok(data)
 }

@@ -21,13 +21,13 @@ pub struct SceneFile {
     #[serde(default)]
     pub object: Vec<Object>,
     #[serde(default)]
-    pub shafts: crate::passes::shafts::Settings,
+    pub shafts: crate::shafts::Settings,
     #[serde(default)]
-    pub surface: crate::passes::surface::Settings,
-    pub sky: Option<crate::passes::sky::Settings>,
-    pub sea: Option<crate::passes::sea::Settings>,
+    pub surface: crate::common::surface::Settings,
+    pub sky: Option<crate::sky::Settings>,
+    pub sea: Option<crate::sea::Settings>,
     #[serde(default)]
-    pub caustics: crate::passes::caustics::Settings,
+    pub caustics: crate::caustics::Settings,
 }
 
 #[derive(Debug, Deserialize)]

@@ -6,7 +6,7 @@ use glam::{Vec3, Vec4};
 /// The least default shadow-map resolution where the maps serve the shafts
 /// alone (surfaces shadowed by shadow rays, the default); the default there
 /// is the smallest resolution whose texels are no wider than a pixel where
-/// the view sees the light (`passes::shadow_maps::shafts_resolution`), up to
+/// the view sees the light (`common::shadow_maps::shafts_resolution`), up to
 /// `SURFACE_SHADOW_MAP_RESOLUTION`.
 pub const SHAFTS_MIN_SHADOW_MAP_RESOLUTION: u32 = 128;
 

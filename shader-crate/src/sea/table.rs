@@ -1,7 +1,7 @@
 //! Order 2 over a varying bottom with the paper's depth table (section
 //! 5.4 of Iwasaki, Dobashi and Nishita, `../shared/papers/004_*`).
 //!
-//! The scattering maps (`sea.rs`) are built for flat bottoms, and a pixel's
+//! The scattering maps (`mod.rs`) are built for flat bottoms, and a pixel's
 //! order 2 is read between those built for the depths bracketing the
 //! bottom where its view ray meets it: the water under the pixel taken as
 //! flat. Light that reaches a point from below was scattered between the

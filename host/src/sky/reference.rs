@@ -1,5 +1,5 @@
 //! The sky's reference: the same single-scattering integral as the sky
-//! kernels (see `shader-crate/src/sky.rs`), in f64, with no tables and none
+//! kernels (see `shader-crate/src/sky/`), in f64, with no tables and none
 //! of their shortcuts: planet-centred vectors instead of the kernels'
 //! altitude formulas, every optical depth (to the sun from each sample, and
 //! along the view ray) by adaptive Gauss-Kronrod quadrature refined until

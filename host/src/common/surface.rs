@@ -1,14 +1,15 @@
-//! The lit-surface pass (kernel: `shader-crate/src/surface.rs`): surfaces
+//! The lit-surface pass (kernel: `shader-crate/src/common/surface.rs`): surfaces
 //! seen through the medium, and the G-buffer.
 
 use anyhow::{ensure, Result};
 use glam::Vec4;
 use indicatif::ProgressBar;
-use slicelight_shaders::surface::surface_pixel;
+use slicelight_shaders::common::surface::surface_pixel;
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
-use super::*;
+use crate::caustics;
 use crate::cpu::for_each_invocation2;
+use crate::passes::*;
 use crate::scene::SceneData;
 
 /// Attenuated surface radiance per pixel (rgb; w = 0).
@@ -49,10 +50,10 @@ impl Pass for Surface {
         "surface"
     }
     fn kernel(&self) -> &'static str {
-        "surface::surface_kernel"
+        "common::surface::surface_kernel"
     }
     fn variants(&self) -> &'static [&'static str] {
-        &["surface::surface_opaque_kernel"]
+        &["common::surface::surface_opaque_kernel"]
     }
     fn kernel_for(&self, scene: &SceneData) -> &'static str {
         if scene.has_glass() {

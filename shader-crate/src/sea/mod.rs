@@ -43,7 +43,7 @@
 //!   known exponential attenuation, integrated exactly.
 //!
 //! Over a varying bottom the maps are built for `layers` flat bottoms and
-//! read at the depth under each pixel's view ray; `sea_table.rs` corrects
+//! read at the depth under each pixel's view ray; `table.rs` corrects
 //! that with the paper's depth table (5.4).
 //!
 //! A scattering map texel stands for a direction toward the eye rather than
@@ -51,11 +51,14 @@
 //! order-2 radiance at a depth depends on the point only through that
 //! direction, so one map serves every camera.
 
+pub mod table;
+
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
 use crate::camera::{camera_ray, in_image, sample_offset};
 use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
+use crate::optics::{reflectance, refract};
 use crate::phase::henyey_greenstein;
 use crate::sky::{sky_radiance, sun_disk, SkyParams};
 use crate::types::{CommonParams, GBufferTexel, NO_OBJECT};
@@ -150,35 +153,6 @@ pub fn phi(x: f32) -> f32 {
 
 fn phi3(v: Vec3) -> Vec3 {
     Vec3::new(phi(v.x), phi(v.y), phi(v.z))
-}
-
-/// Fresnel reflectance of unpolarised light arriving at cosine `cos_i` (> 0)
-/// from the side of index `n1` onto index `n2`: the mean of the s and p
-/// reflectances; 1 beyond the critical angle.
-pub fn fresnel(cos_i: f32, n1: f32, n2: f32) -> f32 {
-    let cos_i = cos_i.clamp(0.0, 1.0);
-    let eta = n1 / n2;
-    let sin_t2 = eta * eta * (1.0 - cos_i * cos_i);
-    if sin_t2 >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = (1.0 - sin_t2).sqrt();
-    let rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t);
-    let rp = (n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i);
-    0.5 * (rs * rs + rp * rp)
-}
-
-/// Refracts unit direction of travel `d` through a surface with unit normal
-/// `n` (on the side `d` comes from: `d . n < 0`), index ratio `eta = n1/n2`;
-/// `None`-like: returns `(direction, false)` under total internal reflection.
-pub fn refract(d: Vec3, n: Vec3, eta: f32) -> (Vec3, bool) {
-    let cos_i = -d.dot(n);
-    let sin_t2 = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
-    if sin_t2 >= 1.0 {
-        return (d, false);
-    }
-    let cos_t = (1.0 - sin_t2).sqrt();
-    ((d * eta + n * (eta * cos_i - cos_t)).normalize(), true)
 }
 
 /// The forward scattering fraction of Henyey-Greenstein with parameter `g`:
@@ -760,7 +734,7 @@ pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4]
     }
     let cos_i = -dir.dot(normal);
     let n = p.extinction.w;
-    let r = fresnel(cos_i, 1.0, n);
+    let r = reflectance(cos_i, 1.0 / n);
     let reflected = dir + normal * (2.0 * cos_i);
     let view = view_in_water(dir, normal, n);
     out.hit = true;
@@ -915,7 +889,7 @@ pub fn order2_pixel(
             // every sampling ray rather than flat under the view ray.
             let offset = sample_offset(common.sample_index, common.samples_per_pixel);
             let position = Vec2::new((index % common.width) as f32, (index / common.width) as f32) + offset;
-            value = (value + crate::sea_table::correction_at(p, common, correction, position)).max(Vec3::ZERO);
+            value = (value + crate::sea::table::correction_at(p, common, correction, position)).max(Vec3::ZERO);
         }
     }
     (value * v.transmission).extend(0.0)
@@ -1124,21 +1098,6 @@ mod tests {
                 (-c * zp / mu_s).exp() * (-c * (zp - z).abs() / mu.abs()).exp() * h / mu.abs()
             })
             .sum()
-    }
-
-    #[test]
-    fn fresnel_closed_forms() {
-        let n = 1.333f32;
-        let normal = ((n - 1.0) / (n + 1.0)).powi(2);
-        assert!((fresnel(1.0, 1.0, n) - normal).abs() < 1e-7);
-        assert!((fresnel(1.0, n, 1.0) - normal).abs() < 1e-7, "reciprocal at normal incidence");
-        assert_eq!(fresnel(0.0, 1.0, n), 1.0, "grazing");
-        // Beyond the critical angle (48.6 degrees) from the water side.
-        assert_eq!(fresnel(50f32.to_radians().cos(), n, 1.0), 1.0);
-        // Brewster: rp = 0, so R = rs^2 / 2.
-        let brewster = n.atan();
-        let r = fresnel(brewster.cos(), 1.0, n);
-        assert!(r > 0.0 && r < 0.05, "{r}");
     }
 
     #[test]

@@ -1,9 +1,12 @@
-//! The caustics passes (kernels: `shader-crate/src/caustics.rs`): the light
+//! The caustics passes (kernels: `shader-crate/src/caustics/`): the light
 //! transport table of every glass mesh (`caustics.table`), the exit rays for
 //! the scene's lights (`caustics.lookup`), the illumination volumes
 //! rasterised into caustics maps on horizontal sample planes
 //! (`caustics.maps`), and the caustic light on the surfaces each pixel sees
 //! (`caustics`, an EXR layer).
+
+pub mod bench;
+pub mod reference;
 
 use anyhow::{bail, ensure, Result};
 use glam::{Vec3, Vec4};
@@ -16,7 +19,10 @@ use slicelight_shaders::glass::{dispersive, trace_through, Glass, PATH_OUT};
 use slicelight_shaders::scatter::{words_for, CpuAtomics};
 use slicelight_shaders::types::{CommonParams, GBufferTexel, MATERIAL_GLASS, NO_OBJECT};
 
-use super::*;
+use crate::passes::*;
+
+/// The family's passes, in the order they run (see `passes::FAMILIES`).
+pub static PASSES: &[&dyn Pass] = &[&CausticsTable, &CausticsLookup, &CausticsMaps, &Caustics];
 use crate::cpu::{for_each_index, for_each_invocation};
 use crate::scene::{invalid, SceneData};
 use rayon::prelude::*;
@@ -699,10 +705,10 @@ impl Pass for CausticsMaps {
     fn keeps(&self) -> &'static [&'static Resource] {
         resources![CAUSTICS_MAPS]
     }
-    fn report(&self, scene: &SceneData, frame: &Frame) -> Option<String> {
+    fn report(&self, scene: &SceneData, frame: &Frame) -> Result<Option<String>> {
         let words = frame.get::<u32>(&CAUSTICS_MAPS);
         if words.is_empty() {
-            return None;
+            return Ok(None);
         }
         let p = &scene.caustics.params;
         let maps = decode_maps(scene, words);
@@ -715,12 +721,12 @@ impl Pass for CausticsMaps {
                 format!("[{:.4e}, {:.4e}, {:.4e}]", sum.x, sum.y, sum.z)
             })
             .collect();
-        Some(format!(
+        Ok(Some(format!(
             "flux on each plane (W, from the lowest): {}; {} rejected contributions (not finite, or a cross-section over {} texels)",
             flux.join(", "),
             words[0],
             slicelight_shaders::caustics::MAX_VOLUME_TEXELS
-        ))
+        )))
     }
     fn compare(&self, scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         // Each texel sums the same flux on both backends, except where a

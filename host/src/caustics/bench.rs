@@ -167,7 +167,7 @@ pub fn run(
             let data = small(load_text(&configured(&text, &c), base, &name)?, stride)?;
             let direct = crate::reference::render_surfaces(&data);
             let (traced, paths) =
-                crate::caustics_reference::caustic_image_converged(&data, 1 << 21, 1 << 24, 2e-3, true);
+                crate::caustics::reference::caustic_image_converged(&data, 1 << 21, 1 << 24, 2e-3, true);
             eprintln!("{name}: reference with {paths} light paths per light and object");
             let image = direct.iter().zip(&traced).map(|(a, b)| *a + *b).collect();
             Ok((image, not_glass(&data)))

@@ -1,6 +1,8 @@
-//! The shafts-of-light pass (kernel: `shader-crate/src/shafts.rs`):
+//! The shafts-of-light pass (kernel: `shader-crate/src/shafts/`):
 //! in-scattering by slice accumulation over sample planes, its settings
 //! (the scene's `[shafts]` table) and its tables.
+
+pub mod bench;
 
 use anyhow::{bail, ensure, Result};
 use glam::{Vec3, Vec4};
@@ -12,7 +14,10 @@ use slicelight_shaders::shafts::{
 };
 use slicelight_shaders::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL};
 
-use super::*;
+use crate::passes::*;
+
+/// The family's passes, in the order they run (see `passes::FAMILIES`).
+pub static PASSES: &[&dyn Pass] = &[&ShaftsTiles, &Shafts];
 use crate::cpu::for_each_invocation;
 use crate::scene::{invalid, SceneData};
 

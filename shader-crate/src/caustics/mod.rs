@@ -49,14 +49,13 @@
 //! which the mean direction is rebuilt. Only rays going down cross the
 //! planes (light from above the receivers).
 
+use crate::common::surface::{channel_part, shadow_ray_visibility, Receiver};
 use crate::geometry::{trace_object, Geometry, NO_HIT};
 use crate::glam::{Quat, UVec3, Vec3, Vec4, Vec4Swizzles};
-use crate::glass::{
-    fresnel_transmittance, pick, surface_epsilon, trace_through, Glass, PATH_LOST, PATH_OCCLUDED, PATH_OUT,
-};
+use crate::glass::{pick, surface_epsilon, trace_through, Glass, PATH_LOST, PATH_OCCLUDED, PATH_OUT};
 use crate::light::{emitted, light_local, transmittance};
+use crate::optics;
 use crate::scatter::{scatter_add, AtomicWords, REJECTED_WORD};
-use crate::surface::{channel_part, shadow_ray_visibility, Receiver};
 use crate::types::{
     CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
     LIGHT_DIRECTIONAL,
@@ -336,7 +335,7 @@ pub fn table_entry(
     // The entry's Fresnel transmittance is left out (the lookup applies it
     // for the light's exact angle): it falls to 0 at grazing faster than
     // the table's rings can follow.
-    let entry = fresnel_transmittance(-w.dot(n), 1.0 / pick(materials[v.material as usize].ior, c));
+    let entry = optics::transmittance(-w.dot(n), 1.0 / pick(materials[v.material as usize].ior, c));
     TableEntry {
         position: anchor.extend(PATH_OUT as f32),
         direction: d.extend(s_exit),
@@ -574,7 +573,7 @@ pub fn lookup(
     let inner = (e00.transmittance * w00 + e01.transmittance * w01 + e10.transmittance * w10 + e11.transmittance * w11)
         / weighed;
     // The entry's Fresnel transmittance at the light's own angle.
-    let entry = fresnel_transmittance(-l.dot(n), 1.0 / pick(materials[v.material as usize].ior, c));
+    let entry = optics::transmittance(-l.dot(n), 1.0 / pick(materials[v.material as usize].ior, c));
     ExitRay {
         position: (anchor + direction * s_exit).extend(1.0),
         direction: direction.extend(0.0),

@@ -1,5 +1,5 @@
 //! Order 2 over a varying bottom with the paper's depth table (section 5.4;
-//! kernels: `shader-crate/src/sea_table.rs`, which explains the method):
+//! kernels: `shader-crate/src/sea/table.rs`, which explains the method):
 //! the table's sampling points, the depth table, and the order-2 correction
 //! the per-pixel `sea.order2` adds. They run only over a varying bottom
 //! with second-order scattering and `depth_table` > 0.
@@ -7,14 +7,14 @@
 use anyhow::Result;
 use glam::Vec4;
 use indicatif::ProgressBar;
-use slicelight_shaders::sea_table::{
+use slicelight_shaders::sea::table::{
     bottom_correction_texel, depth_table_texel, table_directions, table_sample_texel, table_samples,
 };
 use slicelight_shaders::types::CommonParams;
 
-use super::sea::{skip_without_order2, SEA_BOTTOM_GRID, SEA_PARAMS};
-use super::*;
+use super::{skip_without_order2, SEA_BOTTOM_GRID, SEA_PARAMS};
 use crate::cpu::for_each_invocation;
+use crate::passes::*;
 use crate::scene::SceneData;
 
 fn samples(s: &SceneData) -> u64 {
@@ -55,7 +55,7 @@ impl Pass for SeaTableSamples {
         "sea.table_samples"
     }
     fn kernel(&self) -> &'static str {
-        "sea_table::table_samples_kernel"
+        "sea::table::table_samples_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
         resources![COMMON, SEA_PARAMS, SEA_BOTTOM_GRID]
@@ -106,7 +106,7 @@ impl Pass for SeaDepthTable {
         "sea.depth_table"
     }
     fn kernel(&self) -> &'static str {
-        "sea_table::depth_table_kernel"
+        "sea::table::depth_table_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
         resources![SEA_PARAMS, SEA_BOTTOM_GRID, SEA_TABLE_SAMPLES]
@@ -157,7 +157,7 @@ impl Pass for SeaBottomCorrection {
         "sea.bottom_correction"
     }
     fn kernel(&self) -> &'static str {
-        "sea_table::bottom_correction_kernel"
+        "sea::table::bottom_correction_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
         resources![SEA_PARAMS, SEA_TABLE_SAMPLES, SEA_DEPTH_TABLE]

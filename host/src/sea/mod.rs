@@ -1,26 +1,46 @@
-//! The sea passes (kernels: `shader-crate/src/sea.rs`): the radiance map
+//! The sea passes (kernels: `shader-crate/src/sea/`): the radiance map
 //! and the scattering maps (order 2, once per frame), and the four
 //! per-pixel terms, each its own layer: `sea.reflection`, `sea.order1`,
 //! `sea.order2`, `sea.bottom`; their settings (the scene's `[sea]`), and the
 //! automatic choice of `n_z` and `n_d` by the paper's 1/255 rule (6.1).
-//! Over a varying bottom, `sea_table.rs` adds the depth table (5.4).
+//! Over a varying bottom, `table.rs` adds the depth table (5.4).
+
+pub mod bench;
+pub mod reference;
+pub mod table;
+pub mod waves;
 
 use anyhow::{bail, ensure, Result};
 use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Deserialize;
+use slicelight_shaders::optics;
 use slicelight_shaders::sea::{
-    accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, fresnel, layer_params, map_coords,
-    order1_pixel, order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel,
-    scattering_map_lookup, scattering_map_texel, scattering_source, set_size, sun_azimuth_frame, SeaParams, DEEP,
-    WAVES_FLAT, WAVES_NORMAL_MAP,
+    accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, layer_params, map_coords, order1_pixel,
+    order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
+    scattering_map_texel, scattering_source, set_size, sun_azimuth_frame, SeaParams, DEEP, WAVES_FLAT,
+    WAVES_NORMAL_MAP,
 };
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
-use super::sea_table::SEA_BOTTOM_CORRECTION;
-use super::sky::{positive, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW};
-use super::*;
+use crate::passes::*;
+use crate::sea::table::SEA_BOTTOM_CORRECTION;
+use crate::sky::{positive, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW};
+
+/// The family's passes, in the order they run (see `passes::FAMILIES`).
+pub static PASSES: &[&dyn Pass] = &[
+    &SeaRadianceMap,
+    &SeaScatteringMaps,
+    &SeaAccumulatedMap,
+    &table::SeaTableSamples,
+    &table::SeaDepthTable,
+    &table::SeaBottomCorrection,
+    &SeaReflection,
+    &SeaOrder1,
+    &SeaOrder2,
+    &SeaBottom,
+];
 use crate::cpu::for_each_invocation;
 use crate::scene::{invalid, validate, SceneData};
 
@@ -293,7 +313,7 @@ pub enum Waves {
     #[default]
     Flat,
     /// A statistical wave spectrum on an FFT grid (Tessendorf).
-    Spectrum(crate::waves::Spectrum),
+    Spectrum(crate::sea::waves::Spectrum),
 }
 
 /// The sea's state for one scene.
@@ -437,7 +457,7 @@ pub fn choose_directions(p: &SeaParams) -> (u32, Vec<(u32, f32)>) {
 /// returns the sea's setup; the error names the field under `sea.`.
 pub fn configure(
     s: &Settings,
-    sky: &super::sky::Setup,
+    sky: &crate::sky::Setup,
     common: &CommonParams,
     base: &std::path::Path,
 ) -> Result<Setup> {
@@ -532,9 +552,9 @@ pub fn configure(
         Some((e, _)) => (e, sun.y.max(0.0)),
         None => (Vec3::ZERO, sun.y.max(1e-3)),
     };
-    let t_i = 1.0 - fresnel(cos_ii, 1.0, n);
-    let sin_io = (1.0 - cos_ii * cos_ii).max(0.0).sqrt() / n;
-    let cos_io = (1.0 - sin_io * sin_io).sqrt();
+    let t_i = optics::transmittance(cos_ii, 1.0 / n);
+    let (cos_io, _) = optics::transmitted_cosine(cos_ii, 1.0 / n);
+    let sin_io = (1.0 - cos_io * cos_io).max(0.0).sqrt();
     let horizontal = Vec3::new(sun.x, 0.0, sun.z);
     let horizontal = if horizontal.length_squared() > 1e-12 { horizontal.normalize() } else { Vec3::X };
     let in_water = (-horizontal * sin_io - Vec3::Y * cos_io).normalize();
@@ -847,7 +867,7 @@ impl Pass for SeaReflection {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, sky) = (&scene.sea.params, &scene.sky.params);
-        let blank = slicelight_shaders::surface::no_surface();
+        let blank = slicelight_shaders::common::surface::no_surface();
         frame.write_all::<Vec4>(&SEA_REFLECTION, common.band_pixels as usize, |frame, out| {
             let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
             let sky_view = frame.get::<Vec4>(&SKY_VIEW);
@@ -875,7 +895,7 @@ fn run_term(
     out: &Resource,
     term: impl Fn(u32, &GBufferTexel, &[Vec4], &[Vec4]) -> Vec4 + Sync,
 ) {
-    let blank = slicelight_shaders::surface::no_surface();
+    let blank = slicelight_shaders::common::surface::no_surface();
     frame.write_all::<Vec4>(out, common.band_pixels as usize, |frame, values| {
         let maps = frame.get::<Vec4>(&SEA_ACCUMULATED_MAP);
         let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION);

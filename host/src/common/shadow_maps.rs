@@ -1,20 +1,20 @@
-//! The shadow-map pass (kernel: `shader-crate/src/shadow_map.rs`).
+//! The shadow-map pass (kernel: `shader-crate/src/common/shadow_maps.rs`).
 
 use anyhow::{ensure, Result};
 use indicatif::ProgressBar;
 use slicelight_shaders::camera::pinhole_direction;
+use slicelight_shaders::common::shadow_maps::shadow_map_texel;
 use slicelight_shaders::geometry::{trace_nearest, Geometry, NO_HIT};
 use slicelight_shaders::glam::{Vec2, Vec3, Vec4Swizzles};
 use slicelight_shaders::light::light_local;
-use slicelight_shaders::shadow_map::shadow_map_texel;
 use slicelight_shaders::shafts::{clip_to_beam, clip_to_cone};
 use slicelight_shaders::types::{CommonParams, GpuLight, LIGHT_DIRECTIONAL, PROJECTION_PINHOLE};
 
-use super::{
+use crate::cpu::for_each_invocation;
+use crate::passes::{
     count_differences, Dispatch, Frame, Pass, Plan, Resource, BVH_NODES, COMMON, LIGHTS, SHADOW_MAPS, SPHERES,
     TRIANGLES,
 };
-use crate::cpu::for_each_invocation;
 use crate::scene::SceneData;
 
 pub struct ShadowMaps;
@@ -24,7 +24,7 @@ impl Pass for ShadowMaps {
         "shadow_maps"
     }
     fn kernel(&self) -> &'static str {
-        "shadow_map::shadow_map_kernel"
+        "common::shadow_maps::shadow_map_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
         resources![COMMON, LIGHTS, SPHERES, TRIANGLES, BVH_NODES]
@@ -44,7 +44,7 @@ impl Pass for ShadowMaps {
         } else if !scene.has_geometry() {
             Plan::skip("no geometry to cast shadows")
         } else if scene.common.surface_shadows != slicelight_shaders::types::SHADOWS_MAP
-            && !super::shafts::Shafts.plan(scene).runs
+            && !crate::shafts::Shafts.plan(scene).runs
         {
             Plan::skip("surfaces use shadow rays and no shafts are rendered")
         } else {
@@ -119,7 +119,7 @@ pub fn footprint_rays(common: &CommonParams, geometry: &Geometry, t_far: f32) ->
 /// `clip_to_beam`: the shafts' own clipping), and its largest value decides.
 /// Shadow edges in the medium are seen through the shafts' integral along
 /// each ray, which averages a map's steps; finer texels than a pixel change
-/// no image measurably (docs/measurements.md). A fisheye camera (no shafts)
+/// no image measurably (docs/shafts.md). A fisheye camera (no shafts)
 /// gets `max`.
 pub fn shafts_resolution(common: &CommonParams, light: &GpuLight, rays: &[FootprintRay], min: u32, max: u32) -> u32 {
     if common.projection != PROJECTION_PINHOLE {

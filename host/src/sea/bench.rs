@@ -18,12 +18,12 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::bench::median;
-use crate::passes::sea::{order2_at, table_rows, EPSILON};
-use crate::passes::{Dispatch, PASSES};
+use crate::passes::Dispatch;
 use crate::reference::{SEA_HEIGHT_FIELD_TOLERANCE, SEA_TOLERANCE};
 use crate::render::{self, Backend};
 use crate::scene::{self, SceneData};
-use crate::sea_reference::{grid_depth, HeightField, SeaReference};
+use crate::sea::reference::{grid_depth, HeightField, SeaReference};
+use crate::sea::{order2_at, table_rows, EPSILON};
 use slicelight_shaders::sea::{sea_view, SeaParams};
 
 /// One configuration of the sweep.
@@ -86,7 +86,7 @@ fn configure(data: &SceneData, c: &Config) -> SceneData {
 /// meets the bottom.
 pub fn sea_pixels(data: &SceneData, stride: u32) -> Vec<(u32, Vec3, f32, Vec3, f32)> {
     let common = slicelight_shaders::types::CommonParams { samples_per_pixel: 1, sample_index: 0, ..data.common };
-    let blank = slicelight_shaders::surface::no_surface();
+    let blank = slicelight_shaders::common::surface::no_surface();
     let w = data.width();
     (0..data.height())
         .step_by(stride as usize)
@@ -139,14 +139,14 @@ pub struct Convergence {
 }
 
 fn convergence(name: &str, p: &SeaParams, quick: bool) -> Vec<Convergence> {
-    let views = crate::passes::sea::rule_views(p);
+    let views = crate::sea::rule_views(p);
     let reference = SeaReference::new(p, 1e-6);
     let exact: Vec<DVec3> = views.par_iter().map(|v| reference.order2(v.as_dvec3())).collect();
     let error = |values: &[Vec3]| {
         let v: Vec<DVec3> = values.iter().map(|x| x.as_dvec3()).collect();
         relative_error(&v, &exact).1
     };
-    let step = |a: &[Vec3], b: &[Vec3]| crate::passes::sea::max_difference(a, b) as f64;
+    let step = |a: &[Vec3], b: &[Vec3]| crate::sea::max_difference(a, b) as f64;
     let mut out = Vec::new();
     let planes: Vec<u32> = if quick { (2..=12).collect() } else { (2..=24).collect() };
     for &n in &planes {
@@ -226,14 +226,11 @@ pub fn run(
                     let r = render::render_layers(&d, backend, false)?;
                     let st = &r.stats;
                     totals.push(st.total_seconds);
-                    // The sea's passes, once per frame (maps, tables) or per pixel.
+                    // The sea family's passes, once per frame (maps, tables) or per pixel.
                     let sea = |dispatch: Dispatch| -> f64 {
-                        let names: Vec<&str> = PASSES
-                            .iter()
-                            .filter(|p| p.name().starts_with("sea.") && p.dispatch() == dispatch)
-                            .map(|p| p.name())
-                            .collect();
-                        st.passes.iter().filter(|p| names.contains(&p.name)).map(|p| p.seconds).sum()
+                        let passes: Vec<_> =
+                            super::PASSES.iter().copied().filter(|p| p.dispatch() == dispatch).collect();
+                        st.seconds_of(&passes)
                     };
                     maps.push(sea(Dispatch::Whole));
                     per_pixel.push(sea(Dispatch::PerPixel));

@@ -1,8 +1,9 @@
-//! The passes, registered once in `PASSES`, and the resources they share.
+//! The pass registry (`FAMILIES`, `PASSES`), the resources passes share,
+//! and the frame's buffers.
 //!
-//! A pass is one unit: its kernel module in `shader-crate/src/<pass>.rs` (the
+//! A pass is one unit: its kernel in `shader-crate/src/<family>/` (the
 //! pure per-invocation function and its thin entry point) and its host
-//! module here, which says whether a scene needs it and why not, which
+//! side in `host/src/<family>/`, which says whether a scene needs it and why not, which
 //! resources it reads and writes, how it is dispatched, how it runs the same
 //! function on the CPU, and how its GPU and CPU results are compared. The
 //! renderer, the pass plan, `--stats`, the progress bar, the GPU backend's
@@ -29,40 +30,22 @@ macro_rules! resources {
     }};
 }
 
-pub mod caustics;
-pub mod scatter_check;
-pub mod sea;
-pub mod sea_table;
-pub mod shadow_maps;
-pub mod shafts;
-pub mod sky;
-pub mod surface;
+use crate::{caustics, common, sea, shafts, sky};
 
-/// Every pass, in the order the renderer runs them.
-pub static PASSES: &[&dyn Pass] = &[
-    &shadow_maps::ShadowMaps,
-    &caustics::CausticsTable,
-    &caustics::CausticsLookup,
-    &caustics::CausticsMaps,
-    &sky::SkyTransmittance,
-    &sky::SkyView,
-    &sea::SeaRadianceMap,
-    &sea::SeaScatteringMaps,
-    &sea::SeaAccumulatedMap,
-    &sea_table::SeaTableSamples,
-    &sea_table::SeaDepthTable,
-    &sea_table::SeaBottomCorrection,
-    &surface::Surface,
-    &caustics::Caustics,
-    &shafts::ShaftsTiles,
-    &shafts::Shafts,
-    &sky::Sky,
-    &sea::SeaReflection,
-    &sea::SeaOrder1,
-    &sea::SeaOrder2,
-    &sea::SeaBottom,
-    &scatter_check::ScatterCheck,
-];
+/// The families, registered here once. Within each dispatch kind the
+/// renderer runs passes in this order, each family's in its own `PASSES`
+/// order: every `Whole` pass first (the tables and maps), then the per-pixel
+/// passes, whose radiance layers are summed into the image in the same
+/// order. A pass reads only what earlier passes wrote (the
+/// `passes_run_after_what_they_read` test checks it).
+static FAMILIES: &[&[&dyn Pass]] = &[common::PASSES, caustics::PASSES, shafts::PASSES, sky::PASSES, sea::PASSES];
+
+/// Every pass, in the order the renderer runs them (see `FAMILIES`).
+pub static PASSES: std::sync::LazyLock<Vec<&'static dyn Pass>> = std::sync::LazyLock::new(|| {
+    let all = FAMILIES.iter().flat_map(|f| f.iter().copied());
+    let whole = all.clone().filter(|p| p.dispatch() == Dispatch::Whole);
+    whole.chain(all.filter(|p| p.dispatch() == Dispatch::PerPixel)).collect()
+});
 
 /// The registered pass named `name`.
 pub fn by_name(name: &str) -> Option<&'static dyn Pass> {
@@ -133,7 +116,9 @@ pub static SHADOW_MAPS: Resource =
 pub static GBUFFER: Resource = Resource {
     binding: 8,
     name: "G-buffer",
-    kind: ResourceKind::PerPixel { blank: || bytemuck::bytes_of(&slicelight_shaders::surface::no_surface()).to_vec() },
+    kind: ResourceKind::PerPixel {
+        blank: || bytemuck::bytes_of(&slicelight_shaders::common::surface::no_surface()).to_vec(),
+    },
 };
 
 pub static GLASS_VERTICES: Resource = Resource {
@@ -207,11 +192,13 @@ pub trait Pass: Sync {
     fn radiance_layer(&self) -> Option<&'static Resource> {
         None
     }
-    /// What the pass found, for the stats (a self-check's verdict). `frame`
-    /// holds the frame's results: what `Whole` passes wrote that no pass
-    /// reads, and each radiance layer summed over the sub-pixel samples.
-    fn report(&self, _scene: &SceneData, _frame: &Frame) -> Option<String> {
-        None
+    /// What the pass found, for the stats (a self-check's verdict), or an
+    /// error if what it found is wrong (a failed self-check fails the
+    /// render). `frame` holds the frame's results: what `Whole` passes wrote
+    /// that no pass reads, and each radiance layer summed over the sub-pixel
+    /// samples.
+    fn report(&self, _scene: &SceneData, _frame: &Frame) -> anyhow::Result<Option<String>> {
+        Ok(None)
     }
     /// Named counts of the work it did, for the stats (from the same frame).
     fn counters(&self, _scene: &SceneData, _frame: &Frame) -> Vec<(&'static str, u64)> {

@@ -21,6 +21,7 @@
 
 use glam::DVec3;
 use rayon::prelude::*;
+use slicelight_shaders::optics;
 use slicelight_shaders::types::{LIGHT_DIRECTIONAL, MATERIAL_GLASS};
 
 use crate::reference::{d3, emitted, nearest, Surface};
@@ -50,14 +51,9 @@ fn shading_normal(data: &SceneData, triangle: usize, p: DVec3) -> DVec3 {
 /// (None past the critical angle), `n` facing against `d`, `eta` = n_i / n_t.
 fn interface(d: DVec3, n: DVec3, eta: f64) -> (f64, Option<DVec3>) {
     let cos_i = (-n.dot(d)).clamp(0.0, 1.0);
-    let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
-    if sin2_t >= 1.0 {
-        return (1.0, None);
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    let rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-    let rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
-    (0.5 * (rs * rs + rp * rp), Some((d * eta + n * (eta * cos_i - cos_t)).normalize()))
+    let (cos_t, transmitted) = optics::transmitted_cosine(cos_i, eta);
+    let r = optics::reflectance(cos_i, eta);
+    (r, transmitted.then(|| (d * eta + n * (eta * cos_i - cos_t)).normalize()))
 }
 
 fn is_glass(data: &SceneData, s: &Surface) -> bool {
@@ -380,7 +376,7 @@ pub fn caustic_image_converged(
         paths *= 2;
         round += 1;
         let next = caustic_image(data, paths, round, transmission_only);
-        let change = crate::reference::relative_rms_change(&next, &image);
+        let change = crate::metrics::relative_error(&image, &next).0;
         image = next;
         if change < tolerance {
             break;

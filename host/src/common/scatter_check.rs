@@ -1,16 +1,16 @@
-//! The scatter self-check pass (kernel: `shader-crate/src/scatter_check.rs`):
+//! The scatter self-check pass (kernel: `shader-crate/src/common/scatter_check.rs`):
 //! fixed-point scatter accumulation under heavy contention, against its
 //! closed form. It runs when asked for (`slicelight render --pass
 //! scatter_check`, or a test); a scene never needs it.
 
 use anyhow::{ensure, Result};
 use indicatif::ProgressBar;
+use slicelight_shaders::common::scatter_check::{scatter_check_invocation, ScatterCheckParams};
 use slicelight_shaders::scatter::{decode, words_for, CpuAtomics};
-use slicelight_shaders::scatter_check::{scatter_check_invocation, ScatterCheckParams};
 use slicelight_shaders::types::CommonParams;
 
-use super::*;
 use crate::cpu::for_each_index;
+use crate::passes::*;
 use crate::scene::SceneData;
 
 /// 7 x 4 x 2^16 invocations into 4 bins: 458 752 adds per bin, each of
@@ -66,7 +66,7 @@ impl Pass for ScatterCheck {
         "scatter_check"
     }
     fn kernel(&self) -> &'static str {
-        "scatter_check::scatter_check_kernel"
+        "common::scatter_check::scatter_check_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
         resources![CHECK_PARAMS]
@@ -97,8 +97,8 @@ impl Pass for ScatterCheck {
         frame.insert(&CHECK_WORDS, words);
     }
 
-    fn report(&self, _scene: &SceneData, frame: &Frame) -> Option<String> {
-        Some(Self::verdict(frame.get::<u32>(&CHECK_WORDS)).unwrap_or_else(|e| format!("FAILED: {e:#}")))
+    fn report(&self, _scene: &SceneData, frame: &Frame) -> Result<Option<String>> {
+        Self::verdict(frame.get::<u32>(&CHECK_WORDS)).map(Some)
     }
 
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

@@ -89,19 +89,6 @@ pub fn sky_pixels(data: &SceneData, stride: u32) -> Vec<u32> {
         .collect()
 }
 
-/// RMS and largest difference over the pixels and channels, relative to
-/// the reference's peak.
-pub fn sky_error(image: &[DVec3], reference: &[DVec3]) -> (f64, f64) {
-    let peak = reference.iter().map(|p| p.max_element()).fold(1e-300, f64::max);
-    let (mut sum2, mut max) = (0.0, 0.0f64);
-    for (a, b) in image.iter().zip(reference) {
-        let d = (*a - *b).abs();
-        sum2 += d.length_squared();
-        max = max.max(d.max_element());
-    }
-    ((sum2 / (3 * image.len().max(1)) as f64).sqrt() / peak, max / peak)
-}
-
 pub struct Row {
     pub scene: String,
     pub backend: &'static str,
@@ -152,7 +139,7 @@ pub fn run(
                 }
                 let img = last.expect("at least one repeat");
                 let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
-                let (rms, max) = sky_error(&at, &refvals);
+                let (rms, max) = crate::metrics::relative_error(&at, &refvals);
                 let row = Row {
                     scene: name.clone(),
                     backend: backend.name(),

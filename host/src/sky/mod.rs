@@ -1,6 +1,9 @@
-//! The sky passes (kernels: `shader-crate/src/sky.rs`): the transmittance
+//! The sky passes (kernels: `shader-crate/src/sky/`): the transmittance
 //! table, the optional sky-view table, and the per-pixel sky; their settings
 //! (the scene's `[sky]` table) and the sun as a light on the scene.
+
+pub mod bench;
+pub mod reference;
 
 use anyhow::{bail, Result};
 use glam::{Vec3, Vec4};
@@ -12,7 +15,10 @@ use slicelight_shaders::sky::{
 };
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
-use super::*;
+use crate::passes::*;
+
+/// The family's passes, in the order they run (see `passes::FAMILIES`).
+pub static PASSES: &[&dyn Pass] = &[&SkyTransmittance, &SkyView, &Sky];
 use crate::cpu::for_each_invocation;
 use crate::scene::{invalid, validate, SceneData};
 
@@ -467,7 +473,7 @@ impl Pass for Sky {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let n = common.band_pixels as usize;
         let p = &scene.sky.params;
-        let blank = slicelight_shaders::surface::no_surface();
+        let blank = slicelight_shaders::common::surface::no_surface();
         frame.write_all::<Vec4>(&SKY_RADIANCE, n, |frame, out| {
             let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
             let sky_view = frame.get::<Vec4>(&SKY_VIEW);

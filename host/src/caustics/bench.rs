@@ -188,7 +188,7 @@ pub fn run(
                     let mut fresh = data.clone();
                     fresh.caustics.cached_table = None;
                     let (_, st) = render::render(&fresh, backend, false)?;
-                    let table = st.passes.iter().find(|p| p.name == "caustics.table").map_or(0.0, |p| p.seconds);
+                    let table = st.seconds_of(&[&super::CausticsTable]);
                     tables.push(table);
                     frames.push(st.total_seconds - table);
                 }

@@ -14,7 +14,7 @@ use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::bench::{draw_legend, median, pareto, register_font, save_plot, Series, COLORS};
+use crate::bench::{draw_legend, log_ticks, median, pareto, register_font, save_plot, Series, COLORS};
 use crate::metrics::{difference, Difference};
 use crate::reference;
 use crate::render::{self, Backend};
@@ -176,13 +176,15 @@ pub fn run(opts: &Options) -> Result<Vec<Row>> {
                     shaft_samples_naive: st.counter("shaft_samples_naive"),
                 };
                 eprintln!(
-                    "{name:>14} {:>4} {:<12} n={:<4} m={:<3} {:?}{} {:>8.4} s  rms {:.3}%  max {:.2}%",
+                    "{name:>14} {:>4} {:<12} n={:<4} m={:<3} {:?}{}{}{} {:>8.4} s  rms {:.3}%  max {:.2}%",
                     row.backend,
                     c.series,
                     c.planes,
                     c.subplanes,
                     c.mode,
+                    if c.mode == ShaftMode::Tables { format!(" table={}", c.table_size) } else { String::new() },
                     if c.quantize_8bit { " 8-bit" } else { "" },
+                    if c.jitter { "" } else { " no-jitter" },
                     row.median_seconds,
                     row.rms_8bit_percent,
                     row.max_8bit_percent
@@ -314,7 +316,10 @@ fn plot(dir: &Path, rows: &[Row]) -> Result<()> {
             .margin(15)
             .x_label_area_size(45)
             .y_label_area_size(70)
-            .build_cartesian_2d((t0 * 0.8..t1 * 1.25).log_scale(), 0.0..e1)?;
+            .build_cartesian_2d(
+                (t0 * 0.8..t1 * 1.25).log_scale().with_key_points(log_ticks(t0 * 0.8, t1 * 1.25)),
+                0.0..e1,
+            )?;
         chart
             .configure_mesh()
             .x_desc("median render time, s")

@@ -130,11 +130,8 @@ pub fn run(
                 for _ in 0..repeats.max(1) {
                     let (img, st) = render::render(&d, backend, false)?;
                     totals.push(st.total_seconds);
-                    let pass = |names: &[&str]| -> f64 {
-                        st.passes.iter().filter(|p| names.contains(&p.name)).map(|p| p.seconds).sum()
-                    };
-                    tables.push(pass(&["sky_transmittance", "sky_view"]));
-                    sky.push(pass(&["sky"]));
+                    tables.push(st.seconds_of(&[&super::SkyTransmittance, &super::SkyView]));
+                    sky.push(st.seconds_of(&[&super::Sky]));
                     last = Some(img);
                 }
                 let img = last.expect("at least one repeat");

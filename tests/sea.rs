@@ -80,12 +80,19 @@ fn monte_carlo_and_quadrature_agree_on_orders_1_and_2() {
 
 #[test]
 fn each_term_is_within_one_percent_of_the_reference_for_a_flat_sea() {
-    let mut worst = [0.0f64; 3];
-    for sun in [0.0f32, 30.0, 60.0, 80.0] {
-        for extra in ["", "depth_m = 20.0"] {
+    // The quadrature's tolerance, 1e-3 relative, is a tenth of the 1 %
+    // checked. It was 1e-5: the worst errors found are the same to the
+    // printed digit (order 2 0.532 %), in 15 s instead of 82 s on two cores
+    // (with the eight cases now run in parallel).
+    let cases: Vec<(f32, &str)> =
+        [0.0f32, 30.0, 60.0, 80.0].iter().flat_map(|&sun| ["", "depth_m = 20.0"].map(|extra| (sun, extra))).collect();
+    let worst = cases
+        .par_iter()
+        .map(|&(sun, extra)| {
+            let mut worst = [0.0f64; 3];
             let data = sea(sun, extra);
             let p = &data.sea.params;
-            let r = SeaReference::new(p, 1e-5);
+            let r = SeaReference::new(p, 1e-3);
             let views: Vec<Vec3> =
                 [0.0f32, 35.0, 70.0].iter().flat_map(|&z| [0.0f32, 90.0, 180.0].map(|a| in_water(p, z, a))).collect();
             let maps = order2_by_maps(p, &views);
@@ -108,8 +115,9 @@ fn each_term_is_within_one_percent_of_the_reference_for_a_flat_sea() {
                     100.0 * errors[2]
                 );
             }
-        }
-    }
+            worst
+        })
+        .reduce(|| [0.0f64; 3], |a, b| [a[0].max(b[0]), a[1].max(b[1]), a[2].max(b[2])]);
     println!(
         "worst: order1 {:.3} %, order2 {:.3} %, bottom {:.3} %",
         100.0 * worst[0],

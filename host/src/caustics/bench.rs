@@ -82,28 +82,33 @@ pub struct Row {
     pub max_8bit_percent: f64,
 }
 
-/// The scene's text with a configuration's settings.
-fn configured(text: &str, c: &Config) -> String {
-    let mut t = text.to_string();
-    if let Some([a, b]) = c.segments {
-        t = t.replacen(
-            "material = { kind = \"glass\"",
-            &format!("segments = [{a}, {b}]\nmaterial = {{ kind = \"glass\""),
-            1,
-        );
-    }
-    format!(
-        "{t}\n[caustics]\ndirections = [{}, {}]\ncompression = {}\nplanes = {}\nmap_resolution = {}\ncache = false\n",
-        c.directions[0], c.directions[1], c.compression, c.planes, c.map_resolution
-    )
+/// Whether glass is the scene's sphere (whose tessellation the sweep varies).
+fn glass_sphere(file: &scene::SceneFile) -> bool {
+    file.object
+        .iter()
+        .any(|o| matches!(o, scene::Object::Sphere(s) if matches!(s.material, Some(scene::Material::Glass { .. }))))
 }
 
-fn load_text(text: &str, base: &Path, name: &str) -> Result<SceneData> {
-    let path = base.join(format!(".bench_{name}.toml"));
-    std::fs::write(&path, text)?;
-    let data = scene::load(&path);
-    let _ = std::fs::remove_file(&path);
-    data
+/// The scene with `c`'s `[caustics]` settings and (with `segments`) its
+/// glass spheres tessellated so, validated as a file's are (the table's
+/// memory limit included). The table is traced afresh (no disk cache).
+fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
+    data.reconfigure(|f| {
+        f.caustics.directions = c.directions;
+        f.caustics.compression = c.compression;
+        f.caustics.planes = c.planes;
+        f.caustics.map_resolution = c.map_resolution;
+        f.caustics.cache = false;
+        if let Some(segments) = c.segments {
+            for o in &mut f.object {
+                if let scene::Object::Sphere(s) = o {
+                    if matches!(s.material, Some(scene::Material::Glass { .. })) {
+                        s.segments = Some(segments);
+                    }
+                }
+            }
+        }
+    })
 }
 
 /// The image at reduced size with 16 samples per pixel.
@@ -157,14 +162,13 @@ pub fn run(
     let mut rows = Vec::new();
     for path in scenes {
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let base = path.parent().unwrap_or(Path::new("."));
-        let sphere = text.contains("type = \"sphere\"") && text.contains("kind = \"glass\"");
+        let scene = scene::load(path)?;
+        let sphere = glass_sphere(&scene.source.file);
         let configs = sweep(quick, sphere);
         // References: the scene as it is, and (sphere scenes) the finest sphere.
         let reference_of = |segments: Option<[u32; 2]>| -> Result<(Vec<DVec3>, Vec<bool>)> {
             let c = Config { segments, ..BASE };
-            let data = small(load_text(&configured(&text, &c), base, &name)?, stride)?;
+            let data = small(configure(&scene, &c)?, stride)?;
             let direct = crate::reference::render_surfaces(&data);
             let (traced, paths) =
                 crate::caustics::reference::caustic_image_converged(&data, 1 << 21, 1 << 24, 2e-3, true);
@@ -176,7 +180,7 @@ pub fn run(
         let finest = if sphere { Some(reference_of(Some(FINEST))?) } else { None };
         for backend in backends {
             for c in &configs {
-                let data = match load_text(&configured(&text, c), base, &name) {
+                let data = match configure(&scene, c) {
                     Ok(d) => d,
                     Err(e) => {
                         eprintln!("{name}: skipped {c:?}: {e:#}");

@@ -64,9 +64,30 @@ pub struct SceneData {
     pub caustics: crate::caustics::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
+    /// The parsed file and the folder its paths are relative to: what
+    /// `reconfigure` edits and validates again.
+    pub source: std::sync::Arc<Source>,
+}
+
+/// A scene as its file gave it (see `SceneData::reconfigure`).
+#[derive(Debug)]
+pub struct Source {
+    pub file: SceneFile,
+    pub base: std::path::PathBuf,
 }
 
 impl SceneData {
+    /// The scene with its file's settings edited by `edit`, built and
+    /// validated again from the start, exactly as `load` does: the one way
+    /// the benches' sweeps change a family's settings (a table size, a
+    /// tessellation, a plane count), so that every setting they try passes
+    /// the checks and limits a scene file's does. Errors name the field.
+    pub fn reconfigure(&self, edit: impl FnOnce(&mut SceneFile)) -> Result<SceneData> {
+        let mut file = self.source.file.clone();
+        edit(&mut file);
+        build(&file, &self.source.base)
+    }
+
     /// Whether light `i` is one of a line light's points (the references
     /// light the line itself instead).
     pub fn is_line_point(&self, i: usize) -> bool {
@@ -368,6 +389,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         sea,
         caustics: Default::default(),
         requested_passes: Vec::new(),
+        source: std::sync::Arc::new(Source { file: file.clone(), base: base.to_path_buf() }),
     };
     data.lay_out_shadow_maps()?;
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;

@@ -4,7 +4,7 @@
 use serde::Deserialize;
 use std::path::PathBuf;
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneFile {
     pub camera: Camera,
@@ -30,7 +30,7 @@ pub struct SceneFile {
     pub caustics: crate::caustics::Settings,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
     pub position: [f32; 3],
@@ -58,7 +58,7 @@ pub enum Projection {
     Fisheye,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Medium {
     /// 1/m per channel.
@@ -88,7 +88,7 @@ pub enum Phase {
     Dobashi2002,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Spotlight {
     pub position: [f32; 3],
@@ -137,7 +137,7 @@ pub struct LineLight {
     pub points: Option<u32>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Object {
     Sphere(SphereObject),
@@ -196,7 +196,7 @@ impl Ior {
 /// scaled by `scale` around `center` (x, z horizontal, y up from the third
 /// coordinate), swept by a tube of radius `tube_radius`, tessellated into
 /// `segments[0] x segments[1] x 2` triangles (along the curve, around the tube).
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrefoilKnotObject {
     pub center: [f32; 3],
@@ -221,7 +221,7 @@ fn default_knot_segments() -> [u32; 2] {
 /// `r` > 0): bottom, sides, top, so that it bounds a closed solid. Vertex
 /// normals follow the outline smoothly, except at corners sharper than
 /// `sharp_deg`, where each side keeps its own.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LatheObject {
     pub center: [f32; 3],
@@ -246,7 +246,7 @@ fn default_sharp_deg() -> f32 {
     40.0
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SphereObject {
     pub center: [f32; 3],
@@ -260,7 +260,7 @@ pub struct SphereObject {
     pub rotation: Option<Rotation>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BoxObject {
     pub min: [f32; 3],
@@ -272,7 +272,7 @@ pub struct BoxObject {
 }
 
 /// The rectangle `center +- u/2 +- v/2`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct QuadObject {
     pub center: [f32; 3],
@@ -284,7 +284,7 @@ pub struct QuadObject {
     pub rotation: Option<Rotation>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshObject {
     pub file: PathBuf,
@@ -301,7 +301,7 @@ pub struct MeshObject {
 /// A torus around `axis` through `center`: tube radius `minor_radius` swept
 /// around a circle of radius `major_radius`, tessellated into
 /// `segments[0] x segments[1] x 2` triangles (around the axis, around the tube).
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TorusObject {
     pub center: [f32; 3],

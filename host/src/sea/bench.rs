@@ -23,7 +23,7 @@ use crate::reference::{SEA_HEIGHT_FIELD_TOLERANCE, SEA_TOLERANCE};
 use crate::render::{self, Backend};
 use crate::scene::{self, SceneData};
 use crate::sea::reference::{grid_depth, HeightField, SeaReference};
-use crate::sea::{order2_at, table_rows, EPSILON};
+use crate::sea::{order2_at, EPSILON};
 use slicelight_shaders::sea::{sea_view, SeaParams};
 
 /// One configuration of the sweep.
@@ -67,17 +67,18 @@ pub fn sweep(auto: &SeaParams, quick: bool) -> Vec<Config> {
     v
 }
 
-fn configure(data: &SceneData, c: &Config) -> SceneData {
-    let mut d = data.clone();
-    let p = &mut d.sea.params;
-    p.planes = c.planes;
-    p.polar = c.polar;
-    p.azimuths = c.polar;
-    p.map_width = c.map;
-    p.map_height = c.map;
-    p.table_width = c.table;
-    p.table_height = table_rows(c.table, &data.common);
-    d
+/// The scene with `c`'s settings in its `[sea]`, validated (and held to
+/// the tables' memory limit) as a file's are.
+fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
+    data.reconfigure(|f| {
+        if let Some(s) = f.sea.as_mut() {
+            s.planes = Some(c.planes);
+            s.directions = Some(c.directions());
+            s.scattering_map = [c.map, c.map];
+            s.depth_table = c.table;
+        }
+    })
+    .with_context(|| format!("sea bench configuration {c:?}"))
 }
 
 /// Pixels on a lattice of `stride` whose centre ray meets the sea, with the
@@ -219,7 +220,7 @@ pub fn run(
         eprintln!("{name}: Fig. 7 and 8 curves, {:.1} s", t.elapsed().as_secs_f64());
         for backend in backends {
             for c in sweep(&data.sea.params, quick) {
-                let d = configure(&data, &c);
+                let d = configure(&data, &c)?;
                 let (mut totals, mut maps, mut per_pixel) = (Vec::new(), Vec::new(), Vec::new());
                 let mut last = None;
                 for _ in 0..repeats.max(1) {

@@ -60,14 +60,17 @@ pub fn sweep(quick: bool) -> Vec<Config> {
     v
 }
 
-fn configure(data: &SceneData, c: &Config) -> SceneData {
-    let mut d = data.clone();
-    let p = &mut d.sky.params;
-    p.use_sky_view = c.sky_view as u32;
-    p.view_samples = c.view_samples;
-    [p.sky_view_width, p.sky_view_height] = c.sky_view_table;
-    [p.transmittance_width, p.transmittance_height] = c.transmittance_table;
-    d
+/// The scene with `c`'s settings in its `[sky]`, validated as a file's are.
+fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
+    data.reconfigure(|f| {
+        if let Some(s) = f.sky.as_mut() {
+            s.sky_view = c.sky_view;
+            s.view_samples = c.view_samples;
+            s.sky_view_table = c.sky_view_table;
+            s.transmittance_table = c.transmittance_table;
+        }
+    })
+    .with_context(|| format!("sky bench configuration {c:?}"))
 }
 
 /// Pixels whose centre ray is more than a degree outside the sun's disk
@@ -124,7 +127,7 @@ pub fn run(
         eprintln!("{name}: reference at {} pixels, {:.1} s", pixels.len(), t.elapsed().as_secs_f64());
         for backend in backends {
             for c in sweep(quick) {
-                let d = configure(&data, &c);
+                let d = configure(&data, &c)?;
                 let (mut totals, mut tables, mut sky) = (Vec::new(), Vec::new(), Vec::new());
                 let mut last = None;
                 for _ in 0..repeats.max(1) {

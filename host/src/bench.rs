@@ -1,11 +1,117 @@
-//! The bench harness every family's sweep shares: medians, the Pareto front
-//! of time against error, and the plots (PNG, written whole or not at all).
-//! Each family's sweep lives in its folder (`shafts::bench`, `sky::bench`,
-//! `sea::bench`, `caustics::bench`); `slicelight bench` routes to them.
+//! The bench harness every family's sweep shares: the `Sweep` trait a
+//! family registers (with its passes, in `passes::FAMILIES`), the routing of
+//! scenes to sweeps, timed renders with medians, the Pareto front of time
+//! against error, and the plots (PNG, written whole or not at all). Each
+//! family's sweep lives in its folder (`shafts::bench`, `sky::bench`,
+//! `sea::bench`, `caustics::bench`).
 
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, bail, Result};
 use plotters::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use crate::passes::Pass;
+use crate::render::{self, Backend, Rendered};
+use crate::scene::SceneData;
+
+/// What `slicelight bench` gives every sweep.
+pub struct Options {
+    pub backends: Vec<Backend>,
+    /// Renders per configuration; times are their medians.
+    pub repeats: usize,
+    /// Error is measured at every `stride`-th pixel centre in x and y (a
+    /// sweep may take a coarser lattice where its reference is costly).
+    pub stride: u32,
+    /// A shorter sweep.
+    pub quick: bool,
+    /// Where the CSVs and plots go (created if missing).
+    pub out_dir: PathBuf,
+}
+
+/// A family's bench sweep: run time against error over its settings, each
+/// configuration measured against the family's reference.
+pub trait Sweep: Sync {
+    /// The scenes (`scenes/<name>.toml`) it runs when given none.
+    fn default_scenes(&self) -> &'static [&'static str];
+    /// Whether a scene is this sweep's to run. The sweeps' choices do not
+    /// overlap: every scene belongs to exactly one.
+    fn takes(&self, scene: &SceneData) -> bool;
+    /// Runs the sweep over `scenes`; returns the files it wrote.
+    fn run(&self, scenes: &[PathBuf], opts: &Options) -> Result<Vec<PathBuf>>;
+}
+
+/// The registered sweeps, by family name, in the families' order.
+pub fn sweeps() -> Vec<(&'static str, &'static dyn Sweep)> {
+    crate::passes::families().iter().filter_map(|f| f.bench.map(|s| (f.name, s))).collect()
+}
+
+/// Runs `family`'s sweep on its default scenes (under `scenes_dir`), or
+/// each of `scenes` with the sweep that takes it; returns the files written.
+pub fn run(family: Option<&str>, scenes: &[PathBuf], scenes_dir: &Path, opts: &Options) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(&opts.out_dir)
+        .map_err(|e| anyhow!("{}: cannot create the folder: {e}", opts.out_dir.display()))?;
+    let sweeps = sweeps();
+    let mut written = Vec::new();
+    if scenes.is_empty() {
+        let name = family.unwrap_or("shafts");
+        let Some((_, sweep)) = sweeps.iter().find(|(n, _)| *n == name) else {
+            let names: Vec<_> = sweeps.iter().map(|(n, _)| *n).collect();
+            bail!("command line: --family: expected one of {}, got {name:?}", names.join(", "));
+        };
+        let paths: Vec<PathBuf> = sweep.default_scenes().iter().map(|s| scenes_dir.join(format!("{s}.toml"))).collect();
+        written.extend(sweep.run(&paths, opts)?);
+        return Ok(written);
+    }
+    let mut by_sweep: Vec<Vec<PathBuf>> = vec![Vec::new(); sweeps.len()];
+    for path in scenes {
+        let data = crate::scene::load(path)?;
+        let takers: Vec<usize> = (0..sweeps.len()).filter(|&k| sweeps[k].1.takes(&data)).collect();
+        match takers[..] {
+            [k] => {
+                if let Some(name) = family.filter(|n| *n != sweeps[k].0) {
+                    bail!("{}: a scene for the {} sweep, not {name}", path.display(), sweeps[k].0);
+                }
+                by_sweep[k].push(path.clone());
+            }
+            _ => bail!("{}: no single bench sweep takes this scene", path.display()),
+        }
+    }
+    for ((_, sweep), paths) in sweeps.iter().zip(&by_sweep) {
+        if !paths.is_empty() {
+            written.extend(sweep.run(paths, opts)?);
+        }
+    }
+    Ok(written)
+}
+
+/// A configuration's timed renders: medians over the repeats of the whole
+/// render and of each group of passes (timed by identity), and the last
+/// render.
+pub struct Timed {
+    pub total_seconds: f64,
+    pub group_seconds: Vec<f64>,
+    pub last: Rendered,
+}
+
+/// Renders `data` `repeats` times (at least once) on `backend` and takes
+/// the medians (see `Timed`).
+pub fn time_renders(data: &SceneData, backend: &Backend, repeats: usize, groups: &[&[&dyn Pass]]) -> Result<Timed> {
+    let mut totals = Vec::new();
+    let mut per_group = vec![Vec::new(); groups.len()];
+    let mut last = None;
+    for _ in 0..repeats.max(1) {
+        let r = render::render_layers(data, backend, false)?;
+        totals.push(r.stats.total_seconds);
+        for (times, group) in per_group.iter_mut().zip(groups) {
+            times.push(r.stats.seconds_of(group));
+        }
+        last = Some(r);
+    }
+    Ok(Timed {
+        total_seconds: median(totals),
+        group_seconds: per_group.into_iter().map(median).collect(),
+        last: last.expect("at least one render"),
+    })
+}
 
 /// The median of `v` (the mean of the middle two for an even count).
 pub fn median(mut v: Vec<f64>) -> f64 {

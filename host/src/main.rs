@@ -80,20 +80,24 @@ enum Command {
         #[arg(long)]
         transmission_only: bool,
     },
-    /// Time against error over the settings: of the shafts pass (scenes in
-    /// a medium), of the sky passes (scenes of sky only) and of the sea's
-    /// second-order scattering (scenes with a [sea]): CSVs and PNG plots.
+    /// Time against error over a family's settings, each configuration
+    /// against the family's reference: CSVs and PNG plots. Each scene goes to
+    /// the sweep of its family (glass: caustics; a [sea]: sea; sky alone:
+    /// sky; the rest: shafts).
     Bench {
-        /// Scene files (default: the paper's Fig. 6 and Fig. 7 scenes and the
-        /// stained-glass window; with --sky the noon, sunset and twilight skies).
+        /// Scene files [default: the --family's own scenes].
         scenes: Vec<PathBuf>,
-        /// Benchmark the sky scenes (scenes/sky_noon, sky_sunset, sky_twilight) by default.
+        /// The family whose sweep runs when no scene is given: shafts (Fig. 6,
+        /// Fig. 7, the stained glass), sky, sea or caustics [default: shafts].
+        #[arg(long, conflicts_with_all = ["sky", "sea", "caustics"])]
+        family: Option<String>,
+        /// Short for --family sky (scenes/sky_noon, sky_sunset, sky_twilight).
         #[arg(long)]
         sky: bool,
-        /// Benchmark the sea scenes (scenes/sea_open, sea_calm_noon) by default.
+        /// Short for --family sea (scenes/sea_open, sea_calm_noon).
         #[arg(long, conflicts_with = "sky")]
         sea: bool,
-        /// Benchmark the caustics scenes (scenes/caustics_ball, caustics_knot) by default.
+        /// Short for --family caustics (scenes/caustics_ball, caustics_knot).
         #[arg(long, conflicts_with_all = ["sky", "sea"])]
         caustics: bool,
         /// Backends to time (give it more than once).
@@ -351,79 +355,19 @@ fn run(cli: Cli) -> Result<()> {
             let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
             write_outputs(&output, &pixels, &[], &data, false)
         }
-        Command::Bench { scenes, sky, sea, caustics, backend, repeats, stride, quick, out_dir } => {
-            let scenes: Vec<PathBuf> = if scenes.is_empty() {
-                let names: &[&str] = if caustics {
-                    &["caustics_ball", "caustics_knot"]
-                } else if sea {
-                    &["sea_open", "sea_calm_noon"]
-                } else if sky {
-                    &["sky_noon", "sky_sunset", "sky_twilight"]
-                } else {
-                    &["fig6_sphere", "fig7_stage", "stained_glass"]
-                };
-                names.iter().map(|s| PathBuf::from(format!("scenes/{s}.toml"))).collect()
-            } else {
-                scenes
-            };
-            // Sea scenes go to the sea sweep, scenes of sky alone to the sky
-            // sweep, the rest to the shafts sweep.
-            let mut sky_scenes = Vec::new();
-            let mut sea_scenes = Vec::new();
-            let mut shaft_scenes = Vec::new();
-            let mut caustic_scenes = Vec::new();
-            for s in scenes {
-                let data = scene::load(&s)?;
-                if !data.glass_vertices.is_empty() {
-                    caustic_scenes.push(s);
-                } else if data.sea.enabled {
-                    sea_scenes.push(s);
-                } else if data.sky.enabled && !data.scatters() {
-                    sky_scenes.push(s);
-                } else {
-                    shaft_scenes.push(s);
-                }
-            }
-            if !shaft_scenes.is_empty() {
-                let opts = slicelight::shafts::bench::Options {
-                    scenes: shaft_scenes,
-                    backends: backend.clone(),
-                    repeats,
-                    stride,
-                    quick,
-                    out_dir: out_dir.clone(),
-                };
-                slicelight::shafts::bench::run(&opts)?;
-                eprintln!(
-                    "wrote {0}/bench.csv, {0}/error_vs_planes.png, {0}/error_vs_subplanes.png, {0}/time_vs_error.png",
-                    out_dir.display()
-                );
-            }
-            if !sky_scenes.is_empty() {
-                let backends: Vec<render::Backend> =
-                    backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
-                slicelight::sky::bench::run(&sky_scenes, &backends, repeats, stride, quick, &out_dir)?;
-                eprintln!("wrote {0}/sky_bench.csv, {0}/sky_time_vs_error.png", out_dir.display());
-            }
-            if !caustic_scenes.is_empty() {
-                let backends: Vec<render::Backend> =
-                    backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
-                slicelight::caustics::bench::run(&caustic_scenes, &backends, repeats, stride, quick, &out_dir)?;
-                eprintln!(
-                    "wrote {0}/caustics_bench.csv, {0}/caustics_time_vs_error.png, {0}/caustics_precompute.png",
-                    out_dir.display()
-                );
-            }
-            if !sea_scenes.is_empty() {
-                let backends: Vec<render::Backend> =
-                    backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
-                // The sea's reference costs ~0.2 s a pixel: a coarser lattice.
-                slicelight::sea::bench::run(&sea_scenes, &backends, repeats, stride.max(40), quick, &out_dir)?;
-                eprintln!(
-                    "wrote {0}/sea_bench.csv, {0}/sea_time_vs_error_*.png, {0}/sea_convergence.csv, {0}/sea_fig7_planes.png, {0}/sea_fig8_directions.png",
-                    out_dir.display()
-                );
-            }
+        Command::Bench { scenes, family, sky, sea, caustics, backend, repeats, stride, quick, out_dir } => {
+            let family = family.or_else(|| {
+                [(sky, "sky"), (sea, "sea"), (caustics, "caustics")]
+                    .iter()
+                    .find(|(on, _)| *on)
+                    .map(|(_, n)| n.to_string())
+            });
+            let backends: Vec<render::Backend> =
+                backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
+            let opts = slicelight::bench::Options { backends, repeats, stride, quick, out_dir };
+            let written = slicelight::bench::run(family.as_deref(), &scenes, Path::new("scenes"), &opts)?;
+            let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
+            eprintln!("wrote {}", names.join(", "));
             Ok(())
         }
         Command::Compare { image, reference, exposure, scene, diff } => {

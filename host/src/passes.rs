@@ -32,17 +32,29 @@ macro_rules! resources {
 
 use crate::{caustics, common, sea, shafts, sky};
 
+/// A family: its passes (in the order they run) and its bench sweep.
+pub struct Family {
+    pub name: &'static str,
+    pub passes: &'static [&'static dyn Pass],
+    pub bench: Option<&'static dyn crate::bench::Sweep>,
+}
+
 /// The families, registered here once. Within each dispatch kind the
-/// renderer runs passes in this order, each family's in its own `PASSES`
+/// renderer runs passes in this order, each family's in its own `passes`
 /// order: every `Whole` pass first (the tables and maps), then the per-pixel
 /// passes, whose radiance layers are summed into the image in the same
 /// order. A pass reads only what earlier passes wrote (the
 /// `passes_run_after_what_they_read` test checks it).
-static FAMILIES: &[&[&dyn Pass]] = &[common::PASSES, caustics::PASSES, shafts::PASSES, sky::PASSES, sea::PASSES];
+static FAMILIES: &[&Family] = &[&common::FAMILY, &caustics::FAMILY, &shafts::FAMILY, &sky::FAMILY, &sea::FAMILY];
+
+/// The registered families (see `FAMILIES`).
+pub fn families() -> &'static [&'static Family] {
+    FAMILIES
+}
 
 /// Every pass, in the order the renderer runs them (see `FAMILIES`).
 pub static PASSES: std::sync::LazyLock<Vec<&'static dyn Pass>> = std::sync::LazyLock::new(|| {
-    let all = FAMILIES.iter().flat_map(|f| f.iter().copied());
+    let all = FAMILIES.iter().flat_map(|f| f.passes.iter().copied());
     let whole = all.clone().filter(|p| p.dispatch() == Dispatch::Whole);
     whole.chain(all.filter(|p| p.dispatch() == Dispatch::PerPixel)).collect()
 });

@@ -14,7 +14,7 @@
 //! caustics, transmission only (the paths the method models). For the
 //! vertex sweep, the reference's sphere is the finest tessellation swept.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use glam::DVec3;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -148,6 +148,25 @@ pub fn select(v: &[DVec3], keep: &[bool]) -> Vec<DVec3> {
     v.iter().zip(keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect()
 }
 
+/// The caustics family's sweep (`passes::FAMILIES` registers it): scenes
+/// with glass.
+pub struct CausticsSweep;
+
+impl crate::bench::Sweep for CausticsSweep {
+    fn default_scenes(&self) -> &'static [&'static str] {
+        &["caustics_ball", "caustics_knot"]
+    }
+    fn takes(&self, s: &SceneData) -> bool {
+        !s.glass_vertices.is_empty()
+    }
+    fn run(&self, scenes: &[PathBuf], opts: &crate::bench::Options) -> Result<Vec<PathBuf>> {
+        run(scenes, &opts.backends, opts.repeats, opts.stride, opts.quick, &opts.out_dir)?;
+        Ok(["caustics_bench.csv", "caustics_time_vs_error.png", "caustics_precompute.png"]
+            .map(|f| opts.out_dir.join(f))
+            .to_vec())
+    }
+}
+
 /// Runs the sweep on every scene and backend; writes `caustics_bench.csv`
 /// and the plots into `out_dir`.
 pub fn run(
@@ -158,7 +177,6 @@ pub fn run(
     quick: bool,
     out_dir: &Path,
 ) -> Result<Vec<Row>> {
-    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let mut rows = Vec::new();
     for path in scenes {
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();

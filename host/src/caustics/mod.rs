@@ -23,6 +23,9 @@ use crate::passes::*;
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
 pub static PASSES: &[&dyn Pass] = &[&CausticsTable, &CausticsLookup, &CausticsMaps, &Caustics];
+
+/// The family, as `passes::FAMILIES` registers it.
+pub static FAMILY: Family = Family { name: "caustics", passes: PASSES, bench: Some(&bench::CausticsSweep) };
 use crate::cpu::{for_each_index, for_each_invocation};
 use crate::scene::{invalid, SceneData};
 use rayon::prelude::*;

@@ -6,7 +6,11 @@ pub mod scatter_check;
 pub mod shadow_maps;
 pub mod surface;
 
-use crate::passes::Pass;
+use crate::passes::{Family, Pass};
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
 pub static PASSES: &[&dyn Pass] = &[&shadow_maps::ShadowMaps, &surface::Surface, &scatter_check::ScatterCheck];
+
+/// The family, as `passes::FAMILIES` registers it (no bench sweep of its
+/// own: the shafts sweep times the whole frame).
+pub static FAMILY: Family = Family { name: "common", passes: PASSES, bench: None };

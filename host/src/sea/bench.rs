@@ -15,12 +15,12 @@ use glam::{DVec3, Vec3, Vec4};
 use plotters::prelude::*;
 use rayon::prelude::*;
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use crate::bench::median;
+use crate::bench::{time_renders, Options};
 use crate::passes::Dispatch;
 use crate::reference::{SEA_HEIGHT_FIELD_TOLERANCE, SEA_TOLERANCE};
-use crate::render::{self, Backend};
+use crate::render::Backend;
 use crate::scene::{self, SceneData};
 use crate::sea::reference::{grid_depth, HeightField, SeaReference};
 use crate::sea::{order2_at, EPSILON};
@@ -170,18 +170,43 @@ fn convergence(name: &str, p: &SeaParams, quick: bool) -> Vec<Convergence> {
     out
 }
 
+/// The sea family's sweep (`passes::FAMILIES` registers it): scenes with a
+/// `[sea]` and no glass.
+pub struct SeaSweep;
+
+impl crate::bench::Sweep for SeaSweep {
+    fn default_scenes(&self) -> &'static [&'static str] {
+        &["sea_open", "sea_calm_noon"]
+    }
+    fn takes(&self, s: &SceneData) -> bool {
+        s.sea.enabled && s.glass_vertices.is_empty()
+    }
+    fn run(&self, scenes: &[PathBuf], opts: &Options) -> Result<Vec<PathBuf>> {
+        // The sea's reference costs ~0.2 s a pixel: at least every 40th.
+        run(scenes, &opts.backends, opts.repeats, opts.stride.max(40), opts.quick, &opts.out_dir)?;
+        Ok([
+            "sea_bench.csv",
+            "sea_time_vs_error_*.png",
+            "sea_convergence.csv",
+            "sea_fig7_planes.png",
+            "sea_fig8_directions.png",
+        ]
+        .map(|f| opts.out_dir.join(f))
+        .to_vec())
+    }
+}
+
 /// Runs the sea sweep over `scenes` and writes `sea_bench.csv`,
 /// `sea_time_vs_error_<scene>_<backend>.png`, `sea_convergence.csv`,
 /// `sea_fig7_planes.png` and `sea_fig8_directions.png` into `out_dir`.
 pub fn run(
-    scenes: &[std::path::PathBuf],
+    scenes: &[PathBuf],
     backends: &[Backend],
     repeats: usize,
     stride: u32,
     quick: bool,
     out_dir: &Path,
 ) -> Result<Vec<Row>> {
-    std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
     let mut rows = Vec::new();
     let mut curves = Vec::new();
     for path in scenes {
@@ -221,23 +246,13 @@ pub fn run(
         for backend in backends {
             for c in sweep(&data.sea.params, quick) {
                 let d = configure(&data, &c)?;
-                let (mut totals, mut maps, mut per_pixel) = (Vec::new(), Vec::new(), Vec::new());
-                let mut last = None;
-                for _ in 0..repeats.max(1) {
-                    let r = render::render_layers(&d, backend, false)?;
-                    let st = &r.stats;
-                    totals.push(st.total_seconds);
-                    // The sea family's passes, once per frame (maps, tables) or per pixel.
-                    let sea = |dispatch: Dispatch| -> f64 {
-                        let passes: Vec<_> =
-                            super::PASSES.iter().copied().filter(|p| p.dispatch() == dispatch).collect();
-                        st.seconds_of(&passes)
-                    };
-                    maps.push(sea(Dispatch::Whole));
-                    per_pixel.push(sea(Dispatch::PerPixel));
-                    last = Some(r);
-                }
-                let r = last.expect("at least one repeat");
+                // The sea family's passes, once per frame (maps, tables) or per pixel.
+                let sea = |dispatch: Dispatch| -> Vec<&'static dyn crate::passes::Pass> {
+                    super::PASSES.iter().copied().filter(|p| p.dispatch() == dispatch).collect()
+                };
+                let (maps, per_pixel) = (sea(Dispatch::Whole), sea(Dispatch::PerPixel));
+                let timed = time_renders(&d, backend, repeats, &[&maps, &per_pixel])?;
+                let r = &timed.last;
                 let layer = r
                     .layers
                     .iter()
@@ -250,9 +265,9 @@ pub fn run(
                     scene: name.clone(),
                     backend: backend.name(),
                     config: c,
-                    median_seconds: median(totals),
-                    maps_median_seconds: median(maps),
-                    pixels_median_seconds: median(per_pixel),
+                    median_seconds: timed.total_seconds,
+                    maps_median_seconds: timed.group_seconds[0],
+                    pixels_median_seconds: timed.group_seconds[1],
                     rms_relative: rms,
                     max_relative: max,
                 };

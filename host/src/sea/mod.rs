@@ -41,6 +41,9 @@ pub static PASSES: &[&dyn Pass] = &[
     &SeaOrder2,
     &SeaBottom,
 ];
+
+/// The family, as `passes::FAMILIES` registers it.
+pub static FAMILY: Family = Family { name: "sea", passes: PASSES, bench: Some(&bench::SeaSweep) };
 use crate::cpu::for_each_invocation;
 use crate::scene::{invalid, validate, SceneData};
 

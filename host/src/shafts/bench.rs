@@ -7,17 +7,16 @@
 //! is the median over repeats of the whole render (all passes, uploads and
 //! read-back included on the GPU), and of the shafts pass alone.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use glam::DVec3;
 use plotters::prelude::*;
 use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::bench::{draw_legend, log_ticks, median, pareto, register_font, save_plot, Series, COLORS};
+use crate::bench::{draw_legend, log_ticks, pareto, register_font, save_plot, time_renders, Options, Series, COLORS};
 use crate::metrics::{difference, Difference};
 use crate::reference;
-use crate::render::{self, Backend};
 use crate::scene::{self, SceneData, ShaftMode, Shafts};
 
 /// One configuration of the sweep.
@@ -114,22 +113,31 @@ fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
     Ok(d)
 }
 
-pub struct Options {
-    pub scenes: Vec<PathBuf>,
-    pub backends: Vec<render::BackendChoice>,
-    pub repeats: usize,
-    pub stride: u32,
-    pub quick: bool,
-    pub out_dir: PathBuf,
+/// The shafts family's sweep (`passes::FAMILIES` registers it): scenes in
+/// a scattering medium without glass, a sea or a sky alone.
+pub struct ShaftsSweep;
+
+impl crate::bench::Sweep for ShaftsSweep {
+    fn default_scenes(&self) -> &'static [&'static str] {
+        &["fig6_sphere", "fig7_stage", "stained_glass"]
+    }
+    fn takes(&self, s: &SceneData) -> bool {
+        s.glass_vertices.is_empty() && !s.sea.enabled && !(s.sky.enabled && !s.scatters())
+    }
+    fn run(&self, scenes: &[PathBuf], opts: &Options) -> Result<Vec<PathBuf>> {
+        run(scenes, opts)?;
+        Ok(["bench.csv", "error_vs_planes.png", "error_vs_subplanes.png", "time_vs_error.png"]
+            .map(|f| opts.out_dir.join(f))
+            .to_vec())
+    }
 }
 
 /// Runs the sweep and writes `bench.csv` and the plots into `out_dir`.
-pub fn run(opts: &Options) -> Result<Vec<Row>> {
-    std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("{}: cannot create", opts.out_dir.display()))?;
-    let backends: Vec<Backend> = opts.backends.iter().map(|b| Backend::open(*b)).collect::<Result<_>>()?;
+pub fn run(scenes: &[PathBuf], opts: &Options) -> Result<Vec<Row>> {
+    let backends = &opts.backends;
     let configs = sweep(opts.quick);
     let mut rows = Vec::new();
-    for path in &opts.scenes {
+    for path in scenes {
         let data = scene::load(path)?;
         let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
         let stride = opts.stride.max(1);
@@ -145,19 +153,11 @@ pub fn run(opts: &Options) -> Result<Vec<Row>> {
             pixels.len(),
             t.elapsed().as_secs_f64()
         );
-        for backend in &backends {
+        for backend in backends {
             for c in &configs {
                 let d = configure(&data, c)?;
-                let mut totals = Vec::new();
-                let mut shafts = Vec::new();
-                let mut last = None;
-                for _ in 0..opts.repeats.max(1) {
-                    let (img, st) = render::render(&d, backend, false)?;
-                    totals.push(st.total_seconds);
-                    shafts.push(st.seconds_of(super::PASSES));
-                    last = Some((img, st));
-                }
-                let (img, st) = last.expect("at least one repeat");
+                let timed = time_renders(&d, backend, opts.repeats, &[super::PASSES])?;
+                let (img, st) = (&timed.last.image, &timed.last.stats);
                 let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
                 let e: Difference = difference(&at, &refvals, data.exposure);
                 let row = Row {
@@ -166,8 +166,8 @@ pub fn run(opts: &Options) -> Result<Vec<Row>> {
                     height: data.height(),
                     backend: backend.name(),
                     config: *c,
-                    median_seconds: median(totals),
-                    shafts_median_seconds: median(shafts),
+                    median_seconds: timed.total_seconds,
+                    shafts_median_seconds: timed.group_seconds[0],
                     rms_8bit_percent: e.rms_8bit_percent,
                     max_8bit_percent: e.max_8bit_percent,
                     rms_relative: e.rms_relative,

@@ -18,6 +18,9 @@ use crate::passes::*;
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
 pub static PASSES: &[&dyn Pass] = &[&ShaftsTiles, &Shafts];
+
+/// The family, as `passes::FAMILIES` registers it.
+pub static FAMILY: Family = Family { name: "shafts", passes: PASSES, bench: Some(&bench::ShaftsSweep) };
 use crate::cpu::for_each_invocation;
 use crate::scene::{invalid, SceneData};
 

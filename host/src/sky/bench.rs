@@ -12,11 +12,11 @@
 use anyhow::{Context, Result};
 use glam::{DVec3, Vec4Swizzles};
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use crate::bench::median;
+use crate::bench::{time_renders, Options};
 use crate::reference;
-use crate::render::{self, Backend};
+use crate::render::Backend;
 use crate::scene::{self, SceneData};
 
 /// One configuration of the sweep.
@@ -105,17 +105,33 @@ pub struct Row {
     pub max_relative: f64,
 }
 
+/// The sky family's sweep (`passes::FAMILIES` registers it): scenes of sky
+/// alone (no scattering medium, sea or glass).
+pub struct SkySweep;
+
+impl crate::bench::Sweep for SkySweep {
+    fn default_scenes(&self) -> &'static [&'static str] {
+        &["sky_noon", "sky_sunset", "sky_twilight"]
+    }
+    fn takes(&self, s: &SceneData) -> bool {
+        s.sky.enabled && !s.scatters() && !s.sea.enabled && s.glass_vertices.is_empty()
+    }
+    fn run(&self, scenes: &[PathBuf], opts: &Options) -> Result<Vec<PathBuf>> {
+        run(scenes, &opts.backends, opts.repeats, opts.stride, opts.quick, &opts.out_dir)?;
+        Ok(vec![opts.out_dir.join("sky_bench.csv"), opts.out_dir.join("sky_time_vs_error.png")])
+    }
+}
+
 /// Runs the sky sweep over `scenes` and writes `sky_bench.csv` and
 /// `sky_time_vs_error.png` into `out_dir`.
 pub fn run(
-    scenes: &[std::path::PathBuf],
+    scenes: &[PathBuf],
     backends: &[Backend],
     repeats: usize,
     stride: u32,
     quick: bool,
     out_dir: &Path,
 ) -> Result<Vec<Row>> {
-    std::fs::create_dir_all(out_dir).with_context(|| format!("{}: cannot create", out_dir.display()))?;
     let mut rows = Vec::new();
     for path in scenes {
         let data = scene::load(path)?;
@@ -128,16 +144,9 @@ pub fn run(
         for backend in backends {
             for c in sweep(quick) {
                 let d = configure(&data, &c)?;
-                let (mut totals, mut tables, mut sky) = (Vec::new(), Vec::new(), Vec::new());
-                let mut last = None;
-                for _ in 0..repeats.max(1) {
-                    let (img, st) = render::render(&d, backend, false)?;
-                    totals.push(st.total_seconds);
-                    tables.push(st.seconds_of(&[&super::SkyTransmittance, &super::SkyView]));
-                    sky.push(st.seconds_of(&[&super::Sky]));
-                    last = Some(img);
-                }
-                let img = last.expect("at least one repeat");
+                let tables: &[&dyn crate::passes::Pass] = &[&super::SkyTransmittance, &super::SkyView];
+                let timed = time_renders(&d, backend, repeats, &[tables, &[&super::Sky]])?;
+                let img = &timed.last.image;
                 let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
                 let (rms, max) = crate::metrics::relative_error(&at, &refvals);
                 let row = Row {
@@ -146,9 +155,9 @@ pub fn run(
                     width: data.width(),
                     height: data.height(),
                     config: c,
-                    median_seconds: median(totals),
-                    tables_median_seconds: median(tables),
-                    sky_median_seconds: median(sky),
+                    median_seconds: timed.total_seconds,
+                    tables_median_seconds: timed.group_seconds[0],
+                    sky_median_seconds: timed.group_seconds[1],
                     rms_relative: rms,
                     max_relative: max,
                 };

@@ -19,6 +19,9 @@ use crate::passes::*;
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
 pub static PASSES: &[&dyn Pass] = &[&SkyTransmittance, &SkyView, &Sky];
+
+/// The family, as `passes::FAMILIES` registers it.
+pub static FAMILY: Family = Family { name: "sky", passes: PASSES, bench: Some(&bench::SkySweep) };
 use crate::cpu::for_each_invocation;
 use crate::scene::{invalid, validate, SceneData};
 

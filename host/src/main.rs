@@ -19,122 +19,134 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene file to one or more images (.png tone-mapped sRGB, .exr linear).
-    Render {
-        /// The scene file (TOML; see scenes/README.md).
-        scene: PathBuf,
-        /// Output image; give it more than once for several formats.
-        #[arg(short, long = "output", required = true)]
-        output: Vec<PathBuf>,
-        /// gpu: a Vulkan device (an error without one); cpu: the same kernel
-        /// functions on every core; auto: a device if there is one.
-        #[arg(long, value_enum, default_value = "auto")]
-        backend: BackendChoice,
-        /// Write the device, the pass plan and each pass's time as JSON.
-        #[arg(long)]
-        stats: Option<PathBuf>,
-        /// Print nothing but errors: no progress bar, no summary.
-        #[arg(short, long, conflicts_with = "verbose")]
-        quiet: bool,
-        /// Also list the passes the scene skips, and why.
-        #[arg(short, long)]
-        verbose: bool,
-        /// Exposure of the PNG's tone mapping (overrides `[camera] exposure`;
-        /// the EXR is linear and unaffected).
-        #[arg(long)]
-        exposure: Option<f32>,
-        #[command(flatten)]
-        shafts: ShaftOverrides,
-        /// Sub-pixel samples per pixel, stratified and box-filtered
-        /// (overrides `[camera] samples_per_pixel`; 1 is the pixel centre).
-        #[arg(long)]
-        spp: Option<u32>,
-        /// How directly seen surfaces find their shadows (overrides `[surface] shadows`).
-        #[arg(long, value_enum)]
-        surface_shadows: Option<slicelight::common::surface::SurfaceShadows>,
-        /// Also run a pass no scene needs, by name (`scatter_check`: the
-        /// scatter accumulation's self-check). Give it more than once for several.
-        #[arg(long = "pass")]
-        passes: Vec<String>,
-    },
+    Render(RenderArgs),
     /// Render the f64 reference (shadow rays against the real geometry, no maps or tables).
-    Reference {
-        /// The scene file (TOML; see scenes/README.md).
-        scene: PathBuf,
-        /// Output image (.png or .exr); give it more than once for several formats.
-        #[arg(short, long = "output", required = true)]
-        output: Vec<PathBuf>,
-        /// Stop doubling the ray-march samples when the image changes by less
-        /// than this RMS, relative to its peak.
-        #[arg(long, default_value_t = 2e-4)]
-        tolerance: f64,
-        /// Sub-pixel samples per pixel, at the same positions as `render --spp`.
-        #[arg(long)]
-        spp: Option<u32>,
-        /// Glass: light paths (per light, glass object and traced channel)
-        /// the caustics light tracer starts with; it doubles them until the
-        /// caustic image changes by less than 10x `tolerance`.
-        #[arg(long, default_value_t = 1 << 20)]
-        paths: u64,
-        /// Glass: keep only the paths the caustics method models (refraction
-        /// at every interface; no reflection, no total internal reflection).
-        #[arg(long)]
-        transmission_only: bool,
-    },
+    Reference(ReferenceArgs),
     /// Time against error over a family's settings, each configuration
     /// against the family's reference: CSVs and PNG plots. Each scene goes to
     /// the sweep of its family (glass: caustics; a [sea]: sea; sky alone:
     /// sky; the rest: shafts).
-    Bench {
-        /// Scene files [default: the --family's own scenes].
-        scenes: Vec<PathBuf>,
-        /// The family whose sweep runs when no scene is given: shafts (Fig. 6,
-        /// Fig. 7, the stained glass), sky, sea or caustics [default: shafts].
-        #[arg(long, conflicts_with_all = ["sky", "sea", "caustics"])]
-        family: Option<String>,
-        /// Short for --family sky (scenes/sky_noon, sky_sunset, sky_twilight).
-        #[arg(long)]
-        sky: bool,
-        /// Short for --family sea (scenes/sea_open, sea_calm_noon).
-        #[arg(long, conflicts_with = "sky")]
-        sea: bool,
-        /// Short for --family caustics (scenes/caustics_ball, caustics_knot).
-        #[arg(long, conflicts_with_all = ["sky", "sea"])]
-        caustics: bool,
-        /// Backends to time (give it more than once).
-        #[arg(long, value_enum, default_values = ["cpu"])]
-        backend: Vec<BackendChoice>,
-        /// Renders per configuration; the median time is reported.
-        #[arg(long, default_value_t = 5)]
-        repeats: usize,
-        /// Error is measured at every STRIDE-th pixel centre in x and y.
-        #[arg(long, default_value_t = 4)]
-        stride: u32,
-        /// A shorter sweep (3 plane counts, 3 sub-plane counts, 2 table sizes).
-        #[arg(long)]
-        quick: bool,
-        /// Folder for the CSVs and plots (created if missing).
-        #[arg(long, default_value = "bench")]
-        out_dir: PathBuf,
-    },
+    Bench(BenchArgs),
     /// Print the RMS and max difference of IMAGE against REFERENCE.
-    Compare {
-        /// The image to judge (.png or .exr).
-        image: PathBuf,
-        /// The image it is judged against (.png or .exr, the same size).
-        reference: PathBuf,
-        /// Exposure of the 8-bit tone mapping the % figures are taken after
-        /// [default: the --scene's exposure, else 1].
-        #[arg(long)]
-        exposure: Option<f32>,
-        /// The scene the images were rendered from: its exposure is used
-        /// unless --exposure is given.
-        #[arg(long)]
-        scene: Option<PathBuf>,
-        /// Write |image - reference| as a linear greyscale-per-channel PNG,
-        /// scaled so that the largest difference (printed) is white.
-        #[arg(long)]
-        diff: Option<PathBuf>,
-    },
+    Compare(CompareArgs),
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// The scene file (TOML; see scenes/README.md).
+    scene: PathBuf,
+    /// Output image; give it more than once for several formats.
+    #[arg(short, long = "output", required = true)]
+    output: Vec<PathBuf>,
+    /// gpu: a Vulkan device (an error without one); cpu: the same kernel
+    /// functions on every core; auto: a device if there is one.
+    #[arg(long, value_enum, default_value = "auto")]
+    backend: BackendChoice,
+    /// Write the device, the pass plan and each pass's time as JSON.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+    /// Print nothing but errors: no progress bar, no summary.
+    #[arg(short, long, conflicts_with = "verbose")]
+    quiet: bool,
+    /// Also list the passes the scene skips, and why.
+    #[arg(short, long)]
+    verbose: bool,
+    /// Exposure of the PNG's tone mapping (overrides `[camera] exposure`;
+    /// the EXR is linear and unaffected).
+    #[arg(long)]
+    exposure: Option<f32>,
+    #[command(flatten)]
+    shafts: ShaftOverrides,
+    /// Sub-pixel samples per pixel, stratified and box-filtered
+    /// (overrides `[camera] samples_per_pixel`; 1 is the pixel centre).
+    #[arg(long)]
+    spp: Option<u32>,
+    /// How directly seen surfaces find their shadows (overrides `[surface] shadows`).
+    #[arg(long, value_enum)]
+    surface_shadows: Option<slicelight::common::surface::SurfaceShadows>,
+    /// Also run a pass no scene needs, by name (`scatter_check`: the
+    /// scatter accumulation's self-check). Give it more than once for several.
+    #[arg(long = "pass")]
+    passes: Vec<String>,
+}
+
+#[derive(clap::Args)]
+struct ReferenceArgs {
+    /// The scene file (TOML; see scenes/README.md).
+    scene: PathBuf,
+    /// Output image (.png or .exr); give it more than once for several formats.
+    #[arg(short, long = "output", required = true)]
+    output: Vec<PathBuf>,
+    /// Stop doubling the ray-march samples when the image changes by less
+    /// than this RMS, relative to its peak.
+    #[arg(long, default_value_t = 2e-4)]
+    tolerance: f64,
+    /// Sub-pixel samples per pixel, at the same positions as `render --spp`.
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Glass: light paths (per light, glass object and traced channel)
+    /// the caustics light tracer starts with; it doubles them until the
+    /// caustic image changes by less than 10x `tolerance`.
+    #[arg(long, default_value_t = 1 << 20)]
+    paths: u64,
+    /// Glass: keep only the paths the caustics method models (refraction
+    /// at every interface; no reflection, no total internal reflection).
+    #[arg(long)]
+    transmission_only: bool,
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Scene files [default: the --family's own scenes].
+    scenes: Vec<PathBuf>,
+    /// The family whose sweep runs when no scene is given: shafts (Fig. 6,
+    /// Fig. 7, the stained glass), sky, sea or caustics [default: shafts].
+    #[arg(long, conflicts_with_all = ["sky", "sea", "caustics"])]
+    family: Option<String>,
+    /// Short for --family sky (scenes/sky_noon, sky_sunset, sky_twilight).
+    #[arg(long)]
+    sky: bool,
+    /// Short for --family sea (scenes/sea_open, sea_calm_noon).
+    #[arg(long, conflicts_with = "sky")]
+    sea: bool,
+    /// Short for --family caustics (scenes/caustics_ball, caustics_knot).
+    #[arg(long, conflicts_with_all = ["sky", "sea"])]
+    caustics: bool,
+    /// Backends to time (give it more than once).
+    #[arg(long, value_enum, default_values = ["cpu"])]
+    backend: Vec<BackendChoice>,
+    /// Renders per configuration; the median time is reported.
+    #[arg(long, default_value_t = 5)]
+    repeats: usize,
+    /// Error is measured at every STRIDE-th pixel centre in x and y.
+    #[arg(long, default_value_t = 4)]
+    stride: u32,
+    /// A shorter sweep (3 plane counts, 3 sub-plane counts, 2 table sizes).
+    #[arg(long)]
+    quick: bool,
+    /// Folder for the CSVs and plots (created if missing).
+    #[arg(long, default_value = "bench")]
+    out_dir: PathBuf,
+}
+
+#[derive(clap::Args)]
+struct CompareArgs {
+    /// The image to judge (.png or .exr).
+    image: PathBuf,
+    /// The image it is judged against (.png or .exr, the same size).
+    reference: PathBuf,
+    /// Exposure of the 8-bit tone mapping the % figures are taken after
+    /// [default: the --scene's exposure, else 1].
+    #[arg(long)]
+    exposure: Option<f32>,
+    /// The scene the images were rendered from: its exposure is used
+    /// unless --exposure is given.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Write |image - reference| as a linear greyscale-per-channel PNG,
+    /// scaled so that the largest difference (printed) is white.
+    #[arg(long)]
+    diff: Option<PathBuf>,
 }
 
 /// Command-line overrides of the scene's `[shafts]` settings.
@@ -270,139 +282,135 @@ fn set_spp(data: &mut scene::SceneData, spp: Option<u32>) -> Result<()> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Render {
-            scene,
-            output,
-            backend,
-            stats,
-            quiet,
-            verbose,
-            exposure,
-            shafts,
-            spp,
-            surface_shadows,
-            passes,
-        } => {
-            check_outputs(&output)?;
-            if let Some(path) = &stats {
-                check_outputs_dir(path)?;
-            }
-            let mut data = scene::load(&scene)?;
-            shafts.apply(&mut data)?;
-            set_spp(&mut data, spp)?;
-            if let Some(e) = exposure {
-                if !(e.is_finite() && e > 0.0) {
-                    return Err(anyhow!("command line: --exposure: expected a positive number, got {e}"));
-                }
-                data.exposure = e;
-            }
-            if let Some(s) = surface_shadows {
-                data.set_surface_shadows(s.code())?;
-            }
-            for name in &passes {
-                if slicelight::passes::by_name(name).is_none() {
-                    let known: Vec<_> = slicelight::passes::PASSES.iter().map(|p| p.name()).collect();
-                    return Err(anyhow!("command line: --pass: expected one of {}, got {name:?}", known.join(", ")));
-                }
-            }
-            data.requested_passes = passes;
-            let backend = Backend::open(backend)?;
-            if !quiet {
-                eprintln!("backend: {} on {}", backend.name(), backend.device());
-            }
-            let show = !quiet && std::io::stderr().is_terminal();
-            let rendered = render::render_layers(&data, &backend, show)?;
-            let st = &rendered.stats;
-            if !quiet {
-                print_summary(st, verbose || stats.is_some());
-            }
-            write_outputs(&output, &rendered.image, &rendered.layer_slices(), &data, quiet)?;
-            if let Some(path) = stats {
-                let json = serde_json::to_vec_pretty(st)?;
-                output::write_atomically(&path, &json)?;
-            }
-            Ok(())
+        Command::Render(args) => render_command(args),
+        Command::Reference(args) => reference_command(args),
+        Command::Bench(args) => bench_command(args),
+        Command::Compare(args) => compare_command(args),
+    }
+}
+
+fn render_command(args: RenderArgs) -> Result<()> {
+    let RenderArgs { scene, output, backend, stats, quiet, verbose, exposure, shafts, spp, surface_shadows, passes } =
+        args;
+    check_outputs(&output)?;
+    if let Some(path) = &stats {
+        check_outputs_dir(path)?;
+    }
+    let mut data = scene::load(&scene)?;
+    shafts.apply(&mut data)?;
+    set_spp(&mut data, spp)?;
+    if let Some(e) = exposure {
+        if !(e.is_finite() && e > 0.0) {
+            return Err(anyhow!("command line: --exposure: expected a positive number, got {e}"));
         }
-        Command::Reference { scene, output, tolerance, spp, paths, transmission_only } => {
-            check_outputs(&output)?;
-            let mut data = scene::load(&scene)?;
-            set_spp(&mut data, spp)?;
-            let t = Instant::now();
-            let (mut image, samples) = reference::render_converged(&data, tolerance);
-            if data.scatters() {
-                eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
-            } else {
-                eprintln!("reference: {:.3} s (the medium does not scatter: no ray march)", t.elapsed().as_secs_f64());
-            }
-            if !data.glass_vertices.is_empty() && !data.lights.is_empty() {
-                let t = Instant::now();
-                let (caustics, n) = slicelight::caustics::reference::caustic_image_converged(
-                    &data,
-                    paths,
-                    paths << 6,
-                    10.0 * tolerance,
-                    transmission_only,
-                );
-                for (p, c) in image.iter_mut().zip(caustics) {
-                    *p += c;
-                }
-                eprintln!(
-                    "reference caustics: {n} light paths per light, glass object and channel{}, {:.3} s",
-                    if transmission_only { " (transmission only)" } else { "" },
-                    t.elapsed().as_secs_f64()
-                );
-            }
-            let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
-            write_outputs(&output, &pixels, &[], &data, false)
+        data.exposure = e;
+    }
+    if let Some(s) = surface_shadows {
+        data.set_surface_shadows(s.code())?;
+    }
+    for name in &passes {
+        if slicelight::passes::by_name(name).is_none() {
+            let known: Vec<_> = slicelight::passes::PASSES.iter().map(|p| p.name()).collect();
+            return Err(anyhow!("command line: --pass: expected one of {}, got {name:?}", known.join(", ")));
         }
-        Command::Bench { scenes, family, sky, sea, caustics, backend, repeats, stride, quick, out_dir } => {
-            let family = family.or_else(|| {
-                [(sky, "sky"), (sea, "sea"), (caustics, "caustics")]
-                    .iter()
-                    .find(|(on, _)| *on)
-                    .map(|(_, n)| n.to_string())
-            });
-            let backends: Vec<render::Backend> =
-                backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
-            let opts = slicelight::bench::Options { backends, repeats, stride, quick, out_dir };
-            let written = slicelight::bench::run(family.as_deref(), &scenes, Path::new("scenes"), &opts)?;
-            let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
-            eprintln!("wrote {}", names.join(", "));
-            Ok(())
+    }
+    data.requested_passes = passes;
+    let backend = Backend::open(backend)?;
+    if !quiet {
+        eprintln!("backend: {} on {}", backend.name(), backend.device());
+    }
+    let show = !quiet && std::io::stderr().is_terminal();
+    let rendered = render::render_layers(&data, &backend, show)?;
+    let st = &rendered.stats;
+    if !quiet {
+        print_summary(st, verbose || stats.is_some());
+    }
+    write_outputs(&output, &rendered.image, &rendered.layer_slices(), &data, quiet)?;
+    if let Some(path) = stats {
+        let json = serde_json::to_vec_pretty(st)?;
+        output::write_atomically(&path, &json)?;
+    }
+    Ok(())
+}
+
+fn reference_command(args: ReferenceArgs) -> Result<()> {
+    let ReferenceArgs { scene, output, tolerance, spp, paths, transmission_only } = args;
+    check_outputs(&output)?;
+    let mut data = scene::load(&scene)?;
+    set_spp(&mut data, spp)?;
+    let t = Instant::now();
+    let (mut image, samples) = reference::render_converged(&data, tolerance);
+    if data.scatters() {
+        eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
+    } else {
+        eprintln!("reference: {:.3} s (the medium does not scatter: no ray march)", t.elapsed().as_secs_f64());
+    }
+    if !data.glass_vertices.is_empty() && !data.lights.is_empty() {
+        let t = Instant::now();
+        let (caustics, n) = slicelight::caustics::reference::caustic_image_converged(
+            &data,
+            paths,
+            paths << 6,
+            10.0 * tolerance,
+            transmission_only,
+        );
+        for (p, c) in image.iter_mut().zip(caustics) {
+            *p += c;
         }
-        Command::Compare { image, reference, exposure, scene, diff } => {
-            let exposure = match (exposure, &scene) {
-                (Some(e), _) => e,
-                (None, Some(path)) => scene::load(path)?.exposure,
-                (None, None) => 1.0,
-            };
-            if !(exposure.is_finite() && exposure > 0.0) {
-                return Err(anyhow!("command line: --exposure: expected a positive number, got {exposure}"));
-            }
-            let (w, h, a) = read_linear(&image)?;
-            let (rw, rh, b) = read_linear(&reference)?;
-            if (w, h) != (rw, rh) {
-                return Err(anyhow!("{} is {w}x{h} but {} is {rw}x{rh}", image.display(), reference.display()));
-            }
-            let d = metrics::difference(&a, &b, exposure);
-            println!("rms_relative     {:.4e}", d.rms_relative);
-            println!("max_relative     {:.4e}", d.max_relative);
-            println!("rms_8bit_percent {:.4}", d.rms_8bit_percent);
-            println!("max_8bit_percent {:.4}", d.max_8bit_percent);
-            if let Some(path) = diff {
-                let largest =
-                    a.iter().zip(&b).map(|(x, y)| (*x - *y).abs().max_element()).fold(0.0, f64::max).max(1e-300);
-                let pixels: Vec<Vec4> =
-                    a.iter().zip(&b).map(|(x, y)| ((*x - *y).abs() / largest).as_vec3().extend(0.0)).collect();
-                output::write_image(&path, &pixels, w, h, 1.0)?;
-                eprintln!(
+        eprintln!(
+            "reference caustics: {n} light paths per light, glass object and channel{}, {:.3} s",
+            if transmission_only { " (transmission only)" } else { "" },
+            t.elapsed().as_secs_f64()
+        );
+    }
+    let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
+    write_outputs(&output, &pixels, &[], &data, false)
+}
+
+fn bench_command(args: BenchArgs) -> Result<()> {
+    let BenchArgs { scenes, family, sky, sea, caustics, backend, repeats, stride, quick, out_dir } = args;
+    let family = family.or_else(|| {
+        [(sky, "sky"), (sea, "sea"), (caustics, "caustics")].iter().find(|(on, _)| *on).map(|(_, n)| n.to_string())
+    });
+    let backends: Vec<render::Backend> = backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
+    let opts = slicelight::bench::Options { backends, repeats, stride, quick, out_dir };
+    let written = slicelight::bench::run(family.as_deref(), &scenes, Path::new("scenes"), &opts)?;
+    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
+    eprintln!("wrote {}", names.join(", "));
+    Ok(())
+}
+
+fn compare_command(args: CompareArgs) -> Result<()> {
+    let CompareArgs { image, reference, exposure, scene, diff } = args;
+    let exposure = match (exposure, &scene) {
+        (Some(e), _) => e,
+        (None, Some(path)) => scene::load(path)?.exposure,
+        (None, None) => 1.0,
+    };
+    if !(exposure.is_finite() && exposure > 0.0) {
+        return Err(anyhow!("command line: --exposure: expected a positive number, got {exposure}"));
+    }
+    let (w, h, a) = read_linear(&image)?;
+    let (rw, rh, b) = read_linear(&reference)?;
+    if (w, h) != (rw, rh) {
+        return Err(anyhow!("{} is {w}x{h} but {} is {rw}x{rh}", image.display(), reference.display()));
+    }
+    let d = metrics::difference(&a, &b, exposure);
+    println!("rms_relative     {:.4e}", d.rms_relative);
+    println!("max_relative     {:.4e}", d.max_relative);
+    println!("rms_8bit_percent {:.4}", d.rms_8bit_percent);
+    println!("max_8bit_percent {:.4}", d.max_8bit_percent);
+    if let Some(path) = diff {
+        let largest = a.iter().zip(&b).map(|(x, y)| (*x - *y).abs().max_element()).fold(0.0, f64::max).max(1e-300);
+        let pixels: Vec<Vec4> =
+            a.iter().zip(&b).map(|(x, y)| ((*x - *y).abs() / largest).as_vec3().extend(0.0)).collect();
+        output::write_image(&path, &pixels, w, h, 1.0)?;
+        eprintln!(
                     "wrote {}: per channel |image - reference| / {largest:.4e} (white: that difference; linear, no tone mapping)",
                     path.display()
                 );
-            }
-            Ok(())
-        }
     }
+    Ok(())
 }
 
 fn check_outputs_dir(path: &Path) -> Result<()> {

@@ -487,18 +487,35 @@ pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> 
     if !data.scatters() {
         return (filter(surfaces.iter().map(|s| s.0).collect()), 0);
     }
-    let mut samples = 64;
-    let mut image = with_inscatter(samples);
-    while samples < 65536 {
-        samples *= 2;
-        let next = with_inscatter(samples);
+    let (image, samples) = converged(64, 65536, tolerance, |samples, _| with_inscatter(samples as u32));
+    (image, samples as u32)
+}
+
+/// The references' convergence: `estimate(count, round)` with `count`
+/// starting at `start` and doubling (round 1, 2, ...), until two successive
+/// images differ by less than `tolerance` RMS relative to the peak
+/// (`metrics::relative_error`), or `count` reaches `max`. Returns the last
+/// image and its count.
+pub fn converged(
+    start: u64,
+    max: u64,
+    tolerance: f64,
+    mut estimate: impl FnMut(u64, u64) -> Vec<DVec3>,
+) -> (Vec<DVec3>, u64) {
+    let mut count = start.max(1);
+    let mut round = 1;
+    let mut image = estimate(count, round);
+    while count < max {
+        count *= 2;
+        round += 1;
+        let next = estimate(count, round);
         let change = crate::metrics::relative_error(&image, &next).0;
         image = next;
         if change < tolerance {
             break;
         }
     }
-    (image, samples)
+    (image, count)
 }
 
 /// The whole reference image at convergence (see `render_converged_at`).

@@ -369,18 +369,7 @@ pub fn caustic_image_converged(
     tolerance: f64,
     transmission_only: bool,
 ) -> (Vec<DVec3>, u64) {
-    let mut paths = start.max(1);
-    let mut image = caustic_image(data, paths, 1, transmission_only);
-    let mut round = 1;
-    while paths < max_paths {
-        paths *= 2;
-        round += 1;
-        let next = caustic_image(data, paths, round, transmission_only);
-        let change = crate::metrics::relative_error(&image, &next).0;
-        image = next;
-        if change < tolerance {
-            break;
-        }
-    }
-    (image, paths)
+    crate::reference::converged(start, max_paths, tolerance, |paths, round| {
+        caustic_image(data, paths, round, transmission_only)
+    })
 }

@@ -174,18 +174,180 @@ fn add_into(sum: &mut [Vec4], layer: &[Vec4]) {
     sum.iter_mut().zip(layer).for_each(|(s, v)| *s += *v);
 }
 
+/// A pass that runs this frame: where its stats are, and its invocations.
+#[derive(Clone, Copy)]
+struct Running {
+    stat: usize,
+    pass: &'static dyn Pass,
+    invocations: u64,
+}
+
 /// What the `Whole` passes write that no running pass reads (a self-check's
 /// accumulators): the frame's results for `Pass::report` and `counters`.
 /// Intermediates such as the shadow maps stay on the device.
-fn final_outputs(running: &[(usize, &'static dyn Pass, u64)]) -> Vec<&'static Resource> {
-    let read = |r: &Resource| running.iter().any(|(_, p, _)| p.reads().iter().any(|x| x.binding == r.binding));
+fn final_outputs(running: &[Running]) -> Vec<&'static Resource> {
+    let read = |r: &Resource| running.iter().any(|x| x.pass.reads().iter().any(|y| y.binding == r.binding));
     running
         .iter()
-        .filter(|r| r.1.dispatch() == Dispatch::Whole)
+        .filter(|r| r.pass.dispatch() == Dispatch::Whole)
         .flat_map(|r| {
-            r.1.writes().iter().copied().filter(|w| !read(w) || r.1.keeps().iter().any(|k| k.binding == w.binding))
+            let keeps = r.pass.keeps();
+            r.pass.writes().iter().copied().filter(move |w| !read(w) || keeps.iter().any(|k| k.binding == w.binding))
         })
         .collect()
+}
+
+/// The passes of one dispatch kind, in run order.
+fn of_kind(running: &[Running], dispatch: Dispatch) -> impl Iterator<Item = &Running> {
+    running.iter().filter(move |r| r.pass.dispatch() == dispatch)
+}
+
+/// A frame in progress: the passes that run, those that add a radiance
+/// layer, and what they have produced.
+struct Work<'a> {
+    data: &'a SceneData,
+    running: Vec<Running>,
+    layers: Vec<&'static dyn Pass>,
+    /// The results: `Whole` passes' final outputs (the layers join at the end).
+    result: Frame,
+    /// Each layer's sum over the sub-pixel samples (on the CPU the first
+    /// sample's buffer itself, moved, not copied).
+    sums: Vec<Option<Buffer>>,
+    stats: Vec<PassStats>,
+    progress: ProgressBar,
+}
+
+impl Work<'_> {
+    /// Runs every pass on the CPU; returns how the pass times were taken.
+    fn run_cpu(&mut self, known: Frame) -> &'static str {
+        let (data, pb) = (self.data, &self.progress);
+        let pixels = data.pixel_count() as usize;
+        let mut frame = known;
+        // Per-pixel resources that running passes read but none writes
+        // hold their blank (the rest are never touched).
+        for r in self.running.iter().flat_map(|r| r.pass.reads().iter()) {
+            let written = self.running.iter().any(|x| x.pass.writes().iter().any(|w| w.binding == r.binding));
+            if !written && !frame.contains(r) {
+                if let Some(blank) = r.blank(pixels) {
+                    frame.insert(r, blank);
+                }
+            }
+        }
+        for r in of_kind(&self.running, Dispatch::Whole) {
+            pb.set_message(r.pass.name());
+            let t = Instant::now();
+            r.pass.run_cpu(data, &data.common, &mut frame, pb);
+            self.stats[r.stat].seconds += t.elapsed().as_secs_f64();
+        }
+        for sample in 0..data.samples_per_pixel() {
+            let mut common = data.common;
+            common.sample_index = sample;
+            for r in of_kind(&self.running, Dispatch::PerPixel) {
+                pb.set_message(r.pass.name());
+                let t = Instant::now();
+                r.pass.run_cpu(data, &common, &mut frame, pb);
+                self.stats[r.stat].seconds += t.elapsed().as_secs_f64();
+            }
+            for (sum, pass) in self.sums.iter_mut().zip(&self.layers) {
+                let resource = pass.radiance_layer().expect("a layer");
+                match sum {
+                    None => *sum = frame.remove(resource),
+                    Some(sum) => add_into(sum.as_mut_slice(), frame.get(resource)),
+                }
+            }
+        }
+        for w in final_outputs(&self.running) {
+            if let Some(b) = frame.remove(w) {
+                self.result.insert(w, b);
+            }
+        }
+        "wall clock"
+    }
+
+    /// Runs every pass on the device, band by band of pixels; returns how
+    /// the pass times were taken.
+    fn run_gpu(&mut self, ctx: &GpuContext, known: Frame) -> Result<&'static str> {
+        let (data, pb) = (self.data, &self.progress);
+        let pixels = data.pixel_count() as usize;
+        let passes: Vec<&'static dyn Pass> = self.running.iter().map(|r| r.pass).collect();
+        let frame = ctx.frame(data, &passes, Some(&known))?;
+        let whole: Vec<Running> = of_kind(&self.running, Dispatch::Whole).copied().collect();
+        pb.set_message("maps");
+        let times = frame.run(&whole.iter().map(|r| (r.pass, r.invocations as u32)).collect::<Vec<_>>())?;
+        for (r, t) in whole.iter().zip(times) {
+            self.stats[r.stat].seconds += t;
+            pb.inc(r.invocations);
+        }
+        for w in final_outputs(&self.running) {
+            if let ResourceKind::Frame(len) = w.kind {
+                self.result.insert(w, frame.read(w, len(data))?);
+            }
+        }
+        let per_pixel: Vec<Running> = of_kind(&self.running, Dispatch::PerPixel).copied().collect();
+        let band = ctx.band_pixels(data);
+        let mut first = 0;
+        while first < data.pixel_count() {
+            let count = band.min(data.pixel_count() - first);
+            for sample in 0..data.samples_per_pixel() {
+                frame.set_band(first, count, sample);
+                pb.set_message("image");
+                let times = frame.run(&per_pixel.iter().map(|r| (r.pass, count)).collect::<Vec<_>>())?;
+                for (r, t) in per_pixel.iter().zip(times) {
+                    self.stats[r.stat].seconds += t;
+                    pb.inc(count as u64);
+                }
+                for (sum, pass) in self.sums.iter_mut().zip(&self.layers) {
+                    let layer = frame.read(pass.radiance_layer().expect("a layer"), count as u64 * 16)?;
+                    let sum = sum.get_or_insert_with(|| Buffer::zeroed::<Vec4>(pixels));
+                    let range = &mut sum.as_mut_slice::<Vec4>()[first as usize..(first + count) as usize];
+                    add_into(range, layer.as_slice());
+                }
+            }
+            first += count;
+        }
+        Ok(if ctx.has_timestamps() { "device timestamps" } else { "wall clock per submission" })
+    }
+
+    /// The passes' reports and counters, and the image: the mean over
+    /// samples of the sum of the layers (box filter), with each layer.
+    #[allow(clippy::type_complexity)]
+    fn finish(
+        mut self,
+    ) -> Result<(Vec<Vec4>, Vec<(&'static str, Buffer)>, Vec<PassStats>, BTreeMap<&'static str, u64>)> {
+        let data = self.data;
+        let pixels = data.pixel_count() as usize;
+        self.progress.finish_and_clear();
+        for (sum, pass) in std::mem::take(&mut self.sums).into_iter().zip(&self.layers) {
+            let sum = sum.unwrap_or_else(|| Buffer::zeroed::<Vec4>(pixels));
+            self.result.insert(pass.radiance_layer().expect("a layer"), sum);
+        }
+        let mut counters = BTreeMap::new();
+        for r in &self.running {
+            r.pass.persist(data, &self.result);
+            self.stats[r.stat].report =
+                r.pass.report(data, &self.result).map_err(|e| e.context(format!("pass {}", r.pass.name())))?;
+            counters.extend(r.pass.counters(data, &self.result));
+        }
+        let inv = 1.0 / data.samples_per_pixel() as f32;
+        let mut named = Vec::new();
+        for pass in &self.layers {
+            let mut layer = self.result.remove(pass.radiance_layer().expect("a layer")).expect("inserted above");
+            layer.as_mut_slice::<Vec4>().par_chunks_mut(PIXEL_CHUNK).for_each(|chunk| {
+                for s in chunk {
+                    *s = (*s * inv).truncate().extend(0.0);
+                }
+            });
+            named.push((pass.name(), layer));
+        }
+        // Collected in parallel: the new image's first touch of its pages (a
+        // page fault each) is shared among the threads.
+        let image: Vec<Vec4> = (0..pixels)
+            .into_par_iter()
+            .with_min_len(PIXEL_CHUNK)
+            .map(|i| named.iter().map(|(_, layer)| layer.as_slice::<Vec4>()[i]).sum())
+            .collect();
+        Ok((image, named, self.stats, counters))
+    }
 }
 
 /// Renders a scene: rgb radiance per pixel (W/(m^2 sr)).
@@ -197,32 +359,26 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
 /// Renders a scene, keeping each pass's radiance layer.
 pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<Rendered> {
     let plans = plans(data);
-    let mut stats: Vec<PassStats> = plans.iter().map(|(p, plan)| stats_of(*p, plan, data)).collect();
-    let running: Vec<(usize, &'static dyn Pass, u64)> = plans
+    let stats: Vec<PassStats> = plans.iter().map(|(p, plan)| stats_of(*p, plan, data)).collect();
+    let running: Vec<Running> = plans
         .iter()
         .enumerate()
         .filter(|(_, (_, plan))| plan.runs)
-        .map(|(k, (p, plan))| (k, *p, plan.invocations))
+        .map(|(stat, (pass, plan))| Running { stat, pass: *pass, invocations: plan.invocations })
         .collect();
     let total: u64 = stats.iter().map(|p| p.invocations).sum();
-    let pb = if show_progress { progress_bar(total) } else { ProgressBar::hidden() };
+    let progress = if show_progress { progress_bar(total) } else { ProgressBar::hidden() };
     let kernel_build_seconds = match backend {
         Backend::Gpu(ctx) => {
             let t = Instant::now();
-            ctx.prepare(data, &running.iter().map(|r| r.1).collect::<Vec<_>>())?;
+            ctx.prepare(data, &running.iter().map(|r| r.pass).collect::<Vec<_>>())?;
             t.elapsed().as_secs_f64()
         }
         Backend::Cpu => 0.0,
     };
     let start = Instant::now();
-    let layers: Vec<&'static dyn Pass> = running.iter().map(|r| r.1).filter(|p| p.radiance_layer().is_some()).collect();
-    let pixels = data.pixel_count() as usize;
-    // The results: `Whole` passes' final outputs and the layers summed over samples.
-    let mut result = Frame::default();
-    // Each layer's sum over the sub-pixel samples (on the CPU the first
-    // sample's buffer itself, moved, not copied).
-    let mut sums: Vec<Option<Buffer>> = (0..layers.len()).map(|_| None).collect();
-    let spp = data.samples_per_pixel();
+    let layers: Vec<&'static dyn Pass> =
+        running.iter().map(|r| r.pass).filter(|p| p.radiance_layer().is_some()).collect();
     // Outputs known before the frame (a cached table).
     let mut known = Frame::default();
     for pass in PASSES.iter() {
@@ -230,142 +386,26 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
             known.insert(r, buffer);
         }
     }
+    let sums = (0..layers.len()).map(|_| None).collect();
+    let mut work = Work { data, running, layers, result: Frame::default(), sums, stats, progress };
     let pass_timing = match backend {
-        Backend::Cpu => {
-            let mut frame = known;
-            // Per-pixel resources that running passes read but none writes
-            // hold their blank (the rest are never touched).
-            for r in running.iter().flat_map(|(_, p, _)| p.reads().iter()) {
-                let written = running.iter().any(|(_, p, _)| p.writes().iter().any(|w| w.binding == r.binding));
-                if !written && !frame.contains(r) {
-                    if let Some(blank) = r.blank(pixels) {
-                        frame.insert(r, blank);
-                    }
-                }
-            }
-            for &(k, pass, _) in running.iter().filter(|r| r.1.dispatch() == Dispatch::Whole) {
-                pb.set_message(pass.name());
-                let t = Instant::now();
-                pass.run_cpu(data, &data.common, &mut frame, &pb);
-                stats[k].seconds += t.elapsed().as_secs_f64();
-            }
-            for sample in 0..spp {
-                let mut common = data.common;
-                common.sample_index = sample;
-                for &(k, pass, _) in running.iter().filter(|r| r.1.dispatch() == Dispatch::PerPixel) {
-                    pb.set_message(pass.name());
-                    let t = Instant::now();
-                    pass.run_cpu(data, &common, &mut frame, &pb);
-                    stats[k].seconds += t.elapsed().as_secs_f64();
-                }
-                for (sum, pass) in sums.iter_mut().zip(&layers) {
-                    let resource = pass.radiance_layer().expect("a layer");
-                    match sum {
-                        None => *sum = frame.remove(resource),
-                        Some(sum) => add_into(sum.as_mut_slice(), frame.get(resource)),
-                    }
-                }
-            }
-            for w in final_outputs(&running) {
-                if let Some(b) = frame.remove(w) {
-                    result.insert(w, b);
-                }
-            }
-            "wall clock"
-        }
-        Backend::Gpu(ctx) => {
-            let passes: Vec<&'static dyn Pass> = running.iter().map(|r| r.1).collect();
-            let frame = ctx.frame(data, &passes, Some(&known))?;
-            let whole: Vec<(usize, &'static dyn Pass, u32)> = running
-                .iter()
-                .filter(|r| r.1.dispatch() == Dispatch::Whole)
-                .map(|&(k, p, n)| (k, p, n as u32))
-                .collect();
-            pb.set_message("maps");
-            let times = frame.run(&whole.iter().map(|&(_, p, n)| (p, n)).collect::<Vec<_>>())?;
-            for ((k, _, n), t) in whole.iter().zip(times) {
-                stats[*k].seconds += t;
-                pb.inc(*n as u64);
-            }
-
-            for w in final_outputs(&running) {
-                if let ResourceKind::Frame(len) = w.kind {
-                    result.insert(w, frame.read(w, len(data))?);
-                }
-            }
-            let per_pixel: Vec<(usize, &'static dyn Pass)> =
-                running.iter().filter(|r| r.1.dispatch() == Dispatch::PerPixel).map(|&(k, p, _)| (k, p)).collect();
-            let band = ctx.band_pixels(data);
-            let mut first = 0;
-            while first < data.pixel_count() {
-                let count = band.min(data.pixel_count() - first);
-                for sample in 0..spp {
-                    frame.set_band(first, count, sample);
-                    pb.set_message("image");
-                    let times = frame.run(&per_pixel.iter().map(|&(_, p)| (p, count)).collect::<Vec<_>>())?;
-                    for ((k, _), t) in per_pixel.iter().zip(times) {
-                        stats[*k].seconds += t;
-                        pb.inc(count as u64);
-                    }
-                    for (sum, pass) in sums.iter_mut().zip(&layers) {
-                        let layer = frame.read(pass.radiance_layer().expect("a layer"), count as u64 * 16)?;
-                        let sum = sum.get_or_insert_with(|| Buffer::zeroed::<Vec4>(pixels));
-                        let range = &mut sum.as_mut_slice::<Vec4>()[first as usize..(first + count) as usize];
-                        add_into(range, layer.as_slice());
-                    }
-                }
-                first += count;
-            }
-            if ctx.has_timestamps() {
-                "device timestamps"
-            } else {
-                "wall clock per submission"
-            }
-        }
+        Backend::Cpu => work.run_cpu(known),
+        Backend::Gpu(ctx) => work.run_gpu(ctx, known)?,
     };
-    pb.finish_and_clear();
-    for (sum, pass) in sums.into_iter().zip(&layers) {
-        let sum = sum.unwrap_or_else(|| Buffer::zeroed::<Vec4>(pixels));
-        result.insert(pass.radiance_layer().expect("a layer"), sum);
-    }
-    let mut counters = BTreeMap::new();
-    for &(k, pass, _) in &running {
-        pass.persist(data, &result);
-        stats[k].report = pass.report(data, &result).map_err(|e| e.context(format!("pass {}", pass.name())))?;
-        counters.extend(pass.counters(data, &result));
-    }
-    // The image: the mean over samples of the sum of the layers (box filter).
-    let inv = 1.0 / spp as f32;
-    let mut named = Vec::new();
-    for pass in &layers {
-        let mut layer = result.remove(pass.radiance_layer().expect("a layer")).expect("inserted above");
-        layer.as_mut_slice::<Vec4>().par_chunks_mut(PIXEL_CHUNK).for_each(|chunk| {
-            for s in chunk {
-                *s = (*s * inv).truncate().extend(0.0);
-            }
-        });
-        named.push((pass.name(), layer));
-    }
-    // Collected in parallel: the new image's first touch of its pages (a
-    // page fault each) is shared among the threads.
-    let image: Vec<Vec4> = (0..pixels)
-        .into_par_iter()
-        .with_min_len(PIXEL_CHUNK)
-        .map(|i| named.iter().map(|(_, layer)| layer.as_slice::<Vec4>()[i]).sum())
-        .collect();
+    let (image, layers, passes, counters) = work.finish()?;
     let stats = RenderStats {
         backend: backend.name(),
         device: backend.device(),
         width: data.width(),
         height: data.height(),
-        samples_per_pixel: spp,
-        passes: stats,
+        samples_per_pixel: data.samples_per_pixel(),
+        passes,
         pass_timing,
         total_seconds: start.elapsed().as_secs_f64(),
         kernel_build_seconds,
         counters,
     };
-    Ok(Rendered { image, layers: named, stats })
+    Ok(Rendered { image, layers, stats })
 }
 
 impl Rendered {

@@ -527,20 +527,7 @@ pub fn configure(
             bail!(invalid("sea.planes", "a plane count in 2..=256", planes));
         }
     }
-    let polar = match s.directions {
-        None => None,
-        Some(d) => {
-            let k = ((d / 3) as f32).sqrt().round() as u32;
-            if !(12..=12288).contains(&d) || 3 * k * k != d || !k.is_multiple_of(2) {
-                bail!(invalid(
-                    "sea.directions",
-                    "three times an even square in 12..=12288 (12, 48, 108, 192, 300, ...)",
-                    d
-                ));
-            }
-            Some(k)
-        }
-    };
+    let polar = polar_of(s.directions)?;
     let (waves_kind, waves, wave_resolution, wave_size) = match &s.waves {
         Waves::Flat => (WAVES_FLAT, vec![Vec4::new(0.0, 1.0, 0.0, 0.0)], 1, 1.0),
         Waves::Spectrum(spectrum) => {
@@ -549,19 +536,7 @@ pub fn configure(
         }
     };
 
-    // The sun, refracted at the mean (flat) surface.
-    let sun = sky.params.sun_direction.truncate();
-    let (irradiance, cos_ii) = match sky.sun_at_observer() {
-        Some((e, _)) => (e, sun.y.max(0.0)),
-        None => (Vec3::ZERO, sun.y.max(1e-3)),
-    };
-    let t_i = optics::transmittance(cos_ii, 1.0 / n);
-    let (cos_io, _) = optics::transmitted_cosine(cos_ii, 1.0 / n);
-    let sin_io = (1.0 - cos_io * cos_io).max(0.0).sqrt();
-    let horizontal = Vec3::new(sun.x, 0.0, sun.z);
-    let horizontal = if horizontal.length_squared() > 1e-12 { horizontal.normalize() } else { Vec3::X };
-    let in_water = (-horizontal * sin_io - Vec3::Y * cos_io).normalize();
-    let beam = irradiance * (t_i * cos_ii / cos_io);
+    let RefractedSun { sun, cos_ii, in_water, cos_io, beam, t_i } = refracted_sun(sky, n);
     let c = a + b;
     let albedo0 = Vec3::select(c.cmpgt(Vec3::ZERO), b / c.max(Vec3::splat(1e-30)), Vec3::ZERO);
     let order1_c = match s.single {
@@ -600,40 +575,99 @@ pub fn configure(
         table_height: if grid.is_some() && s.second_order { table_rows(s.depth_table, common) } else { 0 },
         _pad: [0; 2],
     };
+    let sampling = if s.second_order { choose_sampling(&mut params, s.planes, polar) } else { Vec::new() };
+    check_table_size(&params, s.depth_table)?;
+    Ok(Setup {
+        enabled: true,
+        params,
+        waves,
+        bottom: grid.map_or(vec![0.0], |g| g.depths),
+        second_order: s.second_order,
+        single: s.single,
+        sampling: sampling.join(", "),
+    })
+}
+
+/// The sun refracted at the mean (flat) surface, eq. 5's and 7's beam:
+/// its direction above the water and cosine `cos_ii`, its direction in the
+/// water and cosine `cos_io` (Snell), the irradiance normal to the
+/// refracted beam `E_w = T_i E cos(theta_ii) / cos(theta_io)` (W/m^2) and
+/// the Fresnel transmittance `T_i`.
+struct RefractedSun {
+    sun: Vec3,
+    cos_ii: f32,
+    in_water: Vec3,
+    cos_io: f32,
+    beam: Vec3,
+    t_i: f32,
+}
+
+fn refracted_sun(sky: &crate::sky::Setup, n: f32) -> RefractedSun {
+    let sun = sky.params.sun_direction.truncate();
+    let (irradiance, cos_ii) = match sky.sun_at_observer() {
+        Some((e, _)) => (e, sun.y.max(0.0)),
+        None => (Vec3::ZERO, sun.y.max(1e-3)),
+    };
+    let t_i = optics::transmittance(cos_ii, 1.0 / n);
+    let (cos_io, _) = optics::transmitted_cosine(cos_ii, 1.0 / n);
+    let sin_io = (1.0 - cos_io * cos_io).max(0.0).sqrt();
+    let horizontal = Vec3::new(sun.x, 0.0, sun.z);
+    let horizontal = if horizontal.length_squared() > 1e-12 { horizontal.normalize() } else { Vec3::X };
+    let in_water = (-horizontal * sin_io - Vec3::Y * cos_io).normalize();
+    let beam = irradiance * (t_i * cos_ii / cos_io);
+    RefractedSun { sun, cos_ii, in_water, cos_io, beam, t_i }
+}
+
+/// `sea.directions` as `k` (`n_d = 3 k^2`, `k` even), if given.
+fn polar_of(directions: Option<u32>) -> Result<Option<u32>> {
+    let Some(d) = directions else { return Ok(None) };
+    let k = ((d / 3) as f32).sqrt().round() as u32;
+    if !(12..=12288).contains(&d) || 3 * k * k != d || !k.is_multiple_of(2) {
+        bail!(invalid("sea.directions", "three times an even square in 12..=12288 (12, 48, 108, 192, 300, ...)", d));
+    }
+    Ok(Some(k))
+}
+
+/// Chooses `n_d` (unless `polar` is given) and `n_z` (unless `planes` is)
+/// by the paper's 1/255 rule (6.1); returns what it chose, for the plan.
+fn choose_sampling(params: &mut SeaParams, planes: Option<u32>, polar: Option<u32>) -> Vec<String> {
     let mut sampling = Vec::new();
     let chosen = std::time::Instant::now();
-    if s.second_order {
-        // Over a varying bottom the rule runs for the deepest bottom and
-        // for the middle layer's (geometric mean), and keeps the larger count.
-        let rule_at: Vec<SeaParams> = if params.layers > 1 {
-            vec![layer_params(&params, params.layers - 1), layer_params(&params, params.layers / 2)]
-        } else {
-            vec![params]
-        };
-        if polar.is_none() {
-            let (mut k, mut tried) = (2, 0);
-            for q in &rule_at {
-                let (kq, curve) = choose_directions(&SeaParams { layers: 1, ..*q });
-                (k, tried) = (k.max(kq), tried + curve.len());
-            }
-            params.polar = k;
-            params.azimuths = k;
-            sampling.push(format!("n_d = {} by the 1/255 rule ({tried} counts tried)", 3 * k * k));
+    // Over a varying bottom the rule runs for the deepest bottom and
+    // for the middle layer's (geometric mean), and keeps the larger count.
+    let rule_at: Vec<SeaParams> = if params.layers > 1 {
+        vec![layer_params(params, params.layers - 1), layer_params(params, params.layers / 2)]
+    } else {
+        vec![*params]
+    };
+    if polar.is_none() {
+        let (mut k, mut tried) = (2, 0);
+        for q in &rule_at {
+            let (kq, curve) = choose_directions(&SeaParams { layers: 1, ..*q });
+            (k, tried) = (k.max(kq), tried + curve.len());
         }
-        if s.planes.is_none() {
-            let (mut planes, mut tried) = (2, 0);
-            for q in &rule_at {
-                let q = SeaParams { layers: 1, polar: params.polar, azimuths: params.azimuths, ..*q };
-                let (nq, curve) = choose_planes(&q);
-                (planes, tried) = (planes.max(nq), tried + curve.len());
-            }
-            params.planes = planes;
-            sampling.push(format!("n_z = {planes} by the 1/255 rule ({tried} counts tried)"));
-        }
-        if s.planes.is_none() || polar.is_none() {
-            sampling.push(format!("chosen in {:.0} ms", 1e3 * chosen.elapsed().as_secs_f64()));
-        }
+        params.polar = k;
+        params.azimuths = k;
+        sampling.push(format!("n_d = {} by the 1/255 rule ({tried} counts tried)", 3 * k * k));
     }
+    if planes.is_none() {
+        let (mut n, mut tried) = (2, 0);
+        for q in &rule_at {
+            let q = SeaParams { layers: 1, polar: params.polar, azimuths: params.azimuths, ..*q };
+            let (nq, curve) = choose_planes(&q);
+            (n, tried) = (n.max(nq), tried + curve.len());
+        }
+        params.planes = n;
+        sampling.push(format!("n_z = {n} by the 1/255 rule ({tried} counts tried)"));
+    }
+    if planes.is_none() || polar.is_none() {
+        sampling.push(format!("chosen in {:.0} ms", 1e3 * chosen.elapsed().as_secs_f64()));
+    }
+    sampling
+}
+
+/// The depth table within its memory limit.
+fn check_table_size(params: &SeaParams, depth_table: u32) -> Result<()> {
     // The depth table holds a distance per sample, level and direction.
     let table_bytes = 4
         * params.table_width as u64
@@ -650,18 +684,10 @@ pub fn configure(
                 params.planes,
                 3 * set_size(&params)
             ),
-            s.depth_table
+            depth_table
         ));
     }
-    Ok(Setup {
-        enabled: true,
-        params,
-        waves,
-        bottom: grid.map_or(vec![0.0], |g| g.depths),
-        second_order: s.second_order,
-        single: s.single,
-        sampling: sampling.join(", "),
-    })
+    Ok(())
 }
 
 pub(super) fn skip_without_sea(scene: &SceneData) -> Option<Plan> {

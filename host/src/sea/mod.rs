@@ -669,12 +669,8 @@ fn choose_sampling(params: &mut SeaParams, planes: Option<u32>, polar: Option<u3
 /// The depth table within its memory limit.
 fn check_table_size(params: &SeaParams, depth_table: u32) -> Result<()> {
     // The depth table holds a distance per sample, level and direction.
-    let table_bytes = 4
-        * params.table_width as u64
-        * params.table_height as u64
-        * params.planes as u64
-        * 3
-        * set_size(&params) as u64;
+    let table_bytes =
+        4 * params.table_width as u64 * params.table_height as u64 * params.planes as u64 * 3 * set_size(params) as u64;
     if table_bytes > MAX_TABLE_BYTES {
         bail!(invalid(
             "sea.depth_table",
@@ -682,7 +678,7 @@ fn check_table_size(params: &SeaParams, depth_table: u32) -> Result<()> {
                 "a depth table within {} MiB ({} planes x {} directions per sample)",
                 MAX_TABLE_BYTES >> 20,
                 params.planes,
-                3 * set_size(&params)
+                3 * set_size(params)
             ),
             depth_table
         ));

@@ -115,7 +115,65 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
             s.directions
         ));
     }
-    // Receivers: every surface that is not glass.
+    let Some((lo, hi)) = receiver_bounds(scene) else {
+        return off("no opaque surface to receive caustics");
+    };
+    let glass_top = scene.glass_vertices.iter().map(|v| v.position.y).fold(f32::NEG_INFINITY, f32::max);
+    let y_lo = lo.y;
+    let y_hi = hi.y.min(glass_top).max(y_lo);
+    let scale = lo.abs().max(hi.abs()).max_element().max(1.0);
+    let (planes, spacing) = if s.planes == 1 || y_hi - y_lo < 1e-4 * scale {
+        (1, 0.0)
+    } else {
+        (s.planes, (y_hi - y_lo) / (s.planes - 1) as f32)
+    };
+
+    let y_top = y_lo + spacing * (planes - 1) as f32;
+    let Some((xz_lo, xz_hi)) = exit_footprint(scene, channels, [y_lo, y_top]) else {
+        return off("no light leaves the glass downward toward the receivers");
+    };
+    // A margin for the rays between the sampled vertices, then the receivers' extent.
+    let margin = (xz_hi - xz_lo).max_element() * 0.1 + 1e-3 * scale;
+    let xz_lo = (xz_lo - margin).max(glam::Vec2::new(lo.x, lo.z));
+    let xz_hi = (xz_hi + margin).min(glam::Vec2::new(hi.x, hi.z));
+    let size = (xz_hi - xz_lo).max(glam::Vec2::splat(1e-6 * scale));
+    let texel = size.max_element() / s.map_resolution as f32;
+    let map_width = ((size.x / texel).ceil() as u32).clamp(1, s.map_resolution);
+    let map_height = ((size.y / texel).ceil() as u32).clamp(1, s.map_resolution);
+
+    let Some(fixed_scale) = fixed_point_scale(scene, texel) else {
+        return off("the lights send no light onto the glass");
+    };
+
+    let params = CausticsParams {
+        map_origin: Vec4::new(xz_lo.x, y_lo, xz_lo.y, texel),
+        rings,
+        azimuths,
+        directions,
+        channels,
+        vertex_count,
+        triangle_count: scene.glass_triangles.len() as u32,
+        light_count: scene.lights.len() as u32,
+        planes,
+        map_width,
+        map_height,
+        plane_spacing: spacing,
+        scale: fixed_scale,
+        compressed: s.compression as u32,
+        entry_words,
+        _pad: [0; 2],
+    };
+    let mut setup = Setup { enabled: true, table_blocks: blocks as u32, params, ..Default::default() };
+    if s.cache {
+        if let Some(dir) = cache::directory() {
+            cache::load(&mut setup, scene, &dir);
+        }
+    }
+    Ok(setup)
+}
+
+/// The bounds of the receivers: every surface that is not glass (none: `None`).
+fn receiver_bounds(scene: &SceneData) -> Option<(Vec3, Vec3)> {
     let mut lo = Vec3::splat(f32::INFINITY);
     let mut hi = Vec3::splat(f32::NEG_INFINITY);
     for sph in &scene.spheres {
@@ -129,21 +187,13 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
             hi = hi.max(v.truncate());
         }
     }
-    if lo.x > hi.x {
-        return off("no opaque surface to receive caustics");
-    }
-    let glass_top = scene.glass_vertices.iter().map(|v| v.position.y).fold(f32::NEG_INFINITY, f32::max);
-    let y_lo = lo.y;
-    let y_hi = hi.y.min(glass_top).max(y_lo);
-    let scale = lo.abs().max(hi.abs()).max_element().max(1.0);
-    let (planes, spacing) = if s.planes == 1 || y_hi - y_lo < 1e-4 * scale {
-        (1, 0.0)
-    } else {
-        (s.planes, (y_hi - y_lo) / (s.planes - 1) as f32)
-    };
+    (lo.x <= hi.x).then_some((lo, hi))
+}
 
-    // Where the light leaving the glass crosses the lowest and highest
-    // planes, from exactly traced exit rays at up to 4096 vertices per light.
+/// Where the light leaving the glass crosses the planes at `heights` (the
+/// lowest and the highest), as x-z bounds, from exactly traced exit rays at
+/// up to 4096 vertices per light; `None` if no light leaves downward.
+fn exit_footprint(scene: &SceneData, channels: u32, heights: [f32; 2]) -> Option<(glam::Vec2, glam::Vec2)> {
     let geometry = scene.geometry();
     let glass = Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
     let stride = (scene.glass_vertices.len() / 4096).max(1);
@@ -171,7 +221,7 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
                 if path.status != PATH_OUT || path.direction.y >= 0.0 {
                     continue;
                 }
-                for y in [y_lo, y_lo + spacing * (planes - 1) as f32] {
+                for y in heights {
                     let t = (y - path.position.y) / path.direction.y;
                     if t >= 0.0 {
                         let q = path.position + path.direction * t;
@@ -182,20 +232,13 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
             }
         }
     }
-    if xz_lo.x > xz_hi.x {
-        return off("no light leaves the glass downward toward the receivers");
-    }
-    // A margin for the rays between the sampled vertices, then the receivers' extent.
-    let margin = (xz_hi - xz_lo).max_element() * 0.1 + 1e-3 * scale;
-    let xz_lo = (xz_lo - margin).max(glam::Vec2::new(lo.x, lo.z));
-    let xz_hi = (xz_hi + margin).min(glam::Vec2::new(hi.x, hi.z));
-    let size = (xz_hi - xz_lo).max(glam::Vec2::splat(1e-6 * scale));
-    let texel = size.max_element() / s.map_resolution as f32;
-    let map_width = ((size.x / texel).ceil() as u32).clamp(1, s.map_resolution);
-    let map_height = ((size.y / texel).ceil() as u32).clamp(1, s.map_resolution);
+    (xz_lo.x <= xz_hi.x).then_some((xz_lo, xz_hi))
+}
 
-    // The fixed-point scale: no texel can hold more than all the flux that
-    // falls on the glass, in one texel, times the largest slope, in 2^60 units.
+/// The maps' fixed-point scale (units per W/m^2): no texel can hold more
+/// than all the flux that falls on the glass, in one texel of `texel` m,
+/// times the largest slope, in 2^60 units. `None` if no light reaches the glass.
+fn fixed_point_scale(scene: &SceneData, texel: f32) -> Option<f32> {
     let mut flux_bound = 0.0f64;
     for light in &scene.lights {
         for t in &scene.glass_triangles {
@@ -205,36 +248,10 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
         }
     }
     if flux_bound.is_nan() || flux_bound <= 0.0 {
-        return off("the lights send no light onto the glass");
+        return None;
     }
     let peak = flux_bound / (texel as f64 * texel as f64) * 3.0 * MAX_SLOPE as f64;
-    let fixed_scale = (2f64.powi(60) / peak).min(1e30) as f32;
-
-    let params = CausticsParams {
-        map_origin: Vec4::new(xz_lo.x, y_lo, xz_lo.y, texel),
-        rings,
-        azimuths,
-        directions,
-        channels,
-        vertex_count,
-        triangle_count: scene.glass_triangles.len() as u32,
-        light_count: scene.lights.len() as u32,
-        planes,
-        map_width,
-        map_height,
-        plane_spacing: spacing,
-        scale: fixed_scale,
-        compressed: s.compression as u32,
-        entry_words,
-        _pad: [0; 2],
-    };
-    let mut setup = Setup { enabled: true, table_blocks: blocks as u32, params, ..Default::default() };
-    if s.cache {
-        if let Some(dir) = cache::directory() {
-            cache::load(&mut setup, scene, &dir);
-        }
-    }
-    Ok(setup)
+    Some((2f64.powi(60) / peak).min(1e30) as f32)
 }
 
 /// One glass object's light transport table on disk.

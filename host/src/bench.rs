@@ -27,6 +27,21 @@ pub struct Options {
     pub out_dir: PathBuf,
 }
 
+/// A scene a sweep runs: its file, its name (the file's stem, for the rows
+/// and plots) and the scene as loaded, once, by `run`.
+pub struct BenchScene {
+    pub path: PathBuf,
+    pub name: String,
+    pub data: SceneData,
+}
+
+impl BenchScene {
+    pub fn load(path: &Path) -> Result<BenchScene> {
+        let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+        Ok(BenchScene { path: path.to_path_buf(), name, data: crate::scene::load(path)? })
+    }
+}
+
 /// A family's bench sweep: run time against error over its settings, each
 /// configuration measured against the family's reference.
 pub trait Sweep: Sync {
@@ -36,7 +51,7 @@ pub trait Sweep: Sync {
     /// overlap: every scene belongs to exactly one.
     fn takes(&self, scene: &SceneData) -> bool;
     /// Runs the sweep over `scenes`; returns the files it wrote.
-    fn run(&self, scenes: &[PathBuf], opts: &Options) -> Result<Vec<PathBuf>>;
+    fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>>;
 }
 
 /// The registered sweeps, by family name, in the families' order.
@@ -57,27 +72,31 @@ pub fn run(family: Option<&str>, scenes: &[PathBuf], scenes_dir: &Path, opts: &O
             let names: Vec<_> = sweeps.iter().map(|(n, _)| *n).collect();
             bail!("command line: --family: expected one of {}, got {name:?}", names.join(", "));
         };
-        let paths: Vec<PathBuf> = sweep.default_scenes().iter().map(|s| scenes_dir.join(format!("{s}.toml"))).collect();
-        written.extend(sweep.run(&paths, opts)?);
+        let loaded = sweep
+            .default_scenes()
+            .iter()
+            .map(|s| BenchScene::load(&scenes_dir.join(format!("{s}.toml"))))
+            .collect::<Result<Vec<_>>>()?;
+        written.extend(sweep.run(&loaded, opts)?);
         return Ok(written);
     }
-    let mut by_sweep: Vec<Vec<PathBuf>> = vec![Vec::new(); sweeps.len()];
+    let mut by_sweep: Vec<Vec<BenchScene>> = (0..sweeps.len()).map(|_| Vec::new()).collect();
     for path in scenes {
-        let data = crate::scene::load(path)?;
-        let takers: Vec<usize> = (0..sweeps.len()).filter(|&k| sweeps[k].1.takes(&data)).collect();
+        let scene = BenchScene::load(path)?;
+        let takers: Vec<usize> = (0..sweeps.len()).filter(|&k| sweeps[k].1.takes(&scene.data)).collect();
         match takers[..] {
             [k] => {
                 if let Some(name) = family.filter(|n| *n != sweeps[k].0) {
                     bail!("{}: a scene for the {} sweep, not {name}", path.display(), sweeps[k].0);
                 }
-                by_sweep[k].push(path.clone());
+                by_sweep[k].push(scene);
             }
             _ => bail!("{}: no single bench sweep takes this scene", path.display()),
         }
     }
-    for ((_, sweep), paths) in sweeps.iter().zip(&by_sweep) {
-        if !paths.is_empty() {
-            written.extend(sweep.run(paths, opts)?);
+    for ((_, sweep), loaded) in sweeps.iter().zip(&by_sweep) {
+        if !loaded.is_empty() {
+            written.extend(sweep.run(loaded, opts)?);
         }
     }
     Ok(written)

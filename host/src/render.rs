@@ -310,10 +310,9 @@ impl Work<'_> {
 
     /// The passes' reports and counters, and the image: the mean over
     /// samples of the sum of the layers (box filter), with each layer.
-    #[allow(clippy::type_complexity)]
-    fn finish(
-        mut self,
-    ) -> Result<(Vec<Vec4>, Vec<(&'static str, Buffer)>, Vec<PassStats>, BTreeMap<&'static str, u64>)> {
+    /// `timing` says how the pass times were taken, `start` is when the
+    /// frame began.
+    fn finish(mut self, backend: &Backend, timing: &'static str, start: Instant, build: f64) -> Result<Rendered> {
         let data = self.data;
         let pixels = data.pixel_count() as usize;
         self.progress.finish_and_clear();
@@ -346,7 +345,19 @@ impl Work<'_> {
             .with_min_len(PIXEL_CHUNK)
             .map(|i| named.iter().map(|(_, layer)| layer.as_slice::<Vec4>()[i]).sum())
             .collect();
-        Ok((image, named, self.stats, counters))
+        let stats = RenderStats {
+            backend: backend.name(),
+            device: backend.device(),
+            width: data.width(),
+            height: data.height(),
+            samples_per_pixel: data.samples_per_pixel(),
+            passes: self.stats,
+            pass_timing: timing,
+            total_seconds: start.elapsed().as_secs_f64(),
+            kernel_build_seconds: build,
+            counters,
+        };
+        Ok(Rendered { image, layers: named, stats })
     }
 }
 
@@ -392,20 +403,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         Backend::Cpu => work.run_cpu(known),
         Backend::Gpu(ctx) => work.run_gpu(ctx, known)?,
     };
-    let (image, layers, passes, counters) = work.finish()?;
-    let stats = RenderStats {
-        backend: backend.name(),
-        device: backend.device(),
-        width: data.width(),
-        height: data.height(),
-        samples_per_pixel: data.samples_per_pixel(),
-        passes,
-        pass_timing,
-        total_seconds: start.elapsed().as_secs_f64(),
-        kernel_build_seconds,
-        counters,
-    };
-    Ok(Rendered { image, layers, stats })
+    work.finish(backend, pass_timing, start, kernel_build_seconds)
 }
 
 impl Rendered {

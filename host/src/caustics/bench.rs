@@ -19,7 +19,7 @@ use glam::DVec3;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::bench::median;
+use crate::bench::{median, BenchScene};
 use crate::metrics::{difference, to_f64};
 use crate::render::{self, Backend};
 use crate::scene::{self, SceneData};
@@ -159,7 +159,7 @@ impl crate::bench::Sweep for CausticsSweep {
     fn takes(&self, s: &SceneData) -> bool {
         !s.glass_vertices.is_empty()
     }
-    fn run(&self, scenes: &[PathBuf], opts: &crate::bench::Options) -> Result<Vec<PathBuf>> {
+    fn run(&self, scenes: &[BenchScene], opts: &crate::bench::Options) -> Result<Vec<PathBuf>> {
         run(scenes, &opts.backends, opts.repeats, opts.stride, opts.quick, &opts.out_dir)?;
         Ok(["caustics_bench.csv", "caustics_time_vs_error.png", "caustics_precompute.png"]
             .map(|f| opts.out_dir.join(f))
@@ -170,7 +170,7 @@ impl crate::bench::Sweep for CausticsSweep {
 /// Runs the sweep on every scene and backend; writes `caustics_bench.csv`
 /// and the plots into `out_dir`.
 pub fn run(
-    scenes: &[PathBuf],
+    scenes: &[BenchScene],
     backends: &[Backend],
     repeats: usize,
     stride: u32,
@@ -178,15 +178,13 @@ pub fn run(
     out_dir: &Path,
 ) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
-    for path in scenes {
-        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        let scene = scene::load(path)?;
+    for BenchScene { name, data: scene, .. } in scenes {
         let sphere = glass_sphere(&scene.source.file);
         let configs = sweep(quick, sphere);
         // References: the scene as it is, and (sphere scenes) the finest sphere.
         let reference_of = |segments: Option<[u32; 2]>| -> Result<(Vec<DVec3>, Vec<bool>)> {
             let c = Config { segments, ..BASE };
-            let data = small(configure(&scene, &c)?, stride)?;
+            let data = small(configure(scene, &c)?, stride)?;
             let direct = crate::reference::render_surfaces(&data);
             let (traced, paths) =
                 crate::caustics::reference::caustic_image_converged(&data, 1 << 21, 1 << 24, 2e-3, true);
@@ -198,7 +196,7 @@ pub fn run(
         let finest = if sphere { Some(reference_of(Some(FINEST))?) } else { None };
         for backend in backends {
             for c in &configs {
-                let data = match configure(&scene, c) {
+                let data = match configure(scene, c) {
                     Ok(d) => d,
                     Err(e) => {
                         eprintln!("{name}: skipped {c:?}: {e:#}");

@@ -17,11 +17,11 @@ use rayon::prelude::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::bench::{time_renders, Options};
+use crate::bench::{time_renders, BenchScene, Options};
 use crate::passes::Dispatch;
 use crate::reference::{SEA_HEIGHT_FIELD_TOLERANCE, SEA_TOLERANCE};
 use crate::render::Backend;
-use crate::scene::{self, SceneData};
+use crate::scene::SceneData;
 use crate::sea::reference::{grid_depth, HeightField, SeaReference};
 use crate::sea::{order2_at, EPSILON};
 use slicelight_shaders::sea::{sea_view, SeaParams};
@@ -181,7 +181,7 @@ impl crate::bench::Sweep for SeaSweep {
     fn takes(&self, s: &SceneData) -> bool {
         s.sea.enabled && s.glass_vertices.is_empty()
     }
-    fn run(&self, scenes: &[PathBuf], opts: &Options) -> Result<Vec<PathBuf>> {
+    fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         // The sea's reference costs ~0.2 s a pixel: at least every 40th.
         run(scenes, &opts.backends, opts.repeats, opts.stride.max(40), opts.quick, &opts.out_dir)?;
         Ok([
@@ -200,7 +200,7 @@ impl crate::bench::Sweep for SeaSweep {
 /// `sea_time_vs_error_<scene>_<backend>.png`, `sea_convergence.csv`,
 /// `sea_fig7_planes.png` and `sea_fig8_directions.png` into `out_dir`.
 pub fn run(
-    scenes: &[PathBuf],
+    scenes: &[BenchScene],
     backends: &[Backend],
     repeats: usize,
     stride: u32,
@@ -209,15 +209,13 @@ pub fn run(
 ) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
     let mut curves = Vec::new();
-    for path in scenes {
-        let data = scene::load(path)?;
+    for BenchScene { path, name, data } in scenes {
         anyhow::ensure!(
             data.sea.enabled && data.sea.second_order,
             "{}: no [sea] with second-order scattering to benchmark",
             path.display()
         );
-        let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
-        let pixels = sea_pixels(&data, stride.max(1));
+        let pixels = sea_pixels(data, stride.max(1));
         let t = std::time::Instant::now();
         // Over a varying bottom the reference integrates over the real height
         // field (as `slicelight reference` does).
@@ -241,11 +239,11 @@ pub fn run(
             .collect();
         eprintln!("{name}: reference order 2 at {} pixels, {:.1} s", pixels.len(), t.elapsed().as_secs_f64());
         let t = std::time::Instant::now();
-        curves.extend(convergence(&name, &data.sea.params, quick));
+        curves.extend(convergence(name, &data.sea.params, quick));
         eprintln!("{name}: Fig. 7 and 8 curves, {:.1} s", t.elapsed().as_secs_f64());
         for backend in backends {
             for c in sweep(&data.sea.params, quick) {
-                let d = configure(&data, &c)?;
+                let d = configure(data, &c)?;
                 // The sea family's passes, once per frame (maps, tables) or per pixel.
                 let sea = |dispatch: Dispatch| -> Vec<&'static dyn crate::passes::Pass> {
                     super::PASSES.iter().copied().filter(|p| p.dispatch() == dispatch).collect()

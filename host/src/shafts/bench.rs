@@ -14,10 +14,12 @@ use serde::Serialize;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::bench::{draw_legend, log_ticks, pareto, register_font, save_plot, time_renders, Options, Series, COLORS};
+use crate::bench::{
+    draw_legend, log_ticks, pareto, register_font, save_plot, time_renders, BenchScene, Options, Series, COLORS,
+};
 use crate::metrics::{difference, Difference};
 use crate::reference;
-use crate::scene::{self, SceneData, ShaftMode, Shafts};
+use crate::scene::{SceneData, ShaftMode, Shafts};
 
 /// One configuration of the sweep.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -124,7 +126,7 @@ impl crate::bench::Sweep for ShaftsSweep {
     fn takes(&self, s: &SceneData) -> bool {
         s.glass_vertices.is_empty() && !s.sea.enabled && !(s.sky.enabled && !s.scatters())
     }
-    fn run(&self, scenes: &[PathBuf], opts: &Options) -> Result<Vec<PathBuf>> {
+    fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         run(scenes, opts)?;
         Ok(["bench.csv", "error_vs_planes.png", "error_vs_subplanes.png", "time_vs_error.png"]
             .map(|f| opts.out_dir.join(f))
@@ -133,13 +135,11 @@ impl crate::bench::Sweep for ShaftsSweep {
 }
 
 /// Runs the sweep and writes `bench.csv` and the plots into `out_dir`.
-pub fn run(scenes: &[PathBuf], opts: &Options) -> Result<Vec<Row>> {
+pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
     let backends = &opts.backends;
     let configs = sweep(opts.quick);
     let mut rows = Vec::new();
-    for path in scenes {
-        let data = scene::load(path)?;
-        let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+    for BenchScene { data, name, .. } in scenes {
         let stride = opts.stride.max(1);
         let width = data.width();
         let pixels: Vec<u32> = (0..data.height())
@@ -147,7 +147,7 @@ pub fn run(scenes: &[PathBuf], opts: &Options) -> Result<Vec<Row>> {
             .flat_map(|y| (0..width).step_by(stride as usize).map(move |x| y * width + x))
             .collect();
         let t = std::time::Instant::now();
-        let (refvals, samples) = reference::render_converged_at(&data, &pixels, 2e-4);
+        let (refvals, samples) = reference::render_converged_at(data, &pixels, 2e-4);
         eprintln!(
             "{name}: reference at {} pixels, {samples} samples per ray, {:.1} s",
             pixels.len(),
@@ -155,7 +155,7 @@ pub fn run(scenes: &[PathBuf], opts: &Options) -> Result<Vec<Row>> {
         );
         for backend in backends {
             for c in &configs {
-                let d = configure(&data, c)?;
+                let d = configure(data, c)?;
                 let timed = time_renders(&d, backend, opts.repeats, &[super::PASSES])?;
                 let (img, st) = (&timed.last.image, &timed.last.stats);
                 let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();

@@ -14,10 +14,10 @@ use glam::{DVec3, Vec4Swizzles};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::bench::{time_renders, Options};
+use crate::bench::{time_renders, BenchScene, Options};
 use crate::reference;
 use crate::render::Backend;
-use crate::scene::{self, SceneData};
+use crate::scene::SceneData;
 
 /// One configuration of the sweep.
 #[derive(Debug, Clone, Copy)]
@@ -116,7 +116,7 @@ impl crate::bench::Sweep for SkySweep {
     fn takes(&self, s: &SceneData) -> bool {
         s.sky.enabled && !s.scatters() && !s.sea.enabled && s.glass_vertices.is_empty()
     }
-    fn run(&self, scenes: &[PathBuf], opts: &Options) -> Result<Vec<PathBuf>> {
+    fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         run(scenes, &opts.backends, opts.repeats, opts.stride, opts.quick, &opts.out_dir)?;
         Ok(vec![opts.out_dir.join("sky_bench.csv"), opts.out_dir.join("sky_time_vs_error.png")])
     }
@@ -125,7 +125,7 @@ impl crate::bench::Sweep for SkySweep {
 /// Runs the sky sweep over `scenes` and writes `sky_bench.csv` and
 /// `sky_time_vs_error.png` into `out_dir`.
 pub fn run(
-    scenes: &[PathBuf],
+    scenes: &[BenchScene],
     backends: &[Backend],
     repeats: usize,
     stride: u32,
@@ -133,17 +133,15 @@ pub fn run(
     out_dir: &Path,
 ) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
-    for path in scenes {
-        let data = scene::load(path)?;
+    for BenchScene { path, name, data } in scenes {
         anyhow::ensure!(data.sky.enabled, "{}: no [sky] to benchmark", path.display());
-        let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
-        let pixels = sky_pixels(&data, stride.max(1));
+        let pixels = sky_pixels(data, stride.max(1));
         let t = std::time::Instant::now();
-        let (refvals, _) = reference::render_converged_at(&data, &pixels, 2e-4);
+        let (refvals, _) = reference::render_converged_at(data, &pixels, 2e-4);
         eprintln!("{name}: reference at {} pixels, {:.1} s", pixels.len(), t.elapsed().as_secs_f64());
         for backend in backends {
             for c in sweep(quick) {
-                let d = configure(&data, &c)?;
+                let d = configure(data, &c)?;
                 let tables: &[&dyn crate::passes::Pass] = &[&super::SkyTransmittance, &super::SkyView];
                 let timed = time_renders(&d, backend, repeats, &[tables, &[&super::Sky]])?;
                 let img = &timed.last.image;

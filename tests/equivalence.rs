@@ -102,6 +102,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("sea_shore", sky("sea_shore", 180, 120)),
         ("caustics_ball", traced("caustics_ball", 160, 120)),
         ("caustics_torus, turned", turned_torus()),
+        ("cloud_cumulus", sky("cloud_cumulus", 160, 120)),
     ]
 }
 

@@ -35,5 +35,6 @@ pub mod common;
 pub mod sea;
 pub mod shafts;
 pub mod sky;
+pub mod volumes;
 
 pub use slicelight_shaders as shaders;

@@ -30,7 +30,7 @@ macro_rules! resources {
     }};
 }
 
-use crate::{caustics, common, sea, shafts, sky};
+use crate::{caustics, common, sea, shafts, sky, volumes};
 
 /// A family: its passes (in the order they run) and its bench sweep.
 pub struct Family {
@@ -45,7 +45,8 @@ pub struct Family {
 /// passes, whose radiance layers are summed into the image in the same
 /// order. A pass reads only what earlier passes wrote (the
 /// `passes_run_after_what_they_read` test checks it).
-static FAMILIES: &[&Family] = &[&common::FAMILY, &caustics::FAMILY, &shafts::FAMILY, &sky::FAMILY, &sea::FAMILY];
+static FAMILIES: &[&Family] =
+    &[&common::FAMILY, &caustics::FAMILY, &shafts::FAMILY, &sky::FAMILY, &sea::FAMILY, &volumes::FAMILY];
 
 /// The registered families (see `FAMILIES`).
 pub fn families() -> &'static [&'static Family] {
@@ -202,6 +203,15 @@ pub trait Pass: Sync {
     /// The per-pixel radiance (rgb, W/(m^2 sr)) it adds to the image, if
     /// any: a layer of the EXR, summed into the beauty image.
     fn radiance_layer(&self) -> Option<&'static Resource> {
+        None
+    }
+    /// The per-pixel transmittance (rgb) of what the pass renders, if it
+    /// hides what lies behind it (a participating medium in front of the
+    /// surfaces and the sky): the renderer multiplies the radiance layers
+    /// of every per-pixel pass that runs before it by it, sample by sample,
+    /// before they are summed (so each layer holds the light that reaches
+    /// the eye).
+    fn transmittance_layer(&self) -> Option<&'static Resource> {
         None
     }
     /// What the pass found, for the stats (a self-check's verdict), or an

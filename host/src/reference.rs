@@ -238,6 +238,18 @@ pub(crate) fn toward_light(light: &GpuLight, point: DVec3) -> (DVec3, DVec3, f64
     }
 }
 
+/// The inverse-square falloff of a spot or point light at `distance` (m),
+/// 1 for a directional light. The kernels' point light has radius
+/// `LIGHT_RADIUS` in `1/s^2`.
+pub(crate) fn falloff(light: &GpuLight, distance: f64) -> f64 {
+    if light.kind == LIGHT_DIRECTIONAL {
+        1.0
+    } else {
+        let r = distance.max(slicelight_shaders::shafts::LIGHT_RADIUS as f64);
+        1.0 / (r * r)
+    }
+}
+
 /// Attenuated surface radiance at one sub-pixel sample, and the distance to
 /// the surface (infinite where the ray meets none), f64.
 fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3, f64) {
@@ -443,13 +455,7 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f6
             if e == DVec3::ZERO {
                 continue;
             }
-            let falloff = if light.kind == LIGHT_DIRECTIONAL {
-                1.0
-            } else {
-                // The kernels' point light has radius LIGHT_RADIUS in 1/s^2.
-                let r = distance.max(slicelight_shaders::shafts::LIGHT_RADIUS as f64);
-                1.0 / (r * r)
-            };
+            let falloff = falloff(light, distance);
             if !sees_light(data, point, to_light, distance) {
                 continue;
             }
@@ -461,7 +467,8 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f6
 }
 
 /// The reference at convergence at the given pixels (row-major indices),
-/// rgb in f64: the surface term once, plus the in-scattering, whose ray-march
+/// rgb in f64: the surface term once, plus the in-scattering, both seen
+/// through the volumes (`volumes::reference`) if any, whose ray-march
 /// sample count starts at 64 and doubles until the values change by less
 /// than `tolerance` RMS, relative to their peak (or 65536 samples are
 /// reached). Returns the values and the final sample count.
@@ -480,11 +487,22 @@ pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> 
         filter(
             rays.par_iter()
                 .zip(&surfaces)
-                .map(|(&(i, s), &(surface, t))| surface + inscatter_pixel(data, i % w, i / w, s, t, samples))
+                .map(|(&(i, s), &(surface, t))| {
+                    let behind = surface + inscatter_pixel(data, i % w, i / w, s, t, samples);
+                    match camera_ray(data, i % w, i / w, s).filter(|_| data.volumes.enabled) {
+                        // What lies behind the volumes is seen through them.
+                        Some((o, d)) => {
+                            let ray = i as u64 * spp as u64 + s as u64;
+                            let (l, through) = crate::volumes::reference::volume_ray(data, o, d, t, samples, ray);
+                            behind * through + l
+                        }
+                        None => behind,
+                    }
+                })
                 .collect(),
         )
     };
-    if !data.scatters() {
+    if !data.scatters() && !data.volumes.enabled {
         return (filter(surfaces.iter().map(|s| s.0).collect()), 0);
     }
     let (image, samples) = converged(64, 65536, tolerance, |samples, _| with_inscatter(samples as u32));

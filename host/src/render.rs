@@ -174,6 +174,34 @@ fn add_into(sum: &mut [Vec4], layer: &[Vec4]) {
     sum.iter_mut().zip(layer).for_each(|(s, v)| *s += *v);
 }
 
+/// Multiplies the radiance layers in `frame` of the per-pixel passes that
+/// run before each pass with a transmittance layer by it (rgb; `w`, which
+/// some layers use for counts, is kept): what lies behind a medium is seen
+/// through it (`Pass::transmittance_layer`).
+fn attenuate(running: &[Running], frame: &mut Frame) {
+    let per_pixel: Vec<&dyn Pass> = of_kind(running, Dispatch::PerPixel).map(|r| r.pass).collect();
+    for (k, pass) in per_pixel.iter().enumerate() {
+        let Some(t) = pass.transmittance_layer().and_then(|t| frame.remove(t).map(|b| (t, b))) else {
+            continue;
+        };
+        for behind in per_pixel[..k].iter().filter_map(|p| p.radiance_layer()) {
+            if let Some(mut layer) = frame.remove(behind) {
+                layer
+                    .as_mut_slice::<Vec4>()
+                    .par_chunks_mut(PIXEL_CHUNK)
+                    .zip(t.1.as_slice::<Vec4>().par_chunks(PIXEL_CHUNK))
+                    .for_each(|(l, t)| {
+                        for (l, t) in l.iter_mut().zip(t) {
+                            *l = (l.truncate() * t.truncate()).extend(l.w);
+                        }
+                    });
+                frame.insert(behind, layer);
+            }
+        }
+        frame.insert(t.0, t.1);
+    }
+}
+
 /// A pass that runs this frame: where its stats are, and its invocations.
 #[derive(Clone, Copy)]
 struct Running {
@@ -248,6 +276,7 @@ impl Work<'_> {
                 r.pass.run_cpu(data, &common, &mut frame, pb);
                 self.stats[r.stat].seconds += t.elapsed().as_secs_f64();
             }
+            attenuate(&self.running, &mut frame);
             for (sum, pass) in self.sums.iter_mut().zip(&self.layers) {
                 let resource = pass.radiance_layer().expect("a layer");
                 match sum {
@@ -296,11 +325,20 @@ impl Work<'_> {
                     self.stats[r.stat].seconds += t;
                     pb.inc(count as u64);
                 }
+                // The band's layers, and the transmittances that hide some of them.
+                let mut band = Frame::default();
+                for r in per_pixel
+                    .iter()
+                    .flat_map(|r| r.pass.radiance_layer().into_iter().chain(r.pass.transmittance_layer()))
+                {
+                    band.insert(r, frame.read(r, count as u64 * 16)?);
+                }
+                attenuate(&self.running, &mut band);
                 for (sum, pass) in self.sums.iter_mut().zip(&self.layers) {
-                    let layer = frame.read(pass.radiance_layer().expect("a layer"), count as u64 * 16)?;
+                    let layer = band.get::<Vec4>(pass.radiance_layer().expect("a layer"));
                     let sum = sum.get_or_insert_with(|| Buffer::zeroed::<Vec4>(pixels));
                     let range = &mut sum.as_mut_slice::<Vec4>()[first as usize..(first + count) as usize];
-                    add_into(range, layer.as_slice());
+                    add_into(range, layer);
                 }
             }
             first += count;

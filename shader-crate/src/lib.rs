@@ -32,6 +32,7 @@ pub mod common;
 pub mod sea;
 pub mod shafts;
 pub mod sky;
+pub mod volumes;
 
 pub use spirv_std::glam;
 

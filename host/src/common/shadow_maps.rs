@@ -45,8 +45,9 @@ impl Pass for ShadowMaps {
             Plan::skip("no geometry to cast shadows")
         } else if scene.common.surface_shadows != slicelight_shaders::types::SHADOWS_MAP
             && !crate::shafts::Shafts.plan(scene).runs
+            && !crate::volumes::Volumes.plan(scene).runs
         {
-            Plan::skip("surfaces use shadow rays and no shafts are rendered")
+            Plan::skip("surfaces use shadow rays and no shafts or volumes are rendered")
         } else {
             let sizes: Vec<String> = scene
                 .lights

@@ -62,6 +62,8 @@ pub struct SceneData {
     pub sea: crate::sea::Setup,
     /// The caustics passes' parameter block (`enabled` false without glass and light on it).
     pub caustics: crate::caustics::Setup,
+    /// The volumes' parameter block, records and metaballs (`enabled` false without `[[volume]]`).
+    pub volumes: crate::volumes::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
     /// The parsed file and the folder its paths are relative to: what
@@ -316,8 +318,21 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
             "fisheye"
         ));
     }
+    if common.projection == PROJECTION_FISHEYE && !file.volume.is_empty() {
+        bail!(invalid(
+            "camera.projection",
+            "a pinhole camera with [[volume]] (the volumes' sample planes are parallel to a pinhole's image plane)",
+            "fisheye"
+        ));
+    }
     let objects = geometry::build(&file.object, base)?;
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
+    // The lights cover the geometry and the volumes' boxes (a directional
+    // light enters the scene where its bounding sphere begins).
+    let light_bounds = file.volume.iter().fold(bounds, |b, v| {
+        let (lo, hi) = (Vec3::from(v.min), Vec3::from(v.max));
+        Some(b.map_or((lo.min(hi), lo.max(hi)), |(a, c)| (a.min(lo).min(hi), c.max(hi).max(lo))))
+    });
     let mut sky = match &file.sky {
         Some(s) => crate::sky::configure(s)?,
         None => Default::default(),
@@ -336,7 +351,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     // The sun lights the scene's surfaces as a directional light of its
     // colour after the air it crosses to the observer.
     let mut directionals: Vec<DirectionalLight> = Vec::new();
-    let sun_lights = file.sky.as_ref().is_some_and(|s| s.light_scene) && bounds.is_some();
+    let sun_lights = file.sky.as_ref().is_some_and(|s| s.light_scene) && light_bounds.is_some();
     if let Some((irradiance, toward)) = sky.sun_at_observer().filter(|_| sun_lights) {
         directionals.push(DirectionalLight {
             direction: (-toward).into(),
@@ -362,7 +377,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         &file.point_light,
         &file.line_light,
         base,
-        bounds,
+        light_bounds,
     )?;
     let bvh = crate::bvh::Bvh::build(objects.triangles);
     common.light_count = lights.lights.len() as u32;
@@ -388,11 +403,13 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         sky,
         sea,
         caustics: Default::default(),
+        volumes: Default::default(),
         requested_passes: Vec::new(),
         source: std::sync::Arc::new(Source { file: file.clone(), base: base.to_path_buf() }),
     };
     data.lay_out_shadow_maps()?;
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;
     data.caustics = crate::caustics::configure(&file.caustics, &data).map_err(|e| anyhow!("caustics.{e}"))?;
+    data.volumes = crate::volumes::configure(&file.volume, &file.volumes, &data, base)?;
     Ok(data)
 }

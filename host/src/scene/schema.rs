@@ -28,6 +28,11 @@ pub struct SceneFile {
     pub sea: Option<crate::sea::Settings>,
     #[serde(default)]
     pub caustics: crate::caustics::Settings,
+    /// Local media in boxes (`[[volume]]`), and how they are rendered (`[volumes]`).
+    #[serde(default)]
+    pub volume: Vec<crate::volumes::Volume>,
+    #[serde(default)]
+    pub volumes: crate::volumes::Settings,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -1,0 +1,217 @@
+//! Volumes (`[[volume]]`): the slice renderer against the f64 reference,
+//! the stress cases at the edges of the parameters, and the errors bad
+//! input gets.
+
+mod common;
+
+use slicelight::metrics::{difference, to_f64};
+use slicelight::render::{render, Backend};
+use slicelight::scene::SceneData;
+
+/// A shipped scene at a smaller resolution, through the validating path.
+fn shipped(name: &str, width: u32, height: u32) -> SceneData {
+    let data = slicelight::scene::load(&common::root().join(format!("scenes/{name}.toml"))).unwrap();
+    data.reconfigure(|f| f.camera.resolution = [width, height]).unwrap()
+}
+
+fn cpu_image(data: &SceneData) -> Vec<glam::Vec4> {
+    render(data, &Backend::Cpu, false).unwrap().0
+}
+
+/// Every pixel finite and non-negative, and the volumes' transmittance
+/// layer (where it ran) within [0, 1].
+fn assert_sane(what: &str, data: &SceneData) {
+    let r = slicelight::render::render_layers(data, &Backend::Cpu, false).unwrap();
+    for (i, p) in r.image.iter().enumerate() {
+        assert!(p.is_finite() && p.min_element() >= 0.0, "{what}: pixel {i} is {p}");
+    }
+    let volumes = r.layers.iter().find(|(n, _)| *n == "volumes");
+    if let Some((_, layer)) = volumes {
+        for p in layer.as_slice::<glam::Vec4>() {
+            assert!(p.truncate().is_finite() && p.truncate().min_element() >= 0.0, "{what}: volume radiance {p}");
+        }
+    }
+}
+
+/// The cumulus at 64x48 pixel centres against the f64 reference (analytic
+/// field, nested marching toward the sun). Measured: 0.19 % RMS of the
+/// 8-bit range here (0.10 % at 80x60 and at 40x30, whose pixels fall
+/// elsewhere on the cloud's edge); the bound, 0.5 %, is two and a half times
+/// that and half the issue's 1 %: what a change to the planes, the density
+/// grid or the transmittance volume's defaults must keep.
+#[test]
+fn cumulus_matches_the_reference() {
+    let data = shipped("cloud_cumulus", 64, 48);
+    assert!(data.volumes.enabled);
+    let image = to_f64(&cpu_image(&data));
+    let (reference, samples) = slicelight::reference::render_converged(&data, 2e-4);
+    let d = difference(&image, &reference, data.exposure);
+    println!(
+        "cumulus 64x48: {:.3} % RMS, {:.3} % max of the 8-bit range ({samples} reference samples per ray)",
+        d.rms_8bit_percent, d.max_8bit_percent
+    );
+    assert!(d.rms_8bit_percent < 0.5, "{d:?}");
+    // The cloud is in the picture: it hides part of the sky.
+    let sky_only = data.reconfigure(|f| f.volume.clear()).unwrap();
+    let clear = to_f64(&cpu_image(&sky_only));
+    let changed = image.iter().zip(&clear).filter(|(a, b)| (**a - **b).length() > 1e-3 * b.length()).count();
+    assert!(changed > image.len() / 20, "the cloud covers {changed} of {} pixels", image.len());
+}
+
+/// A small volume in front of a lit quad, seen by a camera; `extra` goes
+/// into the `[[volume]]` table, `balls` is its metaball list, `sky` any
+/// extra tables.
+fn puff(balls: &str, volume: &str, extra: &str) -> SceneData {
+    common::scene_from_str(&format!(
+        r#"
+        [camera]
+        position = [0.0, 1.0, 6.0]
+        look_at = [0.0, 1.0, 0.0]
+        vfov_deg = 40.0
+        resolution = [48, 32]
+        [[directional_light]]
+        direction = [0.3, -1.0, -0.4]
+        irradiance = [2.0, 2.0, 2.0]
+        [[object]]
+        type = "quad"
+        center = [0.0, 0.0, 0.0]
+        u = [6.0, 0.0, 0.0]
+        v = [0.0, 0.0, 6.0]
+        [[volume]]
+        min = [-1.5, 0.0, -1.5]
+        max = [1.5, 2.5, 1.5]
+        sigma_s = [0.9, 0.9, 0.9]
+        sigma_t = [1.0, 1.0, 1.0]
+        metaballs = [{balls}]
+        {volume}
+        {extra}
+        "#
+    ))
+}
+
+const BALLS: &str = "[0.0, 1.0, 0.0, 0.8, 1.0], [0.5, 1.4, 0.2, 0.6, 0.8]";
+
+/// Density 0, optical depths from 0 to 10^4, radii of 1 mm and 10 km (in a
+/// box to match), one metaball and 10^4 overlapping ones, a camera inside
+/// the cloud, an empty volume, a box cutting through the floor: no NaN or
+/// Inf, nothing negative.
+#[test]
+fn stress_cases_stay_finite() {
+    sane_cases(&[
+        ("density 0", puff("[0.0, 1.0, 0.0, 0.8, 0.0]", "", "")),
+        (
+            "optical depth 1e4",
+            puff(BALLS, "", "")
+                .reconfigure(|f| {
+                    f.volume[0].sigma_t = [6000.0; 3];
+                    f.volume[0].sigma_s = [5000.0; 3];
+                })
+                .unwrap(),
+        ),
+        ("no metaballs", puff("", "", "")),
+        ("radius 1 mm", puff("[0.0, 1.0, 0.0, 0.001, 1.0]", "", "")),
+        ("box through the floor", puff(BALLS, "", "").reconfigure(|f| f.volume[0].min[1] = -1.0).unwrap()),
+        ("camera inside", puff(BALLS, "", "").reconfigure(|f| f.camera.position = [0.0, 1.0, 0.3]).unwrap()),
+    ]);
+    let many: Vec<String> = (0..10_000)
+        .map(|i| {
+            let a = i as f32 * 0.618;
+            format!("[{:.3}, {:.3}, {:.3}, 0.5, 0.2]", 0.5 * a.sin(), 1.0 + 0.3 * a.cos(), 0.4 * (a * 0.7).sin())
+        })
+        .collect();
+    sane_cases(&[("10^4 metaballs", puff(&many.join(", "), "", ""))]);
+    let huge = common::scene_from_str(
+        r#"
+        [camera]
+        position = [0.0, 10.0, 0.0]
+        look_at = [0.0, 8000.0, -30000.0]
+        vfov_deg = 50.0
+        resolution = [32, 24]
+        [sky]
+        sun_zenith_deg = 30.0
+        [[volume]]
+        min = [-20000.0, 2000.0, -50000.0]
+        max = [20000.0, 22000.0, -10000.0]
+        sigma_s = [1e-4, 1e-4, 1e-4]
+        sigma_t = [1e-4, 1e-4, 1e-4]
+        metaballs = [[0.0, 12000.0, -30000.0, 10000.0, 1.0]]
+        "#,
+    );
+    sane_cases(&[("radius 10 km", huge)]);
+}
+
+fn sane_cases(cases: &[(&str, SceneData)]) {
+    for (what, data) in cases {
+        assert_sane(what, data);
+    }
+}
+
+/// The sun at the horizon and below it: the cloud is lit by what reaches
+/// it (nothing below the horizon) and still hides the sky.
+#[test]
+fn low_and_set_sun() {
+    for zenith in [89.5f32, 90.0, 100.0] {
+        let data = shipped("cloud_cumulus", 32, 24);
+        let data = data.reconfigure(|f| f.sky.as_mut().unwrap().sun_zenith_deg = zenith).unwrap();
+        assert_sane(&format!("sun at {zenith} degrees"), &data);
+    }
+}
+
+/// A scene without volumes runs none of the volumes' passes.
+#[test]
+fn a_scene_without_volumes_pays_nothing() {
+    let data = slicelight::scene::load(&common::root().join("scenes/fog_spot.toml")).unwrap();
+    for p in slicelight::render::plan(&data) {
+        if p.name.starts_with("volume") {
+            assert!(!p.ran, "{} runs without volumes: {}", p.name, p.reason);
+        }
+    }
+}
+
+fn load_error(toml: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, toml).unwrap();
+    std::fs::write(dir.path().join("balls.txt"), "0 1 0 0.5 1\n0 1 0 0.5\n").unwrap();
+    format!("{:#}", slicelight::scene::load(&path).unwrap_err())
+}
+
+/// Bad volumes are refused with the field named and what was expected.
+#[test]
+fn bad_volumes_name_the_field() {
+    let base = r#"
+        [camera]
+        position = [0.0, 1.0, 6.0]
+        look_at = [0.0, 1.0, 0.0]
+        vfov_deg = 40.0
+        resolution = [8, 8]
+        [[volume]]
+        sigma_s = [0.5, 0.5, 0.5]
+        sigma_t = [1.0, 1.0, 1.0]
+    "#;
+    let cases = [
+        ("min = [0.0, 0.0, 0.0]\nmax = [1.0, 0.0, 1.0]", "volume[0].max"),
+        ("min = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nmetaballs = [[2.0, 0.5, 0.5, 0.3, 1.0]]", "volume[0].metaballs[0]"),
+        ("min = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nmetaballs = [[0.5, 0.5, 0.5, 0.0, 1.0]]", "radius"),
+        ("min = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nmetaballs = [[0.5, 0.5, 0.5, 0.3, -1.0]]", "q"),
+        ("min = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nmetaballs_file = \"balls.txt\"", "line 2"),
+        ("min = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nmetaballs_file = \"nope.txt\"", "nope.txt"),
+        ("min = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nresolution = [0, 4, 4]", "volume[0].resolution"),
+        (
+            "min = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nphase = { kind = \"double-henyey-greenstein\", g1 = 0.8, g2 = 1.0, weight = 0.5 }",
+            "volume[0].phase.g2",
+        ),
+    ];
+    for (volume, field) in cases {
+        let e = load_error(&format!("{base}\n{volume}"));
+        assert!(e.contains(field), "{volume}: {e}");
+    }
+    let e = load_error(
+        &format!("{base}\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]").replace("0.5, 0.5, 0.5]", "2.0, 0.5, 0.5]"),
+    );
+    assert!(e.contains("volume[0].sigma_s"), "{e}");
+    let e = load_error(&format!(
+        "{base}\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\n[[point_light]]\nposition = [0.0, 3.0, 0.0]\nintensity = [1.0, 1.0, 1.0]"
+    ));
+    assert!(e.contains("point_light"), "{e}");
+}

@@ -340,7 +340,7 @@ fn reference_command(args: ReferenceArgs) -> Result<()> {
     set_spp(&mut data, spp)?;
     let t = Instant::now();
     let (mut image, samples) = reference::render_converged(&data, tolerance);
-    if data.scatters() {
+    if data.scatters() || data.volumes.enabled {
         eprintln!("reference: {samples} samples per ray, {:.3} s", t.elapsed().as_secs_f64());
     } else {
         eprintln!("reference: {:.3} s (the medium does not scatter: no ray march)", t.elapsed().as_secs_f64());

@@ -95,6 +95,8 @@ fn good_scene_writes_png_exr_and_stats() {
             "sea.table_samples",
             "sea.depth_table",
             "sea.bottom_correction",
+            "volume_density",
+            "volume_light",
             "surface",
             "caustics",
             "shafts",
@@ -102,11 +104,12 @@ fn good_scene_writes_png_exr_and_stats() {
             "sea.reflection",
             "sea.order1",
             "sea.order2",
-            "sea.bottom"
+            "sea.bottom",
+            "volumes"
         ]
     );
     // Every pass the scene needs ran; the self-check waits to be asked for,
-    // and a scene without a [sky] or a [sea] pays nothing for their passes.
+    // and a scene without a [sky], a [sea] or a [[volume]] pays nothing for their passes.
     let idle = [
         "scatter_check",
         "caustics.table",
@@ -126,6 +129,9 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.order1",
         "sea.order2",
         "sea.bottom",
+        "volume_density",
+        "volume_light",
+        "volumes",
     ];
     assert!(passes
         .iter()

@@ -38,8 +38,13 @@ const MODULE: &str = "host/spirv/slicelight_shaders.spv";
 const DIGEST: &str = "host/spirv/slicelight_shaders.digest";
 
 fn root() -> PathBuf {
-    // xtask/ sits in the workspace root.
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask is inside the workspace").to_path_buf()
+    // xtask/ sits in the workspace root. `cargo run` names the manifest's
+    // folder at run time: checkouts that share a target folder share this
+    // binary (cargo does not rebuild it for an identical copy), and the
+    // folder it was compiled in would be another checkout's.
+    let manifest =
+        std::env::var_os("CARGO_MANIFEST_DIR").map_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")), PathBuf::from);
+    manifest.parent().expect("xtask is inside the workspace").to_path_buf()
 }
 
 fn compile(root: &Path) -> Result<Vec<u8>, String> {

@@ -52,12 +52,18 @@ pub(crate) struct Surface {
     pub triangle: usize,
 }
 
-/// Whether the ray meets the box `[lo, hi]` within `[t_min, t_max]`, f64 slab test.
-fn hits_box(o: DVec3, inv: DVec3, lo: DVec3, hi: DVec3, t_min: f64, t_max: f64) -> bool {
+/// Where the ray `o + t d` (`inv = 1 / d`) enters and leaves the box
+/// `[lo, hi]` within `[t_min, t_max]`, f64 slab test; it misses unless
+/// `near <= far`.
+pub(crate) fn box_span(o: DVec3, inv: DVec3, lo: DVec3, hi: DVec3, t_min: f64, t_max: f64) -> (f64, f64) {
     let a = (lo - o) * inv;
     let b = (hi - o) * inv;
-    let near = a.min(b).max_element().max(t_min);
-    let far = a.max(b).min_element().min(t_max);
+    (a.min(b).max_element().max(t_min), a.max(b).min_element().min(t_max))
+}
+
+/// Whether the ray meets the box `[lo, hi]` within `[t_min, t_max]` (`box_span`).
+fn hits_box(o: DVec3, inv: DVec3, lo: DVec3, hi: DVec3, t_min: f64, t_max: f64) -> bool {
+    let (near, far) = box_span(o, inv, lo, hi, t_min, t_max);
     // A NaN (origin on a face, ray parallel to it) fails the test; the boxes
     // are padded beyond their triangles, so no hit is lost.
     near <= far
@@ -397,15 +403,18 @@ pub fn surface_pixel(data: &SceneData, x: u32, y: u32) -> DVec3 {
     (0..spp).map(|s| surface_and_distance(data, x, y, s).0).sum::<DVec3>() / spp as f64
 }
 
-/// Phase functions in f64, from their closed forms (normalised, 1/sr).
+/// The medium's phase function in f64 (`phase_f64`).
 fn phase(data: &SceneData, cos: f64) -> f64 {
+    phase_f64(data.common.phase_kind, data.common.phase_g as f64, cos)
+}
+
+/// Phase function `kind` (`types::PHASE_*`, asymmetry `g` for
+/// Henyey-Greenstein) in f64, from its closed form (normalised, 1/sr).
+pub(crate) fn phase_f64(kind: u32, g: f64, cos: f64) -> f64 {
     use slicelight_shaders::types::{PHASE_DOBASHI, PHASE_HENYEY_GREENSTEIN, PHASE_RAYLEIGH};
     let pi = std::f64::consts::PI;
-    match data.common.phase_kind {
-        PHASE_HENYEY_GREENSTEIN => {
-            let g = data.common.phase_g as f64;
-            (1.0 - g * g) / (4.0 * pi * (1.0 + g * g - 2.0 * g * cos).powf(1.5))
-        }
+    match kind {
+        PHASE_HENYEY_GREENSTEIN => (1.0 - g * g) / (4.0 * pi * (1.0 + g * g - 2.0 * g * cos).powf(1.5)),
         PHASE_RAYLEIGH => 3.0 * (1.0 + cos * cos) / (16.0 * pi),
         PHASE_DOBASHI => (1.0 + 9.0 * (0.5 * (1.0 + cos)).powi(8)) / (8.0 * pi),
         _ => 1.0 / (4.0 * pi),
@@ -416,6 +425,12 @@ fn phase(data: &SceneData, cos: f64) -> f64 {
 fn jitter(pixel: u32, sample: u32, round: u32) -> f64 {
     let mut h = (pixel as u64) << 32 | sample as u64;
     h ^= (round as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    unit_from_hash(h)
+}
+
+/// A 64-bit key mixed (SplitMix64's finaliser) into a number in [0, 1):
+/// the references' jitter.
+pub(crate) fn unit_from_hash(mut h: u64) -> f64 {
     h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     h ^= h >> 31;

@@ -135,15 +135,24 @@ pub const BVH_STACK: usize = 64;
 /// `[t_min, t_max]` (`t_min` if it starts inside), or `NO_HIT` if it does
 /// not meet it there; the slab test of `ray_hits_box`.
 pub fn box_entry(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_min: f32, t_max: f32) -> f32 {
-    let a = (lo - origin) * inv_dir;
-    let b = (hi - origin) * inv_dir;
-    let near = a.x.min(b.x).max(a.y.min(b.y)).max(a.z.min(b.z)).max(t_min);
-    let far = a.x.max(b.x).min(a.y.max(b.y)).min(a.z.max(b.z)).min(t_max);
+    let (near, far) = box_span(origin, inv_dir, lo, hi, t_min, t_max);
     if near <= far {
         near
     } else {
         NO_HIT
     }
+}
+
+/// Where the ray `origin + t dir` (`inv_dir = 1 / dir`) enters and leaves
+/// the box `[lo, hi]`, clipped to `[t_min, t_max]`: the slab test; it meets
+/// the box there only if `near <= far`.
+#[inline]
+pub fn box_span(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_min: f32, t_max: f32) -> (f32, f32) {
+    let a = (lo - origin) * inv_dir;
+    let b = (hi - origin) * inv_dir;
+    let near = a.x.min(b.x).max(a.y.min(b.y)).max(a.z.min(b.z)).max(t_min);
+    let far = a.x.max(b.x).min(a.y.max(b.y)).min(a.z.max(b.z)).min(t_max);
+    (near, far)
 }
 
 /// Whether the ray `origin + t dir` meets the box `[lo, hi]` for some `t` in

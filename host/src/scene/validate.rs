@@ -22,6 +22,14 @@ pub fn invalid(field: &str, expected: &str, got: impl std::fmt::Debug) -> anyhow
     anyhow!("{field}: expected {expected}, got {got:?}")
 }
 
+/// A positive finite number.
+pub fn positive(field: &str, v: f32) -> Result<f32> {
+    if !(v.is_finite() && v > 0.0) {
+        return Err(invalid(field, "a positive number", v));
+    }
+    Ok(v)
+}
+
 pub fn finite3(field: &str, v: [f32; 3]) -> Result<Vec3> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(Vec3::from(v))

@@ -25,8 +25,9 @@ use slicelight_shaders::sea::{
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
 use crate::passes::*;
+use crate::scene::validate::positive;
 use crate::sea::table::SEA_BOTTOM_CORRECTION;
-use crate::sky::{positive, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW};
+use crate::sky::{SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW};
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
 pub static PASSES: &[&dyn Pass] = &[

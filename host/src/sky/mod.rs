@@ -23,6 +23,7 @@ pub static PASSES: &[&dyn Pass] = &[&SkyTransmittance, &SkyView, &Sky];
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family = Family { name: "sky", passes: PASSES, bench: Some(&bench::SkySweep) };
 use crate::cpu::for_each_invocation;
+use crate::scene::validate::positive;
 use crate::scene::{invalid, validate, SceneData};
 
 pub static SKY_PARAMS: Resource =
@@ -224,13 +225,6 @@ impl Setup {
         let e = p.sun_irradiance.truncate() * (-tau).exp();
         (e.max_element() > 0.0).then_some((e, sun))
     }
-}
-
-pub(crate) fn positive(field: &str, v: f32) -> Result<f32> {
-    if !(v.is_finite() && v > 0.0) {
-        bail!(invalid(field, "a positive number", v));
-    }
-    Ok(v)
 }
 
 /// A non-negative finite scalar (the aerosols' coefficients).

@@ -178,14 +178,6 @@ impl Setup {
     }
 }
 
-/// A positive finite number.
-fn positive(field: &str, v: f32) -> Result<f32> {
-    if !(v.is_finite() && v > 0.0) {
-        bail!(invalid(field, "a positive number", v));
-    }
-    Ok(v)
-}
-
 /// Reads a metaball file: five numbers a line.
 fn read_metaballs(field: &str, base: &Path, file: &str) -> Result<Vec<[f32; 5]>> {
     let path = base.join(file);
@@ -265,7 +257,7 @@ fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMet
         if c.cmplt(lo).any() || c.cmpgt(hi).any() {
             bail!(invalid(&name, "a centre inside the volume's box", b));
         }
-        positive(&format!("{name} radius"), b[3])?;
+        validate::positive(&format!("{name} radius"), b[3])?;
         if !(b[4].is_finite() && b[4] >= 0.0) {
             bail!(invalid(&format!("{name} q"), "a non-negative density", b[4]));
         }

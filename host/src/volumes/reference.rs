@@ -9,9 +9,9 @@
 
 use glam::DVec3;
 
-use crate::reference::{d3, emitted, falloff, sees_light, toward_light};
+use crate::reference::{box_span, d3, emitted, falloff, phase_f64, sees_light, toward_light, unit_from_hash};
 use crate::scene::SceneData;
-use slicelight_shaders::types::{PHASE_DOBASHI, PHASE_HENYEY_GREENSTEIN, PHASE_RAYLEIGH};
+use slicelight_shaders::types::PHASE_HENYEY_GREENSTEIN;
 use slicelight_shaders::volumes::{GpuVolume, PHASE_DOUBLE_HENYEY_GREENSTEIN};
 
 /// Wyvill's field function in f64 (`volumes::field`).
@@ -43,22 +43,14 @@ pub fn density(data: &SceneData, v: &GpuVolume, p: DVec3) -> f64 {
         .sum()
 }
 
-fn henyey_greenstein(cos: f64, g: f64) -> f64 {
-    (1.0 - g * g) / (4.0 * std::f64::consts::PI * (1.0 + g * g - 2.0 * g * cos).powf(1.5))
-}
-
 /// A volume's phase function from its closed form, 1/sr.
 fn phase(v: &GpuVolume, cos: f64) -> f64 {
-    let pi = std::f64::consts::PI;
-    match v.phase_kind {
-        PHASE_DOUBLE_HENYEY_GREENSTEIN => {
-            let w = v.weight as f64;
-            w * henyey_greenstein(cos, v.g1 as f64) + (1.0 - w) * henyey_greenstein(cos, v.g2 as f64)
-        }
-        PHASE_HENYEY_GREENSTEIN => henyey_greenstein(cos, v.g1 as f64),
-        PHASE_RAYLEIGH => 3.0 * (1.0 + cos * cos) / (16.0 * pi),
-        PHASE_DOBASHI => (1.0 + 9.0 * (0.5 * (1.0 + cos)).powi(8)) / (8.0 * pi),
-        _ => 1.0 / (4.0 * pi),
+    if v.phase_kind == PHASE_DOUBLE_HENYEY_GREENSTEIN {
+        let w = v.weight as f64;
+        w * phase_f64(PHASE_HENYEY_GREENSTEIN, v.g1 as f64, cos)
+            + (1.0 - w) * phase_f64(PHASE_HENYEY_GREENSTEIN, v.g2 as f64, cos)
+    } else {
+        phase_f64(v.phase_kind, v.g1 as f64, cos)
     }
 }
 
@@ -70,10 +62,9 @@ fn extinction(data: &SceneData, p: DVec3) -> DVec3 {
 /// The span `[near, far]` of the ray `o + t d` (t >= 0) inside any volume's box.
 fn span(data: &SceneData, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
     let mut range: Option<(f64, f64)> = None;
+    let inv = 1.0 / d;
     for v in &data.volumes.volumes {
-        let a = (d3(v.min) - o) / d;
-        let b = (d3(v.max) - o) / d;
-        let (near, far) = (a.min(b).max_element().max(0.0), a.max(b).min_element());
+        let (near, far) = box_span(o, inv, d3(v.min), d3(v.max), 0.0, f64::INFINITY);
         if near < far {
             range = Some(range.map_or((near, far), |(n, f)| (n.min(near), f.max(far))));
         }
@@ -83,11 +74,7 @@ fn span(data: &SceneData, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
 
 /// Hash of (ray, stratum, round) to [0, 1): the jitter of the stratified samples.
 fn jitter(ray: u64, k: u64, round: u64) -> f64 {
-    let mut h = ray.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ k.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ round;
-    h = (h ^ (h >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    h = (h ^ (h >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    h ^= h >> 31;
-    (h >> 11) as f64 / (1u64 << 53) as f64
+    unit_from_hash(ray.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ k.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ round)
 }
 
 /// The optical depth through the volumes from `p` along `dir` (unit) for

@@ -25,6 +25,7 @@
 use spirv_std::num_traits::Float;
 
 use crate::camera::camera_ray;
+use crate::geometry::box_span;
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::light::{emitted_visible, light_local};
 use crate::phase;
@@ -356,17 +357,6 @@ pub fn volume_phase(v: &GpuVolume, cos_theta: f32) -> f32 {
     }
 }
 
-/// The entry and exit distances of the ray `o + t d` through the box
-/// `[lo, hi]` (slab test); empty if entry >= exit.
-pub fn ray_box(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> (f32, f32) {
-    let inv = Vec3::ONE / d;
-    let a = (lo - o) * inv;
-    let b = (hi - o) * inv;
-    let near = a.min(b).max_element();
-    let far = a.max(b).min_element();
-    (near, far)
-}
-
 /// What the volumes pass reads besides the common block and the pixel's
 /// surface distance.
 pub struct VolumeInputs<'a> {
@@ -419,13 +409,15 @@ pub fn volumes_pixel(index: u32, common: &CommonParams, inputs: &VolumeInputs, s
     let x = index % common.width;
     let y = index / common.width;
     let (o, d) = camera_ray(common, x, y);
+    let inv_dir = Vec3::ONE / d;
     let mut t_lo = f32::MAX;
     let mut t_hi = 0.0f32;
     let mut v = 0;
     while v < params.volume_count as usize {
-        let (near, far) = ray_box(o, d, inputs.volumes[v].min.xyz(), inputs.volumes[v].max.xyz());
-        if near < far && far > 0.0 {
-            t_lo = t_lo.min(near.max(0.0));
+        let vol = &inputs.volumes[v];
+        let (near, far) = box_span(o, inv_dir, vol.min.xyz(), vol.max.xyz(), 0.0, f32::MAX);
+        if near < far {
+            t_lo = t_lo.min(near);
             t_hi = t_hi.max(far);
         }
         v += 1;

@@ -400,6 +400,7 @@ fn compare_command(args: CompareArgs) -> Result<()> {
     println!("max_relative     {:.4e}", d.max_relative);
     println!("rms_8bit_percent {:.4}", d.rms_8bit_percent);
     println!("max_8bit_percent {:.4}", d.max_8bit_percent);
+    println!("energy_ratio     {:.4}", d.energy_ratio);
     if let Some(path) = diff {
         let largest = a.iter().zip(&b).map(|(x, y)| (*x - *y).abs().max_element()).fold(0.0, f64::max).max(1e-300);
         let pixels: Vec<Vec4> =

@@ -13,6 +13,9 @@ pub struct Difference {
     pub rms_8bit_percent: f64,
     /// Largest difference of the tone-mapped 8-bit images, % of 255.
     pub max_8bit_percent: f64,
+    /// The image's energy over the reference's: the sums of all pixels'
+    /// channels, linear radiance (1 for an empty reference and image).
+    pub energy_ratio: f64,
 }
 
 /// The RMS and the largest difference over all pixels and channels, each
@@ -46,7 +49,28 @@ pub fn difference(image: &[DVec3], reference: &[DVec3], exposure: f32) -> Differ
         }
     }
     let n = (image.len() * 3).max(1) as f64;
-    Difference { rms_relative, max_relative, rms_8bit_percent: (sum2_8 / n).sqrt(), max_8bit_percent: max_8 }
+    Difference {
+        rms_relative,
+        max_relative,
+        rms_8bit_percent: (sum2_8 / n).sqrt(),
+        max_8bit_percent: max_8,
+        energy_ratio: energy_ratio(image, reference),
+    }
+}
+
+/// Sum of the image's channels over the reference's (1 where both are 0).
+pub fn energy_ratio(image: &[DVec3], reference: &[DVec3]) -> f64 {
+    let a: f64 = image.iter().map(|p| p.element_sum()).sum();
+    let b: f64 = reference.iter().map(|p| p.element_sum()).sum();
+    if b == 0.0 {
+        if a == 0.0 {
+            1.0
+        } else {
+            f64::INFINITY
+        }
+    } else {
+        a / b
+    }
 }
 
 pub fn to_f64(pixels: &[Vec4]) -> Vec<DVec3> {

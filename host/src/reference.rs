@@ -521,7 +521,23 @@ pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> 
         return (filter(surfaces.iter().map(|s| s.0).collect()), 0);
     }
     let (image, samples) = converged(64, 65536, tolerance, |samples, _| with_inscatter(samples as u32));
-    (image, samples as u32)
+    if !(data.volumes.enabled && data.volumes.params.octaves > 1) {
+        return (image, samples as u32);
+    }
+    // Multiple scattering: the volumes' orders 2 and up by random walks,
+    // per sub-pixel ray, through the same box filter.
+    let views: Vec<(DVec3, DVec3, f64)> = rays
+        .iter()
+        .zip(&surfaces)
+        .map(|(&(i, s), &(_, t))| {
+            camera_ray(data, i % w, i / w, s).map_or((DVec3::ZERO, DVec3::Z, 0.0), |(o, d)| (o, d, t))
+        })
+        .collect();
+    let base: Vec<DVec3> = image.iter().flat_map(|p| std::iter::repeat_n(*p, spp as usize)).collect();
+    let (higher, walks) = crate::volumes::montecarlo::converged(data, &views, &base, tolerance);
+    eprintln!("reference: orders 2 and up by {walks} random walks per ray");
+    let higher = filter(higher);
+    (image.iter().zip(higher).map(|(a, b)| *a + b).collect(), samples as u32)
 }
 
 /// The references' convergence: `estimate(count, round)` with `count`

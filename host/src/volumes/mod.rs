@@ -4,6 +4,7 @@
 //! that integrates them along the view rays; the settings (`[volumes]`,
 //! `[[volume]]`) and their validation.
 
+pub mod montecarlo;
 pub mod reference;
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -133,16 +134,73 @@ pub struct Settings {
     /// Transmittance-volume nodes per light: across x, across y, along the
     /// light (default: a density cell apart, at most `MAX_DEFAULT_NODES`).
     pub light_grid: Option<[u32; 3]>,
-    /// `"single"`: single scattering (the only kind so far).
+    /// `"multiple"` (the default): all orders by Wrenninge's octaves;
+    /// `"single"`: single scattering.
     #[serde(default)]
     pub scattering: Scattering,
+    /// With `"multiple"`: the octaves' count and their factors on the
+    /// scattering coefficient, the light's optical depth and the phase
+    /// function's asymmetry (`OCTAVES`, `OCTAVE_*` by default).
+    pub octaves: Option<u32>,
+    pub octave_scattering: Option<f32>,
+    pub octave_extinction: Option<f32>,
+    pub octave_phase: Option<f32>,
 }
 
 #[derive(Debug, Default, Deserialize, Clone, Copy, PartialEq)]
 #[serde(rename_all = "kebab-case")]
 pub enum Scattering {
-    #[default]
     Single,
+    #[default]
+    Multiple,
+}
+
+/// Default octaves of multiple scattering and their factors (`a`, `b`, `c`
+/// of `in_scattered`), chosen against the Monte Carlo reference
+/// (`docs/volumes.md`).
+pub const OCTAVES: u32 = 8;
+pub const OCTAVE_SCATTERING: f32 = 0.75;
+pub const OCTAVE_EXTINCTION: f32 = 0.75;
+pub const OCTAVE_PHASE: f32 = 0.75;
+
+/// The octaves' parameters from the settings: `(count, a, b, c)`.
+fn octaves(settings: &Settings) -> Result<(u32, f32, f32, f32)> {
+    let given = [
+        ("octaves", settings.octaves.is_some()),
+        ("octave_scattering", settings.octave_scattering.is_some()),
+        ("octave_extinction", settings.octave_extinction.is_some()),
+        ("octave_phase", settings.octave_phase.is_some()),
+    ];
+    if settings.scattering == Scattering::Single {
+        if let Some((name, _)) = given.iter().find(|(_, g)| *g) {
+            bail!(invalid(&format!("volumes.{name}"), "no octaves with scattering = \"single\"", "a value"));
+        }
+        return Ok((1, 1.0, 1.0, 1.0));
+    }
+    let count = settings.octaves.unwrap_or(OCTAVES);
+    if !(1..=16).contains(&count) {
+        bail!(invalid("volumes.octaves", "an octave count in 1..=16", count));
+    }
+    let factor = |name: &str, value: Option<f32>, default: f32| -> Result<f32> {
+        let f = value.unwrap_or(default);
+        if !(f > 0.0 && f <= 1.0) {
+            bail!(invalid(&format!("volumes.{name}"), "a factor in (0, 1]", f));
+        }
+        Ok(f)
+    };
+    let a = factor("octave_scattering", settings.octave_scattering, OCTAVE_SCATTERING)?;
+    let b = factor("octave_extinction", settings.octave_extinction, OCTAVE_EXTINCTION)?;
+    let c = factor("octave_phase", settings.octave_phase, OCTAVE_PHASE)?;
+    if a > b {
+        // Wrenninge's condition: with a <= b, no octave adds more light
+        // than the extinction it removes would have let through.
+        bail!(invalid(
+            "volumes.octave_scattering",
+            &format!("at most octave_extinction ({b}), or energy is created"),
+            a
+        ));
+    }
+    Ok((count, a, b, c))
 }
 
 /// Most density cells a volume gets by default (32 MiB of f32).
@@ -487,6 +545,7 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
             nodes
         ));
     }
+    let (octave_count, a, b, c) = octaves(settings)?;
     let params = VolumesParams {
         volume_count: volumes.len() as u32,
         plane_count: planes,
@@ -495,6 +554,10 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
         cell_count: cells as u32,
         column_count: columns as u32,
         column_substeps: COLUMN_SUBSTEPS,
+        octaves: octave_count,
+        octave_scattering: a,
+        octave_extinction: b,
+        octave_phase: c,
         _pad: 0,
     };
     Ok(Setup { enabled: true, params, volumes, balls, bins, grids })
@@ -666,9 +729,17 @@ impl Pass for Volumes {
             return skip;
         }
         let p = &scene.volumes.params;
+        let scattering = if p.octaves > 1 {
+            format!(
+                "multiple scattering ({} octaves, a {} b {} c {})",
+                p.octaves, p.octave_scattering, p.octave_extinction, p.octave_phase
+            )
+        } else {
+            "single scattering".to_string()
+        };
         Plan::run(
             format!(
-                "{} volume(s), single scattering on {} planes over depths {:.3}..{:.3} m",
+                "{} volume(s), {scattering} on {} planes over depths {:.3}..{:.3} m",
                 p.volume_count, p.plane_count, p.depth_near, p.depth_far
             ),
             0,

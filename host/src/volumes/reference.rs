@@ -5,7 +5,7 @@
 //! (no shadow map), the lights evaluated from their definition. It shares
 //! the scene and the pixel positions with the slice renderer and none of
 //! its grids, so the difference between the two is the method's error.
-//! Single scattering.
+//! Single scattering here; `montecarlo` adds the higher orders.
 
 use glam::DVec3;
 
@@ -15,7 +15,7 @@ use slicelight_shaders::types::PHASE_HENYEY_GREENSTEIN;
 use slicelight_shaders::volumes::{GpuVolume, PHASE_DOUBLE_HENYEY_GREENSTEIN};
 
 /// Wyvill's field function in f64 (`volumes::field`).
-fn field(a2: f64) -> f64 {
+pub(super) fn field(a2: f64) -> f64 {
     if a2 >= 1.0 {
         return 0.0;
     }
@@ -44,7 +44,7 @@ pub fn density(data: &SceneData, v: &GpuVolume, p: DVec3) -> f64 {
 }
 
 /// A volume's phase function from its closed form, 1/sr.
-fn phase(v: &GpuVolume, cos: f64) -> f64 {
+pub(super) fn phase(v: &GpuVolume, cos: f64) -> f64 {
     if v.phase_kind == PHASE_DOUBLE_HENYEY_GREENSTEIN {
         let w = v.weight as f64;
         w * phase_f64(PHASE_HENYEY_GREENSTEIN, v.g1 as f64, cos)

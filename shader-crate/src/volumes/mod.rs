@@ -111,6 +111,15 @@ pub struct VolumesParams {
     pub column_count: u32,
     /// Midpoint sub-steps per node interval of a light-grid column.
     pub column_substeps: u32,
+    /// Scattering octaves (1: single scattering; more: Wrenninge's
+    /// approximation of multiple scattering, `in_scattered`).
+    pub octaves: u32,
+    /// Per octave, the factors on the scattering coefficient (`a`), on the
+    /// light's optical depth (`b`) and on the phase functions' asymmetry
+    /// (`c`), each in (0, 1].
+    pub octave_scattering: f32,
+    pub octave_extinction: f32,
+    pub octave_phase: f32,
     pub _pad: u32,
 }
 
@@ -323,37 +332,49 @@ pub fn optical_depth_column(
 /// the grid's `(u, v)` range (no volume lies on those rays) and before
 /// `lo.z`, the last node's value past `hi.z`.
 pub fn light_optical_depth(light: &GpuLight, g: &LightGrid, depths: &[Vec4], p: Vec3) -> Vec4 {
+    light_optical_depths(light, g, depths, p).0
+}
+
+/// `light_optical_depth` at `p`, and the optical depth through all the
+/// volumes along the light's ray through `p` (the column's last node).
+pub fn light_optical_depths(light: &GpuLight, g: &LightGrid, depths: &[Vec4], p: Vec3) -> (Vec4, Vec4) {
     if g.nu == 0 {
-        return Vec4::ZERO;
+        return (Vec4::ZERO, Vec4::ZERO);
     }
     let local = light_local(light, p);
     let (u, v, z) = if light.kind == LIGHT_SPOT {
         if local.z <= 0.0 {
-            return Vec4::ZERO;
+            return (Vec4::ZERO, Vec4::ZERO);
         }
         (local.x / local.z, local.y / local.z, local.z)
     } else {
         (local.x, local.y, local.z)
     };
-    if u < g.lo.x || u > g.hi.x || v < g.lo.y || v > g.hi.y || z <= g.lo.z {
-        return Vec4::ZERO;
+    if u < g.lo.x || u > g.hi.x || v < g.lo.y || v > g.hi.y {
+        return (Vec4::ZERO, Vec4::ZERO);
     }
     let fu = ((u - g.lo.x) / (g.hi.x - g.lo.x).max(1e-30) * (g.nu - 1) as f32).clamp(0.0, (g.nu - 1) as f32);
     let fv = ((v - g.lo.y) / (g.hi.y - g.lo.y).max(1e-30) * (g.nv - 1) as f32).clamp(0.0, (g.nv - 1) as f32);
     let fz = ((z - g.lo.z) / (g.hi.z - g.lo.z).max(1e-30) * (g.nz - 1) as f32).clamp(0.0, (g.nz - 1) as f32);
     // Nodes z fastest: `at` takes (z, u, v) so that a column is contiguous.
     let at = |k: u32, i: u32, j: u32| depths[(g.offset + (j * g.nu + i) * g.nz + k) as usize];
-    trilinear(at, Vec3::new(fz, fu, fv), UVec3::new(g.nz, g.nu, g.nv))
+    let n = UVec3::new(g.nz, g.nu, g.nv);
+    let through = trilinear(at, Vec3::new((g.nz - 1) as f32, fu, fv), n);
+    if z <= g.lo.z {
+        return (Vec4::ZERO, through);
+    }
+    (trilinear(at, Vec3::new(fz, fu, fv), n), through)
 }
 
 /// A volume's phase function at `cos_theta` (incident and scattered travel
-/// directions), 1/sr.
-pub fn volume_phase(v: &GpuVolume, cos_theta: f32) -> f32 {
+/// directions), 1/sr, with its Henyey-Greenstein asymmetries scaled by
+/// `eccentricity` (1 for the volume's own; the octaves' `c^i` below).
+pub fn volume_phase(v: &GpuVolume, cos_theta: f32, eccentricity: f32) -> f32 {
     if v.phase_kind == PHASE_DOUBLE_HENYEY_GREENSTEIN {
-        v.weight * phase::henyey_greenstein(cos_theta, v.g1)
-            + (1.0 - v.weight) * phase::henyey_greenstein(cos_theta, v.g2)
+        v.weight * phase::henyey_greenstein(cos_theta, v.g1 * eccentricity)
+            + (1.0 - v.weight) * phase::henyey_greenstein(cos_theta, v.g2 * eccentricity)
     } else {
-        phase::evaluate(v.phase_kind, cos_theta, v.g1)
+        phase::evaluate(v.phase_kind, cos_theta, v.g1 * eccentricity)
     }
 }
 
@@ -481,7 +502,23 @@ pub fn interval_weight(sigma: f32, step: f32, length: f32) -> f32 {
 
 /// The in-scattered source at `p` toward the camera (the ray's direction
 /// `d`), summed over lights and volumes, W/(m^3 sr).
+///
+/// With `octaves = N > 1`, multiple scattering by Wrenninge's octaves
+/// (Wrenninge, Kulla and Lundqvist, "Oz: the great and volumetric",
+/// SIGGRAPH 2013 talk; as in Frostbite and Unreal): the source is the sum
+/// over `i < N` of single scattering with the scattering coefficient times
+/// `(a (1 - exp(-tau_through)))^i`, the light's optical depth times `b^i`
+/// and the asymmetry times `c^i`. Light scattered many times reaches deeper
+/// (less extinction on its way), is dimmer (`a^i`) and less forward-peaked
+/// (`c^i`); octave 0 is single scattering. `tau_through` is the optical
+/// depth of the whole light ray through the volumes at `p` (the light
+/// grid's last node), so `1 - exp(-tau_through)` is the share of that light
+/// scattered at all: a thin cloud scatters little of it again, a dense one
+/// nearly all. Without that factor the octaves over-brighten thin clouds
+/// two to three times (`docs/volumes.md`). The view's extinction is not
+/// scaled.
 fn in_scattered(common: &CommonParams, inputs: &VolumeInputs, p: Vec3, d: Vec3) -> Vec4 {
+    let params = inputs.params;
     let mut source = Vec4::ZERO;
     let mut l = 0;
     while l < common.light_count as usize {
@@ -493,16 +530,27 @@ fn in_scattered(common: &CommonParams, inputs: &VolumeInputs, p: Vec3, d: Vec3) 
         let light = &inputs.lights[l];
         let (e, travel) = light_at(common, light, inputs, p);
         if e.x > 0.0 || e.y > 0.0 || e.z > 0.0 {
-            let tau = light_optical_depth(light, &inputs.grids[l], inputs.depths, p);
-            let arriving = e * Vec4::new((-tau.x).exp(), (-tau.y).exp(), (-tau.z).exp(), 0.0);
+            let (tau, through) = light_optical_depths(light, &inputs.grids[l], inputs.depths, p);
+            // The octaves' weight: the share of the light that scatters at
+            // all on its way through the volumes along its ray.
+            let thick = Vec4::ONE - Vec4::new((-through.x).exp(), (-through.y).exp(), (-through.z).exp(), 0.0);
             // The scattered light travels toward the camera, along -d.
             let cos_theta = -travel.dot(d);
             let mut v = 0;
-            while v < inputs.params.volume_count as usize {
+            while v < params.volume_count as usize {
                 let vol = &inputs.volumes[v];
                 let rho = grid_density(vol, inputs.density, p);
                 if rho > 0.0 {
-                    source += arriving * vol.sigma_s * (rho * volume_phase(vol, cos_theta));
+                    let (mut a, mut b, mut c) = (Vec4::ONE, 1.0f32, 1.0f32);
+                    let mut octave = 0;
+                    while octave < params.octaves.max(1) {
+                        let arriving = e * Vec4::new((-b * tau.x).exp(), (-b * tau.y).exp(), (-b * tau.z).exp(), 0.0);
+                        source += arriving * vol.sigma_s * a * (rho * volume_phase(vol, cos_theta, c));
+                        a *= thick * params.octave_scattering;
+                        b *= params.octave_extinction;
+                        c *= params.octave_phase;
+                        octave += 1;
+                    }
                 }
                 v += 1;
             }

@@ -279,7 +279,8 @@ impl GpuContext {
                 })
                 .collect::<HashMap<_, _>>()
         })?;
-        let frame = GpuFrame { ctx: self, common: scene.common, buffers, bind_groups, pipelines };
+        let repeats = passes.iter().map(|p| (p.name(), p.repeats(scene).max(1))).collect();
+        let frame = GpuFrame { ctx: self, common: scene.common, buffers, bind_groups, pipelines, repeats };
         frame.set_band(0, band, 0);
         Ok(frame)
     }
@@ -341,6 +342,8 @@ pub struct GpuFrame<'a> {
     bind_groups: HashMap<&'static str, wgpu::BindGroup>,
     /// The pipeline each pass runs for this scene (its `Pass::kernel_for`).
     pipelines: HashMap<&'static str, wgpu::ComputePipeline>,
+    /// Dispatches per run of each pass (`Pass::repeats`).
+    repeats: HashMap<&'static str, u32>,
 }
 
 impl GpuFrame<'_> {
@@ -409,16 +412,32 @@ impl GpuFrame<'_> {
                 let groups = invocations.div_ceil(WORKGROUP_SIZE);
                 let gx = groups.min(max);
                 let gy = groups.div_ceil(gx);
-                let timestamp_writes = timing.map(|(set, _)| wgpu::ComputePassTimestampWrites {
-                    query_set: set,
-                    beginning_of_pass_write_index: Some(2 * k as u32),
-                    end_of_pass_write_index: Some(2 * k as u32 + 1),
-                });
-                let mut cpass = encoder
-                    .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(pass.name()), timestamp_writes });
-                cpass.set_pipeline(&self.pipelines[pass.name()]);
-                cpass.set_bind_group(0, &self.bind_groups[pass.name()], &[]);
-                cpass.dispatch_workgroups(gx, gy, 1);
+                // A stepped pass dispatches once per step, copying what a
+                // step wrote over what the next one reads (`Pass::carry`);
+                // its time spans all steps.
+                let steps = self.repeats.get(pass.name()).copied().unwrap_or(1);
+                for step in 0..steps {
+                    let (first, last) = (step == 0, step + 1 == steps);
+                    let timestamp_writes =
+                        timing.filter(|_| first || last).map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                            query_set: set,
+                            beginning_of_pass_write_index: first.then_some(2 * k as u32),
+                            end_of_pass_write_index: last.then_some(2 * k as u32 + 1),
+                        });
+                    {
+                        let mut cpass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                            label: Some(pass.name()),
+                            timestamp_writes,
+                        });
+                        cpass.set_pipeline(&self.pipelines[pass.name()]);
+                        cpass.set_bind_group(0, &self.bind_groups[pass.name()], &[]);
+                        cpass.dispatch_workgroups(gx, gy, 1);
+                    }
+                    for (from, to) in pass.carry() {
+                        let (a, b) = (&self.buffers[&from.binding], &self.buffers[&to.binding]);
+                        encoder.copy_buffer_to_buffer(a, 0, b, 0, a.size().min(b.size()));
+                    }
+                }
             }
             if let Some((set, resolve)) = timing {
                 encoder.resolve_query_set(set, 0..2 * passes.len() as u32, resolve, 0);

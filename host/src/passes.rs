@@ -205,6 +205,16 @@ pub trait Pass: Sync {
     fn radiance_layer(&self) -> Option<&'static Resource> {
         None
     }
+    /// Dispatches of a `Whole` pass per frame: a simulation's steps. After
+    /// each, the GPU copies every `carry` pair (what the step wrote, over
+    /// what the next step reads); the CPU path runs all the steps itself.
+    fn repeats(&self, _scene: &SceneData) -> u32 {
+        1
+    }
+    /// See `repeats`: `(written, read)` resource pairs, both the pass's own.
+    fn carry(&self) -> &'static [(&'static Resource, &'static Resource)] {
+        &[]
+    }
     /// The per-pixel transmittance (rgb) of what the pass renders, if it
     /// hides what lies behind it (a participating medium in front of the
     /// surfaces and the sky): the renderer multiplies the radiance layers

@@ -4,6 +4,7 @@
 //! that integrates them along the view rays; the settings (`[volumes]`,
 //! `[[volume]]`) and their validation.
 
+pub mod automaton;
 pub mod montecarlo;
 pub mod reference;
 
@@ -28,7 +29,7 @@ use crate::passes::*;
 use crate::scene::{invalid, validate, SceneData};
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
-pub static PASSES: &[&dyn Pass] = &[&Density, &OpticalDepth, &Volumes];
+pub static PASSES: &[&dyn Pass] = &[&automaton::Steps, &automaton::Smooth, &Density, &OpticalDepth, &Volumes];
 
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family = Family { name: "volumes", passes: PASSES, bench: None };
@@ -96,6 +97,8 @@ pub struct Volume {
     /// `"slices"`: the slice renderer (the only one so far).
     #[serde(default)]
     pub method: Method,
+    /// The cloud automaton fills the box (instead of metaballs).
+    pub automaton: Option<automaton::Settings>,
 }
 
 #[derive(Debug, Default, Deserialize, Clone, Copy, PartialEq)]
@@ -227,6 +230,8 @@ pub struct Setup {
     pub bins: Vec<u32>,
     /// One per light (`nu = 0`: the light has none).
     pub grids: Vec<LightGrid>,
+    /// The cloud automaton, if a volume has one.
+    pub automaton: automaton::Setup,
 }
 
 impl Setup {
@@ -322,14 +327,30 @@ fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMet
         balls.push(GpuMetaball { center_radius: c.extend(b[3]), q: Vec4::new(b[4], 0.0, 0.0, 0.0) });
     }
     let size = hi - lo;
-    let [nx, ny, nz] = match v.resolution {
-        Some(r) => {
+    if let Some(a) = &v.automaton {
+        if !balls.is_empty() {
+            bail!(invalid(&format!("{field}.automaton"), "no metaballs besides an automaton", "metaballs"));
+        }
+        if v.resolution.is_some() {
+            bail!(invalid(
+                &format!("{field}.resolution"),
+                "none with an automaton (its cells are the grid)",
+                "a value"
+            ));
+        }
+        if !a.cells.iter().all(|n| (1..=4096).contains(n)) {
+            bail!(invalid(&format!("{field}.automaton.cells"), "three cell counts in 1..=4096", a.cells));
+        }
+    }
+    let [nx, ny, nz] = match (v.resolution, &v.automaton) {
+        (_, Some(a)) => a.cells,
+        (Some(r), None) => {
             if !r.iter().all(|n| (1..=4096).contains(n)) {
                 bail!(invalid(&format!("{field}.resolution"), "three cell counts in 1..=4096", r));
             }
             r
         }
-        None => default_resolution(size, &balls),
+        (None, None) => default_resolution(size, &balls),
     };
     let record = GpuVolume {
         min: lo.extend(0.0),
@@ -482,9 +503,18 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
     let mut balls = Vec::new();
     let mut bins = Vec::new();
     let mut cells = 0u64;
+    let mut cloud_automaton = automaton::Setup::default();
+    let mut automaton_volume = 0;
     for (i, v) in list.iter().enumerate() {
         let field = format!("volume[{i}]");
         let (mut record, own) = volume(&field, v, base)?;
+        if let Some(a) = &v.automaton {
+            if automaton_volume != 0 {
+                bail!(invalid(&format!("{field}.automaton"), "one automaton per scene", "a second"));
+            }
+            cloud_automaton = automaton::configure(&field, i, a, record.min.truncate(), record.max.truncate())?;
+            automaton_volume = i as u32 + 1;
+        }
         record.density_offset =
             u32::try_from(cells).map_err(|_| invalid(&format!("{field}.resolution"), "fewer cells", cells))?;
         cells += record.nx as u64 * record.ny as u64 * record.nz as u64;
@@ -558,9 +588,9 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
         octave_scattering: a,
         octave_extinction: b,
         octave_phase: c,
-        _pad: 0,
+        automaton_volume,
     };
-    Ok(Setup { enabled: true, params, volumes, balls, bins, grids })
+    Ok(Setup { enabled: true, params, volumes, balls, bins, grids, automaton: cloud_automaton })
 }
 
 fn skip_without_volumes(scene: &SceneData) -> Option<Plan> {
@@ -577,7 +607,14 @@ impl Pass for Density {
         "volumes::density_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![VOLUMES_PARAMS, VOLUMES, METABALLS, METABALL_BINS]
+        resources![
+            VOLUMES_PARAMS,
+            VOLUMES,
+            METABALLS,
+            METABALL_BINS,
+            automaton::AUTOMATON_PARAMS,
+            automaton::AUTOMATON_WEIGHTS
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![DENSITY]
@@ -592,8 +629,9 @@ impl Pass for Density {
         let v = &scene.volumes;
         Plan::run(
             format!(
-                "{} metaballs' field at {} cell centres ({:.1} MiB)",
-                v.balls.len(),
+                "{} metaballs'{} field at {} cell centres ({:.1} MiB)",
+                v.balls.len() as u64 + v.automaton.params.cells as u64,
+                if v.params.automaton_volume > 0 { " (the automaton's)" } else { "" },
                 v.params.cell_count,
                 v.params.cell_count as f64 * 4.0 / (1u64 << 20) as f64
             ),
@@ -602,9 +640,12 @@ impl Pass for Density {
     }
     fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let v = &scene.volumes;
-        frame.write_all::<f32>(&DENSITY, v.params.cell_count as usize, |_, out| {
+        frame.write_all::<f32>(&DENSITY, v.params.cell_count as usize, |f, out| {
+            let weights: &[f32] =
+                if f.contains(&automaton::AUTOMATON_WEIGHTS) { f.get(&automaton::AUTOMATON_WEIGHTS) } else { &[] };
+            let a = &v.automaton.params;
             for_each_invocation(out, 0, progress, |i, d| {
-                *d = density_cell(i, &v.params, &v.volumes, &v.balls, &v.bins)
+                *d = density_cell(i, &v.params, &v.volumes, &v.balls, &v.bins, a, weights)
             });
         });
     }

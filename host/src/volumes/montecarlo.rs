@@ -52,13 +52,19 @@ impl Majorants {
         let cells = s
             .volumes
             .iter()
-            .map(|v| {
+            .enumerate()
+            .map(|(index, v)| {
                 let (lo, hi) = (d3(v.min), d3(v.max));
+                let automaton = s.params.automaton_volume == index as u32 + 1;
+                let bound = s.automaton.density_bound() * d3(v.sigma_t).max_element();
                 let (nx, ny, nz) = (v.bins_x * SPLIT, v.bins_y * SPLIT, v.bins_z * SPLIT);
                 let cell = (hi - lo) / DVec3::new(nx as f64, ny as f64, nz as f64);
                 (0..nx * ny * nz)
                     .into_par_iter()
                     .map(|c| {
+                        if automaton {
+                            return bound;
+                        }
                         let i = DVec3::new((c % nx) as f64, ((c / nx) % ny) as f64, (c / (nx * ny)) as f64);
                         let (a, b) = (lo + i * cell, lo + (i + 1.0) * cell);
                         let bin =

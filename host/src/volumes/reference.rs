@@ -30,6 +30,9 @@ pub fn density(data: &SceneData, v: &GpuVolume, p: DVec3) -> f64 {
         return 0.0;
     }
     let s = &data.volumes;
+    if s.params.automaton_volume > 0 && std::ptr::eq(v, &s.volumes[s.params.automaton_volume as usize - 1]) {
+        return s.automaton.density_f64(lo, hi, p);
+    }
     let f = (p - lo) / (hi - lo);
     let bin = |f: f64, n: u32| ((f * n as f64) as i64).clamp(0, n as i64 - 1) as u32;
     let b = v.bin_offset + (bin(f.z, v.bins_z) * v.bins_y + bin(f.y, v.bins_y)) * v.bins_x + bin(f.x, v.bins_x);

@@ -32,6 +32,9 @@ use crate::phase;
 use crate::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL, LIGHT_SPOT};
 use spirv_std::spirv;
 
+pub mod automaton;
+use automaton::{lattice_density, AutomatonParams};
+
 /// `GpuVolume::phase_kind` for the two-lobe Henyey-Greenstein function
 /// `w HG(g1) + (1 - w) HG(g2)` (the other kinds are `types::PHASE_*`).
 pub const PHASE_DOUBLE_HENYEY_GREENSTEIN: u32 = 16;
@@ -120,7 +123,8 @@ pub struct VolumesParams {
     pub octave_scattering: f32,
     pub octave_extinction: f32,
     pub octave_phase: f32,
-    pub _pad: u32,
+    /// The volume filled by the cloud automaton, plus one (0: none).
+    pub automaton_volume: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
@@ -189,12 +193,19 @@ fn volume_of_cell(index: u32, volumes: &[GpuVolume], count: u32) -> (usize, u32)
 /// volumes' grids in order; x fastest, then y, then z), the centre of cell
 /// `(i, j, k)` being `min + (i + 0.5) / n * size` as Mitsuba places a
 /// grid's samples.
+///
+/// The automaton's volume (`params.automaton_volume`) has the automaton's
+/// lattice as its grid, and its density from `automaton::lattice_density`
+/// (`smooth`: the automaton's weights per cell).
+#[allow(clippy::too_many_arguments)]
 pub fn density_cell(
     index: u32,
     params: &VolumesParams,
     volumes: &[GpuVolume],
     balls: &[GpuMetaball],
     bins: &[u32],
+    automaton: &AutomatonParams,
+    smooth: &[f32],
 ) -> f32 {
     let (v, cell) = volume_of_cell(index, volumes, params.volume_count);
     let vol = &volumes[v];
@@ -202,6 +213,9 @@ pub fn density_cell(
     let n = Vec3::new(vol.nx as f32, vol.ny as f32, vol.nz as f32);
     let f = (Vec3::new(i as f32, j as f32, k as f32) + Vec3::splat(0.5)) / n;
     let p = vol.min.xyz() + (vol.max.xyz() - vol.min.xyz()) * f;
+    if params.automaton_volume == v as u32 + 1 {
+        return lattice_density(vol, automaton, smooth, p, UVec3::new(i, j, k));
+    }
     metaball_density(vol, balls, bins, p)
 }
 
@@ -561,6 +575,7 @@ fn in_scattered(common: &CommonParams, inputs: &VolumeInputs, p: Vec3, d: Vec3) 
 }
 
 /// The density kernel's entry point (`density_cell`).
+#[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn density_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
@@ -570,11 +585,13 @@ pub fn density_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 42)] balls: &[GpuMetaball],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 43)] bins: &[u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 44)] density: &mut [f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 49)] automaton: &[AutomatonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 55)] smooth: &[f32],
 ) {
     let index = crate::flat_index(id, groups);
     let params = &params[0];
     if index < params.cell_count {
-        density[index as usize] = density_cell(index, params, volumes, balls, bins);
+        density[index as usize] = density_cell(index, params, volumes, balls, bins, &automaton[0], smooth);
     }
 }
 

@@ -104,6 +104,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("caustics_torus, turned", turned_torus()),
         ("cloud_cumulus", sky("cloud_cumulus", 160, 120)),
         ("cloud_automaton", sky("cloud_automaton", 160, 120)),
+        ("cloud_grid", sky("cloud_grid", 160, 120)),
     ]
 }
 

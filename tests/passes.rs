@@ -376,3 +376,27 @@ fn frames_in_one_process_do_not_see_each_others_buffers() {
     let again = render::render(&fig6, &Backend::Cpu, false).unwrap().0;
     assert!(again == first_image, "Fig. 6 rendered differently after the stage");
 }
+
+#[test]
+fn every_shipped_scene_goes_to_exactly_one_bench_sweep() {
+    // `slicelight bench SCENE` routes a scene to the one family sweep that
+    // takes it; two takers or none is an error there, so every shipped
+    // scene must have exactly one.
+    let sweeps = slicelight::bench::sweeps();
+    let dir = common::root().join("scenes");
+    let mut paths: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    paths.sort();
+    assert!(paths.len() > 20, "{} scenes", paths.len());
+    for path in paths {
+        let data = slicelight::scene::load(&path).unwrap();
+        let takers: Vec<&str> = sweeps.iter().filter(|(_, s)| s.takes(&data)).map(|(n, _)| *n).collect();
+        assert_eq!(takers.len(), 1, "{}: taken by {takers:?}", path.display());
+        if data.volumes.enabled {
+            assert_eq!(takers, ["volumes"], "{}", path.display());
+        }
+    }
+}

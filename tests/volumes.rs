@@ -443,3 +443,103 @@ fn bad_automata_name_the_field() {
     let msg = load_error(&format!("{second}\n[[volume]]\nmin = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]\nsigma_s = [0.5, 0.5, 0.5]\nsigma_t = [1.0, 1.0, 1.0]\nautomaton = {{ cells = [4, 4, 4], steps = 1, {e} }}"));
     assert!(msg.contains("volume[1].automaton"), "{msg}");
 }
+
+/// The volumes' shadows on surfaces: the puff over the lit floor, single
+/// scattering, at 48x32 pixel centres against the f64 reference (whose
+/// shadow rays take the volumes' transmittance by a nested march), and the
+/// floor darker under the puff than without it.
+#[test]
+fn volumes_shadow_the_surfaces() {
+    // Seen from above on the side the shadow falls (the light travels
+    // along +x, -z), so the shadow is not behind the puff.
+    let data = puff(BALLS, "", "[volumes]\nscattering = \"single\"")
+        .reconfigure(|f| {
+            f.camera.position = [3.0, 4.0, -4.0];
+            f.camera.look_at = [0.3, 0.0, -0.4];
+        })
+        .unwrap();
+    let r = slicelight::render::render_layers(&data, &Backend::Cpu, false).unwrap();
+    let image = to_f64(&r.image);
+    let (reference, _) = slicelight::reference::render_converged(&data, 1e-3);
+    let d = difference(&image, &reference, data.exposure);
+    println!(
+        "puff over the floor 48x32: {:.3} % RMS, {:.3} % max of the 8-bit range",
+        d.rms_8bit_percent, d.max_8bit_percent
+    );
+    assert!(d.rms_8bit_percent < 1.0, "{d:?}");
+    let clear = data.reconfigure(|f| f.volume[0].metaballs.clear()).unwrap();
+    let lit = slicelight::render::render_layers(&clear, &Backend::Cpu, false).unwrap();
+    let surface = |r: &slicelight::render::Rendered| -> Vec<glam::Vec4> {
+        r.layers.iter().find(|(n, _)| *n == "surface").unwrap().1.as_slice::<glam::Vec4>().to_vec()
+    };
+    let (with, without) = (surface(&r), surface(&lit));
+    let shaded = with.iter().zip(&without).filter(|(a, b)| a.x < 0.5 * b.x).count();
+    // Measured: 12 of the 1536 pixels (the shadow seen beside the puff,
+    // and the floor seen through it); without the volumes' transmittance
+    // on the lights there are none.
+    assert!(shaded >= 8, "{shaded} floor pixels in the puff's shadow");
+}
+
+/// The grid cloud (a Mitsuba `.vol` file) with `scattering = "single"` at
+/// 48x36 pixel centres against the f64 reference, which interpolates the
+/// file's values as Mitsuba 3 does: the method samples the same grid, so
+/// what differs is the slices' and the transmittance volume's sampling.
+/// Measured: see the print and docs/volumes.md; the bound is the issue's 1 %.
+#[test]
+fn grid_cloud_matches_the_reference() {
+    let data = shipped("cloud_grid", 48, 36)
+        .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
+        .unwrap();
+    assert_eq!(data.volumes.volumes[0].nx, 48);
+    let image = to_f64(&cpu_image(&data));
+    let (reference, samples) = slicelight::reference::render_converged(&data, 1e-3);
+    let d = difference(&image, &reference, data.exposure);
+    println!(
+        "cloud_grid 48x36: {:.3} % RMS, {:.3} % max of the 8-bit range ({samples} reference samples per ray)",
+        d.rms_8bit_percent, d.max_8bit_percent
+    );
+    assert!(d.rms_8bit_percent < 1.0, "{d:?}");
+}
+
+/// A grid file that is not one, or holds a negative density, is refused
+/// with the file and the field named; a grid beside metaballs too.
+#[test]
+fn bad_grids_name_the_file_and_field() {
+    use slicelight::volumes::grid::{vol_bytes, Grid};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |extra: &str| {
+        format!(
+            r#"
+            [camera]
+            position = [0.0, 1.0, 6.0]
+            look_at = [0.0, 1.0, 0.0]
+            vfov_deg = 40.0
+            resolution = [8, 8]
+            [[volume]]
+            min = [0.0, 0.0, 0.0]
+            max = [1.0, 1.0, 1.0]
+            sigma_s = [0.5, 0.5, 0.5]
+            sigma_t = [1.0, 1.0, 1.0]
+            grid = {{ file = "g.vol" }}
+            {extra}
+            "#
+        )
+    };
+    let load = |bytes: &[u8], extra: &str| {
+        std::fs::write(dir.path().join("g.vol"), bytes).unwrap();
+        let path = dir.path().join("s.toml");
+        std::fs::write(&path, scene(extra)).unwrap();
+        slicelight::scene::load(&path).map(|_| ()).map_err(|e| format!("{e:#}"))
+    };
+    let good = Grid { cells: [2, 2, 2], values: vec![0.5; 8] };
+    assert!(load(&vol_bytes(&good), "").is_ok());
+    let negative = Grid { cells: [2, 2, 2], values: vec![0.5, 0.5, 0.5, -1.0, 0.5, 0.5, 0.5, 0.5] };
+    let e = load(&vol_bytes(&negative), "").unwrap_err();
+    assert!(e.contains("volume[0].grid.file") && e.contains("g.vol") && e.contains("(1, 1, 0)"), "{e}");
+    let e = load(b"VOL", "").unwrap_err();
+    assert!(e.contains("g.vol"), "{e}");
+    let e = load(&vol_bytes(&good), "metaballs = [[0.5, 0.5, 0.5, 0.2, 1.0]]").unwrap_err();
+    assert!(e.contains("volume[0].grid"), "{e}");
+    let e = load(&vol_bytes(&good), "resolution = [4, 4, 4]").unwrap_err();
+    assert!(e.contains("volume[0].resolution"), "{e}");
+}

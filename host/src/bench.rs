@@ -132,6 +132,24 @@ pub fn time_renders(data: &SceneData, backend: &Backend, repeats: usize, groups:
     })
 }
 
+/// Rows grouped into plot series by `label` (in the order labels first
+/// appear), each row one point.
+pub fn series_of<R>(
+    rows: &[R],
+    label: impl Fn(&R) -> String,
+    point: impl Fn(&R) -> (f64, f64),
+) -> Vec<(String, Vec<(f64, f64)>)> {
+    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for r in rows {
+        let name = label(r);
+        match series.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, points)) => points.push(point(r)),
+            None => series.push((name, vec![point(r)])),
+        }
+    }
+    series
+}
+
 /// The median of `v` (the mean of the middle two for an even count).
 pub fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);

@@ -24,8 +24,8 @@ enum Command {
     Reference(ReferenceArgs),
     /// Time against error over a family's settings, each configuration
     /// against the family's reference: CSVs and PNG plots. Each scene goes to
-    /// the sweep of its family (glass: caustics; a [sea]: sea; sky alone:
-    /// sky; the rest: shafts).
+    /// the sweep of its family (glass: caustics; a [sea]: sea; [[volume]]:
+    /// volumes; sky alone: sky; the rest: shafts).
     Bench(BenchArgs),
     /// Print the RMS and max difference of IMAGE against REFERENCE.
     Compare(CompareArgs),

@@ -344,7 +344,8 @@ fn incident(
         return DVec3::ZERO;
     }
     let attenuation = (-d3(data.common.sigma_t) * distance).exp();
-    e * attenuation * (cos * falloff)
+    let clouds = crate::volumes::reference::transmittance_toward(data, point, to_light, distance);
+    e * attenuation * clouds * (cos * falloff)
 }
 
 /// The sea along the view ray `(o, d)` (downward, from above the surface),

@@ -11,6 +11,7 @@ use crate::caustics;
 use crate::cpu::for_each_invocation2;
 use crate::passes::*;
 use crate::scene::SceneData;
+use crate::volumes;
 
 /// Attenuated surface radiance per pixel (rgb; w = 0).
 pub static SURFACE_RADIANCE: Resource =
@@ -75,7 +76,9 @@ impl Pass for Surface {
             GLASS_VERTICES,
             GLASS_TRIANGLES,
             caustics::CAUSTICS_PARAMS,
-            caustics::CAUSTICS_MAPS
+            caustics::CAUSTICS_MAPS,
+            volumes::LIGHT_GRIDS,
+            volumes::OPTICAL_DEPTHS
         ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
@@ -115,6 +118,13 @@ impl Pass for Surface {
         let caustic_maps = frame.get::<u32>(&caustics::CAUSTICS_MAPS);
         let no_caustics = slicelight_shaders::caustics::CausticsParams::default();
         let caustics = if caustic_maps.is_empty() { &no_caustics } else { &scene.caustics.params };
+        // The clouds' shadows, where the volumes' transmittance volumes ran.
+        let inputs = slicelight_shaders::common::surface::LightInputs {
+            light_map: &scene.light_map,
+            shadow,
+            grids: if frame.contains(&volumes::OPTICAL_DEPTHS) { &scene.volumes.grids } else { &[] },
+            depths: frame.get(&volumes::OPTICAL_DEPTHS),
+        };
         // The CPU runs the variant the GPU would (`kernel_for`).
         let pixel = if scene.has_glass() { surface_pixel::<true> } else { surface_pixel::<false> };
         for_each_invocation2(
@@ -130,8 +140,7 @@ impl Pass for Surface {
                     &geometry,
                     &glass,
                     &scene.materials,
-                    &scene.light_map,
-                    shadow,
+                    &inputs,
                     caustics,
                     caustic_maps,
                 );

@@ -124,7 +124,7 @@ impl crate::bench::Sweep for ShaftsSweep {
         &["fig6_sphere", "fig7_stage", "stained_glass"]
     }
     fn takes(&self, s: &SceneData) -> bool {
-        s.glass_vertices.is_empty() && !s.sea.enabled && !(s.sky.enabled && !s.scatters())
+        s.glass_vertices.is_empty() && !s.sea.enabled && !(s.sky.enabled && !s.scatters()) && !s.volumes.enabled
     }
     fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         run(scenes, opts)?;

@@ -114,7 +114,7 @@ impl crate::bench::Sweep for SkySweep {
         &["sky_noon", "sky_sunset", "sky_twilight"]
     }
     fn takes(&self, s: &SceneData) -> bool {
-        s.sky.enabled && !s.scatters() && !s.sea.enabled && s.glass_vertices.is_empty()
+        s.sky.enabled && !s.scatters() && !s.sea.enabled && s.glass_vertices.is_empty() && !s.volumes.enabled
     }
     fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         run(scenes, &opts.backends, opts.repeats, opts.stride, opts.quick, &opts.out_dir)?;
@@ -216,20 +216,11 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
 /// Error against the median render time, one colour per series, one
 /// marker shape per scene and backend.
 fn plot(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut groups: Vec<(String, &'static str, &'static str)> =
-        rows.iter().map(|r| (r.scene.clone(), r.backend, r.config.series)).collect();
-    groups.dedup();
-    let series: Vec<(String, Vec<(f64, f64)>)> = groups
-        .iter()
-        .map(|(scene, backend, name)| {
-            let pts = rows
-                .iter()
-                .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *name)
-                .map(|r| (r.median_seconds, 100.0 * r.rms_relative))
-                .collect();
-            (format!("{scene} ({backend}, {name})"), pts)
-        })
-        .collect();
+    let series = crate::bench::series_of(
+        rows,
+        |r| format!("{} ({}, {})", r.scene, r.backend, r.config.series),
+        |r| (r.median_seconds, 100.0 * r.rms_relative),
+    );
     let labels = crate::bench::LogLogPlot {
         caption: "Sky: run time against error (RMS % of the sky's peak)",
         x_desc: "median render time, s",

@@ -5,6 +5,8 @@
 //! `[[volume]]`) and their validation.
 
 pub mod automaton;
+pub mod bench;
+pub mod grid;
 pub mod montecarlo;
 pub mod reference;
 
@@ -32,7 +34,7 @@ use crate::scene::{invalid, validate, SceneData};
 pub static PASSES: &[&dyn Pass] = &[&automaton::Steps, &automaton::Smooth, &Density, &OpticalDepth, &Volumes];
 
 /// The family, as `passes::FAMILIES` registers it.
-pub static FAMILY: Family = Family { name: "volumes", passes: PASSES, bench: None };
+pub static FAMILY: Family = Family { name: "volumes", passes: PASSES, bench: Some(&bench::VolumesSweep) };
 
 pub static VOLUMES_PARAMS: Resource = Resource {
     binding: 40,
@@ -47,6 +49,12 @@ pub static METABALL_BINS: Resource = Resource {
     binding: 43,
     name: "metaball bins",
     kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.volumes.bins)),
+};
+/// The grid volumes' values from their files.
+pub static GRID_VALUES: Resource = Resource {
+    binding: 56,
+    name: "grid values",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.volumes.grid_values)),
 };
 /// Each volume's density at its cell centres.
 pub static DENSITY: Resource = Resource {
@@ -99,6 +107,16 @@ pub struct Volume {
     pub method: Method,
     /// The cloud automaton fills the box (instead of metaballs).
     pub automaton: Option<automaton::Settings>,
+    /// A density grid from a file fills the box (instead of metaballs).
+    pub grid: Option<GridFile>,
+}
+
+/// `grid = { file = "..." }`: a Mitsuba `.vol` file (version 3, float32,
+/// one channel), relative to the scene file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridFile {
+    pub file: String,
 }
 
 #[derive(Debug, Default, Deserialize, Clone, Copy, PartialEq)]
@@ -232,6 +250,8 @@ pub struct Setup {
     pub grids: Vec<LightGrid>,
     /// The cloud automaton, if a volume has one.
     pub automaton: automaton::Setup,
+    /// The grid volumes' values from their files, one after another.
+    pub grid_values: Vec<f32>,
 }
 
 impl Setup {
@@ -293,7 +313,7 @@ fn phase(field: &str, p: VolumePhase) -> Result<(u32, f32, f32, f32)> {
 
 /// One volume, validated: its kernel record (offsets not yet set), balls,
 /// and the grid's resolution.
-fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMetaball>)> {
+fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMetaball>, Option<grid::Grid>)> {
     let lo = validate::finite3(&format!("{field}.min"), v.min)?;
     let hi = validate::finite3(&format!("{field}.max"), v.max)?;
     if !hi.cmpgt(lo).all() {
@@ -342,7 +362,25 @@ fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMet
             bail!(invalid(&format!("{field}.automaton.cells"), "three cell counts in 1..=4096", a.cells));
         }
     }
+    let file = match &v.grid {
+        Some(g) => {
+            let sources = [!balls.is_empty(), v.automaton.is_some()];
+            if sources.iter().any(|s| *s) {
+                bail!(invalid(&format!("{field}.grid"), "a grid alone (no metaballs or automaton besides it)", "both"));
+            }
+            if v.resolution.is_some() {
+                bail!(invalid(
+                    &format!("{field}.resolution"),
+                    "none with a grid (its cells are the grid's)",
+                    "a value"
+                ));
+            }
+            Some(grid::read_vol(&format!("{field}.grid.file"), &base.join(&g.file))?)
+        }
+        None => None,
+    };
     let [nx, ny, nz] = match (v.resolution, &v.automaton) {
+        _ if file.is_some() => file.as_ref().expect("a grid").cells,
         (_, Some(a)) => a.cells,
         (Some(r), None) => {
             if !r.iter().all(|n| (1..=4096).contains(n)) {
@@ -366,7 +404,7 @@ fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMet
         nz,
         ..Default::default()
     };
-    Ok((record, balls))
+    Ok((record, balls, file))
 }
 
 /// Cells a quarter of the smallest ball's radius wide (the trilinear
@@ -504,10 +542,11 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
     let mut bins = Vec::new();
     let mut cells = 0u64;
     let mut cloud_automaton = automaton::Setup::default();
+    let mut grid_values = Vec::new();
     let mut automaton_volume = 0;
     for (i, v) in list.iter().enumerate() {
         let field = format!("volume[{i}]");
-        let (mut record, own) = volume(&field, v, base)?;
+        let (mut record, own, file) = volume(&field, v, base)?;
         if let Some(a) = &v.automaton {
             if automaton_volume != 0 {
                 bail!(invalid(&format!("{field}.automaton"), "one automaton per scene", "a second"));
@@ -525,7 +564,15 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
                 [record.nx, record.ny, record.nz]
             ));
         }
-        bin_balls(&mut record, &own, balls.len() as u32, &mut bins);
+        match file {
+            // A grid volume: no bins (`bins_x == 0`); `bin_offset` is where
+            // its values start in the grid buffer.
+            Some(g) => {
+                record.bin_offset = grid_values.len() as u32;
+                grid_values.extend(g.values);
+            }
+            None => bin_balls(&mut record, &own, balls.len() as u32, &mut bins),
+        }
         balls.extend(own);
         volumes.push(record);
     }
@@ -590,7 +637,7 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
         octave_phase: c,
         automaton_volume,
     };
-    Ok(Setup { enabled: true, params, volumes, balls, bins, grids, automaton: cloud_automaton })
+    Ok(Setup { enabled: true, params, volumes, balls, bins, grids, automaton: cloud_automaton, grid_values })
 }
 
 fn skip_without_volumes(scene: &SceneData) -> Option<Plan> {
@@ -613,7 +660,8 @@ impl Pass for Density {
             METABALLS,
             METABALL_BINS,
             automaton::AUTOMATON_PARAMS,
-            automaton::AUTOMATON_WEIGHTS
+            automaton::AUTOMATON_WEIGHTS,
+            GRID_VALUES
         ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
@@ -629,9 +677,13 @@ impl Pass for Density {
         let v = &scene.volumes;
         Plan::run(
             format!(
-                "{} metaballs'{} field at {} cell centres ({:.1} MiB)",
+                "{} metaballs'{} field{} at {} cell centres ({:.1} MiB)",
                 v.balls.len() as u64 + v.automaton.params.cells as u64,
                 if v.params.automaton_volume > 0 { " (the automaton's)" } else { "" },
+                match v.volumes.iter().filter(|x| x.bins_x == 0).count() {
+                    0 => String::new(),
+                    n => format!(" and {n} grid(s) from files"),
+                },
                 v.params.cell_count,
                 v.params.cell_count as f64 * 4.0 / (1u64 << 20) as f64
             ),
@@ -645,7 +697,7 @@ impl Pass for Density {
                 if f.contains(&automaton::AUTOMATON_WEIGHTS) { f.get(&automaton::AUTOMATON_WEIGHTS) } else { &[] };
             let a = &v.automaton.params;
             for_each_invocation(out, 0, progress, |i, d| {
-                *d = density_cell(i, &v.params, &v.volumes, &v.balls, &v.bins, a, weights)
+                *d = density_cell(i, &v.params, &v.volumes, &v.balls, &v.bins, a, weights, &v.grid_values)
             });
         });
     }

@@ -34,6 +34,16 @@ const MAX_COLLISIONS: u32 = 1 << 16;
 /// Sub-cells of the majorant grid per metaball bin, along each axis.
 const SPLIT: u32 = 4;
 
+/// A volume's majorant grid: its bins split `SPLIT` ways, or one cell for
+/// a grid from a file (which has no bins).
+fn majorant_cells(v: &slicelight_shaders::volumes::GpuVolume) -> (u32, u32, u32) {
+    if v.bins_x == 0 {
+        (1, 1, 1)
+    } else {
+        (v.bins_x * SPLIT, v.bins_y * SPLIT, v.bins_z * SPLIT)
+    }
+}
+
 /// Per volume, a grid of upper bounds of the density, each bin of the
 /// metaballs split `SPLIT` times along each axis: in a sub-cell, the sum
 /// over the balls the bin lists of `q f(a)` at the ball's nearest distance
@@ -56,13 +66,21 @@ impl Majorants {
             .map(|(index, v)| {
                 let (lo, hi) = (d3(v.min), d3(v.max));
                 let automaton = s.params.automaton_volume == index as u32 + 1;
-                let bound = s.automaton.density_bound() * d3(v.sigma_t).max_element();
-                let (nx, ny, nz) = (v.bins_x * SPLIT, v.bins_y * SPLIT, v.bins_z * SPLIT);
+                let grid = v.bins_x == 0;
+                let bound = if grid {
+                    // A grid's trilinear values lie within its largest.
+                    let count = (v.nx * v.ny * v.nz) as usize;
+                    let values = &s.grid_values[v.bin_offset as usize..v.bin_offset as usize + count];
+                    values.iter().fold(0.0f32, |a, b| a.max(*b)) as f64
+                } else {
+                    s.automaton.density_bound()
+                } * d3(v.sigma_t).max_element();
+                let (nx, ny, nz) = majorant_cells(v);
                 let cell = (hi - lo) / DVec3::new(nx as f64, ny as f64, nz as f64);
                 (0..nx * ny * nz)
                     .into_par_iter()
                     .map(|c| {
-                        if automaton {
+                        if automaton || grid {
                             return bound;
                         }
                         let i = DVec3::new((c % nx) as f64, ((c / nx) % ny) as f64, (c / (nx * ny)) as f64);
@@ -106,7 +124,8 @@ impl Majorants {
                 run = run.min(near);
                 continue;
             }
-            let n = DVec3::new((v.bins_x * SPLIT) as f64, (v.bins_y * SPLIT) as f64, (v.bins_z * SPLIT) as f64);
+            let (nx, ny, nz) = majorant_cells(v);
+            let n = DVec3::new(nx as f64, ny as f64, nz as f64);
             let cell = (hi - lo) / n;
             // The sub-cell the ray is in just past `p` (a point on a face
             // belongs to the cell it enters).

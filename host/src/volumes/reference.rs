@@ -33,6 +33,11 @@ pub fn density(data: &SceneData, v: &GpuVolume, p: DVec3) -> f64 {
     if s.params.automaton_volume > 0 && std::ptr::eq(v, &s.volumes[s.params.automaton_volume as usize - 1]) {
         return s.automaton.density_f64(lo, hi, p);
     }
+    if v.bins_x == 0 {
+        let count = (v.nx * v.ny * v.nz) as usize;
+        let values = &s.grid_values[v.bin_offset as usize..v.bin_offset as usize + count];
+        return super::grid::density_f64(values, [v.nx, v.ny, v.nz], lo, hi, p);
+    }
     let f = (p - lo) / (hi - lo);
     let bin = |f: f64, n: u32| ((f * n as f64) as i64).clamp(0, n as i64 - 1) as u32;
     let b = v.bin_offset + (bin(f.z, v.bins_z) * v.bins_y + bin(f.y, v.bins_y)) * v.bins_x + bin(f.x, v.bins_x);
@@ -95,6 +100,18 @@ fn optical_depth(data: &SceneData, p: DVec3, dir: DVec3, distance: f64, samples:
         .map(|k| extinction(data, p + dir * (near + (k as f64 + jitter(seed, k as u64, 7)) * dt)))
         .sum::<DVec3>()
         * dt
+}
+
+/// The transmittance (rgb) through the volumes from `p` toward a light
+/// along `dir` (unit) for `distance` metres: 1 without volumes, else
+/// `exp(-tau)` with `tau` by 256 jittered strata (the references' shadows
+/// of the volumes on surfaces).
+pub(crate) fn transmittance_toward(data: &SceneData, p: DVec3, dir: DVec3, distance: f64) -> DVec3 {
+    if !data.volumes.enabled {
+        return DVec3::ONE;
+    }
+    let seed = p.x.to_bits() ^ p.y.to_bits().rotate_left(21) ^ p.z.to_bits().rotate_left(42);
+    (-optical_depth(data, p, dir, distance, 256, seed)).exp()
 }
 
 /// The volumes' radiance toward the camera along the ray `o + t d` up to

@@ -13,6 +13,7 @@ use crate::types::{
     CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
     LIGHT_DIRECTIONAL, NO_OBJECT, SHADOWS_MAP,
 };
+use crate::volumes::{light_transmittance, LightGrid};
 use core::f32::consts::FRAC_1_PI;
 use spirv_std::spirv;
 
@@ -39,17 +40,20 @@ pub fn no_surface() -> GBufferTexel {
 /// The shadow test `H` is an exact shadow ray through the BVH
 /// (`SHADOWS_RAYS`, the default) or the light's shadow map (`SHADOWS_MAP`,
 /// the 2002 paper's method, which misjudges pixels on shadow outlines).
-#[allow(clippy::too_many_arguments)]
+///
+/// Each light's irradiance is also multiplied by its transmittance through
+/// the volumes (`exp(-tau)`, `volumes::light_optical_depth` from the
+/// light's transmittance volume): the clouds' shadows.
 pub fn direct_radiance(
     params: &CommonParams,
     lights: &[GpuLight],
     geometry: &Geometry,
-    light_map: &[Vec4],
-    shadow: &[f32],
+    inputs: &LightInputs,
     p: Vec3,
     normal: Vec3,
     albedo: Vec4,
 ) -> Vec4 {
+    let (light_map, shadow) = (inputs.light_map, inputs.shadow);
     let mut irradiance = Vec4::ZERO;
     let mut l = 0;
     while l < params.light_count as usize {
@@ -64,14 +68,16 @@ pub fn direct_radiance(
         };
         let cos_incidence = normal.dot(to_light);
         if cos_incidence > 0.0 {
+            let clouds = volume_transmittance(inputs, &light, l, p);
             if params.surface_shadows == SHADOWS_MAP && light.shadow_resolution > 0 {
                 let lit = emitted_visible(&light, light_map, shadow, local, cos_incidence);
-                irradiance += lit * transmittance(params.sigma_t, distance) * (cos_incidence * falloff);
+                irradiance += lit * clouds * transmittance(params.sigma_t, distance) * (cos_incidence * falloff);
             } else {
                 let color = emitted(&light, light_map, local);
                 if color.x > 0.0 || color.y > 0.0 || color.z > 0.0 {
                     let visible = shadow_ray_visibility(geometry, p, normal, to_light, distance);
-                    irradiance += color * transmittance(params.sigma_t, distance) * (visible * cos_incidence * falloff);
+                    irradiance +=
+                        color * clouds * transmittance(params.sigma_t, distance) * (visible * cos_incidence * falloff);
                 }
             }
         }
@@ -79,6 +85,22 @@ pub fn direct_radiance(
     }
     let radiance = albedo * irradiance * FRAC_1_PI;
     Vec4::new(radiance.x, radiance.y, radiance.z, 0.0)
+}
+
+/// What the lights' terms read besides the lights: their light maps and
+/// shadow maps, and the volumes' transmittance volumes (one `LightGrid` per
+/// light and their optical depths; empty in a scene without volumes).
+pub struct LightInputs<'a> {
+    pub light_map: &'a [Vec4],
+    pub shadow: &'a [f32],
+    pub grids: &'a [LightGrid],
+    pub depths: &'a [Vec4],
+}
+
+/// Light `l`'s transmittance (rgb) through the volumes to `p`
+/// (`volumes::light_transmittance`).
+pub fn volume_transmittance(inputs: &LightInputs, light: &GpuLight, l: usize, p: Vec3) -> Vec4 {
+    light_transmittance(inputs.grids, inputs.depths, light, l, p)
 }
 
 /// 1 if the segment from the surface point `p` (unit `normal`, facing the
@@ -207,8 +229,7 @@ pub fn surface_pixel<const GLASS: bool>(
     geometry: &Geometry,
     glass: &Glass,
     materials: &[GpuMaterial],
-    light_map: &[Vec4],
-    shadow: &[f32],
+    inputs: &LightInputs,
     caustics: &CausticsParams,
     caustic_maps: &[u32],
 ) -> (Vec4, GBufferTexel) {
@@ -232,8 +253,7 @@ pub fn surface_pixel<const GLASS: bool>(
             let r = receiver(params, geometry, glass, materials, origin, dir, &hit, c);
             if r.found {
                 let albedo = materials[r.material as usize].albedo;
-                let l =
-                    direct_radiance(params, lights, geometry, light_map, shadow, r.point, r.normal, albedo) * r.weight;
+                let l = direct_radiance(params, lights, geometry, inputs, r.point, r.normal, albedo) * r.weight;
                 radiance += channel_part(l, c, channels);
                 // The caustic light at the same receiver, for the caustics
                 // layer (the view through glass is traced once, here).
@@ -244,7 +264,7 @@ pub fn surface_pixel<const GLASS: bool>(
     } else {
         let r = opaque_receiver(params, origin, dir, &hit);
         let albedo = materials[r.material as usize].albedo;
-        radiance = direct_radiance(params, lights, geometry, light_map, shadow, r.point, r.normal, albedo) * r.weight;
+        radiance = direct_radiance(params, lights, geometry, inputs, r.point, r.normal, albedo) * r.weight;
     }
     let texel = GBufferTexel {
         normal_distance: normal.extend(hit.distance),
@@ -278,6 +298,8 @@ macro_rules! surface_entry_point {
             #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
             #[spirv(storage_buffer, descriptor_set = 0, binding = 31)] caustics: &[CausticsParams],
             #[spirv(storage_buffer, descriptor_set = 0, binding = 34)] caustic_maps: &[u32],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
         ) {
             let index = crate::flat_index(id, groups);
             let params = &common[0];
@@ -291,8 +313,7 @@ macro_rules! surface_entry_point {
                     &geometry,
                     &glass,
                     materials,
-                    light_map,
-                    shadow,
+                    &LightInputs { light_map, shadow, grids, depths },
                     &caustics[0],
                     caustic_maps,
                 );

@@ -196,7 +196,9 @@ fn volume_of_cell(index: u32, volumes: &[GpuVolume], count: u32) -> (usize, u32)
 ///
 /// The automaton's volume (`params.automaton_volume`) has the automaton's
 /// lattice as its grid, and its density from `automaton::lattice_density`
-/// (`smooth`: the automaton's weights per cell).
+/// (`smooth`: the automaton's weights per cell). A grid volume (no bins,
+/// `bins_x == 0`) has its file's values, from `grid_values` at
+/// `bin_offset`.
 #[allow(clippy::too_many_arguments)]
 pub fn density_cell(
     index: u32,
@@ -206,9 +208,14 @@ pub fn density_cell(
     bins: &[u32],
     automaton: &AutomatonParams,
     smooth: &[f32],
+    grid_values: &[f32],
 ) -> f32 {
     let (v, cell) = volume_of_cell(index, volumes, params.volume_count);
     let vol = &volumes[v];
+    if vol.bins_x == 0 {
+        // A grid from a file: its own values at its cell centres.
+        return grid_values[(vol.bin_offset + cell) as usize];
+    }
     let (i, j, k) = (cell % vol.nx, (cell / vol.nx) % vol.ny, cell / (vol.nx * vol.ny));
     let n = Vec3::new(vol.nx as f32, vol.ny as f32, vol.nz as f32);
     let f = (Vec3::new(i as f32, j as f32, k as f32) + Vec3::splat(0.5)) / n;
@@ -347,6 +354,17 @@ pub fn optical_depth_column(
 /// `lo.z`, the last node's value past `hi.z`.
 pub fn light_optical_depth(light: &GpuLight, g: &LightGrid, depths: &[Vec4], p: Vec3) -> Vec4 {
     light_optical_depths(light, g, depths, p).0
+}
+
+/// Light `l`'s transmittance (rgb) through the volumes to `p`, from its
+/// transmittance volume (`grids[l]`): 1 where the scene has no volumes
+/// (`grids` empty) or the light no transmittance volume.
+pub fn light_transmittance(grids: &[LightGrid], depths: &[Vec4], light: &GpuLight, l: usize, p: Vec3) -> Vec4 {
+    if l >= grids.len() || grids[l].nu == 0 {
+        return Vec4::new(1.0, 1.0, 1.0, 0.0);
+    }
+    let tau = light_optical_depth(light, &grids[l], depths, p);
+    Vec4::new((-tau.x).exp(), (-tau.y).exp(), (-tau.z).exp(), 0.0)
 }
 
 /// `light_optical_depth` at `p`, and the optical depth through all the
@@ -587,11 +605,12 @@ pub fn density_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 44)] density: &mut [f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 49)] automaton: &[AutomatonParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 55)] smooth: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 56)] grid_values: &[f32],
 ) {
     let index = crate::flat_index(id, groups);
     let params = &params[0];
     if index < params.cell_count {
-        density[index as usize] = density_cell(index, params, volumes, balls, bins, &automaton[0], smooth);
+        density[index as usize] = density_cell(index, params, volumes, balls, bins, &automaton[0], smooth, grid_values);
     }
 }
 

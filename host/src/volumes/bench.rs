@@ -1,0 +1,228 @@
+//! `slicelight bench` on scenes with `[[volume]]`: run time against error
+//! of the volumes' passes over their settings, on each scene and backend; a
+//! CSV and a PNG plot.
+//!
+//! Three series:
+//! - `planes`: the sample planes, single scattering, against the f64
+//!   quadrature reference (`volumes::reference`);
+//! - `light-grid`: the transmittance volume's nodes (`n` a side), single
+//!   scattering, against the same reference;
+//! - `octaves`: multiple scattering by 1 (single scattering), 2, 4, 8 and
+//!   12 octaves at the default factors, against the Monte Carlo reference
+//!   for all orders (`volumes::montecarlo`).
+//!
+//! Error is the RMS and largest difference of the 8-bit images (the
+//! scene's exposure) at a lattice of pixel centres, % of 255, and the
+//! image energy over the reference's at those pixels. Times are medians
+//! over repeats: the whole render, the volumes' grids (automaton, density,
+//! transmittance volumes) and the per-pixel `volumes` pass.
+
+use anyhow::{Context, Result};
+use glam::DVec3;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use super::Scattering;
+use crate::bench::{time_renders, BenchScene, Options};
+use crate::passes::Pass;
+use crate::render::Backend;
+use crate::scene::SceneData;
+
+/// One configuration of the sweep.
+#[derive(Debug, Clone, Copy)]
+pub struct Config {
+    pub series: &'static str,
+    /// Sample planes (`None`: the scene's default).
+    pub planes: Option<u32>,
+    /// Transmittance-volume nodes a side (`None`: the default).
+    pub light_grid: Option<u32>,
+    /// Octaves (1: single scattering).
+    pub octaves: u32,
+}
+
+pub fn sweep(quick: bool) -> Vec<Config> {
+    let base = Config { series: "", planes: None, light_grid: None, octaves: 1 };
+    let planes: &[u32] = if quick { &[32, 128, 512] } else { &[16, 32, 64, 128, 256, 512, 1024] };
+    let grids: &[u32] = if quick { &[16, 64, 128] } else { &[16, 32, 64, 128, 256] };
+    let octaves: &[u32] = if quick { &[1, 8] } else { &[1, 2, 4, 8, 12] };
+    let mut v = Vec::new();
+    v.extend(planes.iter().map(|&n| Config { series: "planes", planes: Some(n), ..base }));
+    v.extend(grids.iter().map(|&n| Config { series: "light-grid", light_grid: Some(n), ..base }));
+    v.extend(octaves.iter().map(|&n| Config { series: "octaves", octaves: n, ..base }));
+    v
+}
+
+/// The scene with `c`'s settings in its `[volumes]`, validated as a file's are.
+fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
+    data.reconfigure(|f| {
+        let s = &mut f.volumes;
+        s.planes = c.planes;
+        s.light_grid = c.light_grid.map(|n| [n; 3]);
+        if c.octaves == 1 {
+            s.scattering = Scattering::Single;
+            s.octaves = None;
+        } else {
+            s.scattering = Scattering::Multiple;
+            s.octaves = Some(c.octaves);
+        }
+    })
+    .with_context(|| format!("volumes bench configuration {c:?}"))
+}
+
+pub struct Row {
+    pub scene: String,
+    pub backend: &'static str,
+    pub width: u32,
+    pub height: u32,
+    pub config: Config,
+    pub median_seconds: f64,
+    pub grids_median_seconds: f64,
+    pub volumes_median_seconds: f64,
+    pub rms_8bit_percent: f64,
+    pub max_8bit_percent: f64,
+    pub energy_ratio: f64,
+}
+
+/// The volumes family's sweep (`passes::FAMILIES` registers it): every
+/// scene with a `[[volume]]` (and no sea or glass, whose sweeps take those).
+pub struct VolumesSweep;
+
+impl crate::bench::Sweep for VolumesSweep {
+    fn default_scenes(&self) -> &'static [&'static str] {
+        &["cloud_cumulus", "cloud_automaton"]
+    }
+    fn takes(&self, s: &SceneData) -> bool {
+        s.volumes.enabled && !s.sea.enabled && s.glass_vertices.is_empty()
+    }
+    fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
+        // The Monte Carlo reference costs ~0.1 s a pixel on a dense cloud:
+        // at most every 8th pixel each way.
+        run(scenes, &opts.backends, opts.repeats, opts.stride.max(8), opts.quick, &opts.out_dir)?;
+        Ok(vec![opts.out_dir.join("volumes_bench.csv"), opts.out_dir.join("volumes_time_vs_error.png")])
+    }
+}
+
+/// Runs the sweep over `scenes` and writes `volumes_bench.csv` and
+/// `volumes_time_vs_error.png` into `out_dir`.
+pub fn run(
+    scenes: &[BenchScene],
+    backends: &[Backend],
+    repeats: usize,
+    stride: u32,
+    quick: bool,
+    out_dir: &Path,
+) -> Result<Vec<Row>> {
+    let mut rows = Vec::new();
+    for BenchScene { path, name, data } in scenes {
+        anyhow::ensure!(data.volumes.enabled, "{}: no [[volume]] to benchmark", path.display());
+        let w = data.width();
+        let pixels: Vec<u32> = (0..data.height())
+            .step_by(stride as usize)
+            .flat_map(|y| (0..w).step_by(stride as usize).map(move |x| y * w + x))
+            .collect();
+        let mut references = Vec::new();
+        for octaves in [1, 8] {
+            let d = configure(data, &Config { series: "", planes: None, light_grid: None, octaves })?;
+            let t = std::time::Instant::now();
+            let (values, _) =
+                crate::reference::render_converged_at(&d, &pixels, if octaves == 1 { 2e-4 } else { 3e-3 });
+            eprintln!(
+                "{name}: {} reference at {} pixels, {:.1} s",
+                if octaves == 1 { "single-scattering" } else { "Monte Carlo" },
+                pixels.len(),
+                t.elapsed().as_secs_f64()
+            );
+            references.push(values);
+        }
+        for backend in backends {
+            for c in sweep(quick) {
+                let d = configure(data, &c)?;
+                let grids: &[&dyn Pass] =
+                    &[&super::automaton::Steps, &super::automaton::Smooth, &super::Density, &super::OpticalDepth];
+                let timed = time_renders(&d, backend, repeats, &[grids, &[&super::Volumes]])?;
+                let img = &timed.last.image;
+                let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
+                let reference = &references[if c.series == "octaves" { 1 } else { 0 }];
+                let diff = crate::metrics::difference(&at, reference, data.exposure);
+                let row = Row {
+                    scene: name.clone(),
+                    backend: backend.name(),
+                    width: data.width(),
+                    height: data.height(),
+                    config: c,
+                    median_seconds: timed.total_seconds,
+                    grids_median_seconds: timed.group_seconds[0],
+                    volumes_median_seconds: timed.group_seconds[1],
+                    rms_8bit_percent: diff.rms_8bit_percent,
+                    max_8bit_percent: diff.max_8bit_percent,
+                    energy_ratio: diff.energy_ratio,
+                };
+                eprintln!(
+                    "{name:>16} {:>4} {:<10} planes={:<5} light-grid={:<5} octaves={:<2} {:>8.4} s (grids {:.4} s, volumes {:.4} s)  rms {:.3}%  max {:.2}%  energy {:.3}",
+                    row.backend,
+                    c.series,
+                    c.planes.map_or("auto".to_string(), |n| n.to_string()),
+                    c.light_grid.map_or("auto".to_string(), |n| n.to_string()),
+                    c.octaves,
+                    row.median_seconds,
+                    row.grids_median_seconds,
+                    row.volumes_median_seconds,
+                    row.rms_8bit_percent,
+                    row.max_8bit_percent,
+                    row.energy_ratio
+                );
+                rows.push(row);
+            }
+        }
+    }
+    write_csv(&out_dir.join("volumes_bench.csv"), &rows)?;
+    plot(&out_dir.join("volumes_time_vs_error.png"), &rows)?;
+    Ok(rows)
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
+    let mut out = Vec::new();
+    writeln!(
+        out,
+        "scene,width,height,backend,series,planes,light_grid,octaves,median_seconds,grids_median_seconds,volumes_median_seconds,rms_8bit_percent,max_8bit_percent,energy_ratio"
+    )?;
+    let auto = |v: Option<u32>| v.map_or("auto".to_string(), |n| n.to_string());
+    for r in rows {
+        let c = &r.config;
+        writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5}",
+            r.scene,
+            r.width,
+            r.height,
+            r.backend,
+            c.series,
+            auto(c.planes),
+            auto(c.light_grid),
+            c.octaves,
+            r.median_seconds,
+            r.grids_median_seconds,
+            r.volumes_median_seconds,
+            r.rms_8bit_percent,
+            r.max_8bit_percent,
+            r.energy_ratio
+        )?;
+    }
+    crate::output::write_atomically(path, &out)
+}
+
+/// Error against the median render time, one line per scene, backend and
+/// series.
+fn plot(path: &Path, rows: &[Row]) -> Result<()> {
+    let series = crate::bench::series_of(
+        rows,
+        |r| format!("{} ({}, {})", r.scene, r.backend, r.config.series),
+        |r| (r.median_seconds, r.rms_8bit_percent),
+    );
+    let labels = crate::bench::LogLogPlot {
+        caption: "Volumes: run time against error (RMS % of the 8-bit range)",
+        x_desc: "median render time, s",
+        y_desc: "RMS error, % of 255",
+    };
+    crate::bench::plot_log_log(path, &labels, &series, 1e-4)
+}

@@ -105,6 +105,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("cloud_cumulus", sky("cloud_cumulus", 160, 120)),
         ("cloud_automaton", sky("cloud_automaton", 160, 120)),
         ("cloud_grid", sky("cloud_grid", 160, 120)),
+        ("cloud_sea", sky("cloud_sea", 160, 120)),
     ]
 }
 

@@ -221,18 +221,19 @@ fn stress_image_sizes() {
     let p = &big.sea.params;
     let blank = slicelight_shaders::common::surface::no_surface();
     let waves = &big.sea.waves;
+    let clouds = slicelight_shaders::sea::CloudShadow { lights: &big.lights, grids: &[], depths: &[] };
     let n = 8192u32;
     for (x, y) in [(0, 0), (n - 1, 0), (0, n - 1), (n - 1, n - 1), (n / 2, n / 2), (n / 2, n - 1), (0, n / 2)] {
         let i = y * n + x;
         for v in [
-            slicelight_shaders::sea::order1_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank),
-            slicelight_shaders::sea::bottom_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank),
+            slicelight_shaders::sea::order1_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank, &clouds),
+            slicelight_shaders::sea::bottom_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank, &clouds),
         ] {
             assert!(v.is_finite() && v.min_element() >= 0.0, "pixel ({x}, {y}): {v}");
         }
         // The lower half of the image looks down at the sea.
         if y > n / 2 + 8 {
-            let v = slicelight_shaders::sea::order1_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank);
+            let v = slicelight_shaders::sea::order1_pixel(i, &big.common, p, waves, &big.sea.bottom, &blank, &clouds);
             assert!(v.max_element() > 0.0, "pixel ({x}, {y}) misses the sea");
         }
     }

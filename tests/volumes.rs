@@ -543,3 +543,58 @@ fn bad_grids_name_the_file_and_field() {
     let e = load(&vol_bytes(&good), "resolution = [4, 4, 4]").unwrap_err();
     assert!(e.contains("volume[0].resolution"), "{e}");
 }
+
+/// The clouds' shadow on the sea: in `cloud_sea` (single scattering) each
+/// pixel's order-1 sea light over the same scene without the cloud is the
+/// sun's transmittance through the cloud at the surface point (times the
+/// view's through the cloud, where the sea is seen through it), which the
+/// reference marches in f64 through the grid's field. Measured: 225 pixels,
+/// RMS 0.0040, worst 0.024 (on the shadow's edge); the bounds, 0.03 and
+/// 0.2, allow the transmittance volume's trilinear interpolation there.
+#[test]
+fn clouds_shade_the_sea() {
+    let data = shipped("cloud_sea", 64, 48)
+        .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
+        .unwrap();
+    assert!(data.sea.params.sun_light > 0);
+    let order1 = |d: &SceneData| -> Vec<glam::Vec4> {
+        let r = slicelight::render::render_layers(d, &Backend::Cpu, false).unwrap();
+        r.layers.iter().find(|(n, _)| *n == "sea.order1").unwrap().1.as_slice::<glam::Vec4>().to_vec()
+    };
+    let shaded = order1(&data);
+    // The same scene with the cloud's box moved far behind the camera.
+    let clear = data
+        .reconfigure(|f| {
+            f.volume[0].min = [-900.0, 700.0, 90000.0];
+            f.volume[0].max = [900.0, 1600.0, 91800.0];
+        })
+        .unwrap();
+    let open = order1(&clear);
+    assert_eq!(clear.sea.params.sun_light, data.sea.params.sun_light);
+    let light = &data.lights[data.sea.params.sun_light as usize - 1];
+    let (mut n, mut sum2, mut worst) = (0, 0.0f64, 0.0f64);
+    for (i, (a, b)) in shaded.iter().zip(&open).enumerate() {
+        if b.x <= 0.0 {
+            continue;
+        }
+        let (o, d) = slicelight::shaders::camera::camera_ray(&data.common, i as u32 % 64, i as u32 / 64);
+        let t = (data.sea.params.level - o.y) / d.y;
+        let hit = (o + d * t).as_dvec3();
+        let to_light = -light.axis_z.truncate().as_dvec3();
+        let local_z = (hit - light.position.truncate().as_dvec3()).dot(light.axis_z.truncate().as_dvec3());
+        // The layer is the light reaching the eye: seen through the cloud
+        // too where the view ray crosses it.
+        let view = slicelight::volumes::reference::transmittance_toward(&data, o.as_dvec3(), d.as_dvec3(), t as f64).x;
+        let exact = view * slicelight::volumes::reference::transmittance_toward(&data, hit, to_light, local_z).x;
+        let ratio = (a.x / b.x) as f64;
+        if exact < 0.99 || ratio < 0.99 {
+            n += 1;
+            sum2 += (ratio - exact).powi(2);
+            worst = worst.max((ratio - exact).abs());
+        }
+    }
+    let rms = (sum2 / n.max(1) as f64).sqrt();
+    println!("cloud_sea 64x48: {n} shaded sea pixels, transmittance ratio against the f64 march: RMS {rms:.4}, worst {worst:.4}");
+    assert!(n > 20, "only {n} pixels of the sea in the cloud's shadow");
+    assert!(rms < 0.03 && worst < 0.2, "rms {rms}, worst {worst}");
+}

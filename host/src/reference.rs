@@ -394,7 +394,16 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     } else {
         sea.order2(view)
     };
-    let below = sea.order1(view) + second + bottom;
+    // The clouds' shadow on the water at the surface point (the sun's
+    // transmittance through the volumes, marched in f64).
+    let clouds = match p.sun_light {
+        0 => DVec3::ONE,
+        l => {
+            let (_, to_light, distance) = toward_light(&data.lights[l as usize - 1], hit);
+            crate::volumes::reference::transmittance_toward(data, hit, to_light, distance)
+        }
+    };
+    let below = (sea.order1(view) + second + bottom) * clouds;
     sky * r + below * ((1.0 - r) / (n * n))
 }
 

@@ -352,6 +352,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     // colour after the air it crosses to the observer.
     let mut directionals: Vec<DirectionalLight> = Vec::new();
     let sun_lights = file.sky.as_ref().is_some_and(|s| s.light_scene) && light_bounds.is_some();
+    let sun_added = sky.sun_at_observer().is_some() && sun_lights;
     if let Some((irradiance, toward)) = sky.sun_at_observer().filter(|_| sun_lights) {
         directionals.push(DirectionalLight {
             direction: (-toward).into(),
@@ -411,5 +412,11 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;
     data.caustics = crate::caustics::configure(&file.caustics, &data).map_err(|e| anyhow!("caustics.{e}"))?;
     data.volumes = crate::volumes::configure(&file.volume, &file.volumes, &data, base)?;
+    // Clouds shade the sea through the sun's transmittance volume: the sun
+    // is the last light (`lights::build` adds the directional lights last,
+    // the sky's sun after the file's).
+    if data.sea.enabled && data.volumes.enabled && sun_added {
+        data.sea.params.sun_light = data.lights.len() as u32;
+    }
     Ok(data)
 }

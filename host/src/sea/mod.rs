@@ -19,7 +19,7 @@ use slicelight_shaders::optics;
 use slicelight_shaders::sea::{
     accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, layer_params, map_coords, order1_pixel,
     order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
-    scattering_map_texel, scattering_source, set_size, sun_azimuth_frame, SeaParams, DEEP, WAVES_FLAT,
+    scattering_map_texel, scattering_source, set_size, sun_azimuth_frame, CloudShadow, SeaParams, DEEP, WAVES_FLAT,
     WAVES_NORMAL_MAP,
 };
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
@@ -574,7 +574,8 @@ pub fn configure(
         shallow: grid.as_ref().map_or(0.0, |g| g.shallow),
         table_width: if grid.is_some() && s.second_order { s.depth_table } else { 0 },
         table_height: if grid.is_some() && s.second_order { table_rows(s.depth_table, common) } else { 0 },
-        _pad: [0; 2],
+        sun_light: 0,
+        _pad: 0,
     };
     let sampling = if s.second_order { choose_sampling(&mut params, s.planes, polar) } else { Vec::new() };
     check_table_size(&params, s.depth_table)?;
@@ -915,20 +916,25 @@ impl Pass for SeaReflection {
 /// parameters and waves, and optionally the accumulated map and the depth
 /// table's correction (empty where their passes did not run).
 fn run_term(
+    scene: &SceneData,
     common: &CommonParams,
     frame: &mut Frame,
     progress: &ProgressBar,
     out: &Resource,
-    term: impl Fn(u32, &GBufferTexel, &[Vec4], &[Vec4]) -> Vec4 + Sync,
+    term: impl Fn(u32, &GBufferTexel, &[Vec4], &[Vec4], &CloudShadow) -> Vec4 + Sync,
 ) {
     let blank = slicelight_shaders::common::surface::no_surface();
     frame.write_all::<Vec4>(out, common.band_pixels as usize, |frame, values| {
         let maps = frame.get::<Vec4>(&SEA_ACCUMULATED_MAP);
         let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION);
         let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+        // The clouds' shadow where the volumes' transmittance volumes ran.
+        let depths = frame.get::<Vec4>(&crate::volumes::OPTICAL_DEPTHS);
+        let grids: &[_] = if depths.is_empty() { &[] } else { &scene.volumes.grids };
+        let clouds = CloudShadow { lights: &scene.lights, grids, depths };
         for_each_invocation(values, common.band_start, progress, |i, v| {
             let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-            *v = term(i, texel, maps, correction);
+            *v = term(i, texel, maps, correction, &clouds);
         });
     });
 }
@@ -943,7 +949,16 @@ impl Pass for SeaOrder1 {
         "sea::order1_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_BOTTOM_GRID]
+        resources![
+            COMMON,
+            GBUFFER,
+            SEA_PARAMS,
+            SEA_WAVES,
+            SEA_BOTTOM_GRID,
+            LIGHTS,
+            crate::volumes::LIGHT_GRIDS,
+            crate::volumes::OPTICAL_DEPTHS
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_ORDER1]
@@ -969,7 +984,9 @@ impl Pass for SeaOrder1 {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        run_term(common, frame, progress, &SEA_ORDER1, |i, t, _, _| order1_pixel(i, common, p, waves, bottom, t));
+        run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, _, _, c| {
+            order1_pixel(i, common, p, waves, bottom, t, c)
+        });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea order 1", &SEA_ORDER1, gpu, cpu)
@@ -986,7 +1003,18 @@ impl Pass for SeaOrder2 {
         "sea::order2_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_ACCUMULATED_MAP, SEA_BOTTOM_GRID, SEA_BOTTOM_CORRECTION]
+        resources![
+            COMMON,
+            GBUFFER,
+            SEA_PARAMS,
+            SEA_WAVES,
+            SEA_ACCUMULATED_MAP,
+            SEA_BOTTOM_GRID,
+            SEA_BOTTOM_CORRECTION,
+            LIGHTS,
+            crate::volumes::LIGHT_GRIDS,
+            crate::volumes::OPTICAL_DEPTHS
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_ORDER2]
@@ -1014,8 +1042,8 @@ impl Pass for SeaOrder2 {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        run_term(common, frame, progress, &SEA_ORDER2, |i, t, maps, correction| {
-            order2_pixel(i, common, p, waves, bottom, maps, correction, t)
+        run_term(scene, common, frame, progress, &SEA_ORDER2, |i, t, maps, correction, c| {
+            order2_pixel(i, common, p, waves, bottom, maps, correction, t, c)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
@@ -1033,7 +1061,16 @@ impl Pass for SeaBottom {
         "sea::bottom_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_BOTTOM_GRID]
+        resources![
+            COMMON,
+            GBUFFER,
+            SEA_PARAMS,
+            SEA_WAVES,
+            SEA_BOTTOM_GRID,
+            LIGHTS,
+            crate::volumes::LIGHT_GRIDS,
+            crate::volumes::OPTICAL_DEPTHS
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_BOTTOM]
@@ -1070,7 +1107,9 @@ impl Pass for SeaBottom {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        run_term(common, frame, progress, &SEA_BOTTOM, |i, t, _, _| bottom_pixel(i, common, p, waves, bottom, t));
+        run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, _, _, c| {
+            bottom_pixel(i, common, p, waves, bottom, t, c)
+        });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea bottom", &SEA_BOTTOM, gpu, cpu)

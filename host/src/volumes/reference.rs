@@ -106,7 +106,7 @@ fn optical_depth(data: &SceneData, p: DVec3, dir: DVec3, distance: f64, samples:
 /// along `dir` (unit) for `distance` metres: 1 without volumes, else
 /// `exp(-tau)` with `tau` by 256 jittered strata (the references' shadows
 /// of the volumes on surfaces).
-pub(crate) fn transmittance_toward(data: &SceneData, p: DVec3, dir: DVec3, distance: f64) -> DVec3 {
+pub fn transmittance_toward(data: &SceneData, p: DVec3, dir: DVec3, distance: f64) -> DVec3 {
     if !data.volumes.enabled {
         return DVec3::ONE;
     }

@@ -61,7 +61,8 @@ use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::optics::{reflectance, refract};
 use crate::phase::henyey_greenstein;
 use crate::sky::{sky_radiance, sun_disk, SkyParams};
-use crate::types::{CommonParams, GBufferTexel, NO_OBJECT};
+use crate::types::{CommonParams, GBufferTexel, GpuLight, NO_OBJECT};
+use crate::volumes::{light_transmittance, LightGrid};
 use core::f32::consts::{FRAC_1_PI, FRAC_PI_2, PI};
 use spirv_std::spirv;
 
@@ -122,7 +123,11 @@ pub struct SeaParams {
     /// as flat).
     pub table_width: u32,
     pub table_height: u32,
-    pub _pad: [u32; 2],
+    /// The sun's light (its index in the lights, plus one) when clouds
+    /// shade the sea through its transmittance volume (`CloudShadow`); 0:
+    /// no volumes.
+    pub sun_light: u32,
+    pub _pad: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
@@ -779,6 +784,35 @@ pub fn reflection_pixel(
     (sky_light * v.reflectance).extend(0.0)
 }
 
+/// The volumes' shadow on the water: the sun's transmittance through them
+/// to a point of the surface (`volumes::light_transmittance`), which
+/// multiplies the sunlight below the surface there (orders 1 and 2 and the
+/// bottom; locally, as if the shadow were wide against the light's depth in
+/// the water). The reflected sky and sun are not shaded.
+pub struct CloudShadow<'a> {
+    pub lights: &'a [GpuLight],
+    pub grids: &'a [LightGrid],
+    pub depths: &'a [Vec4],
+}
+
+impl CloudShadow<'_> {
+    /// The transmittance (rgb) at the surface point `point`: 1 without
+    /// volumes.
+    pub fn at(&self, p: &SeaParams, point: Vec3) -> Vec3 {
+        if p.sun_light == 0 {
+            return Vec3::ONE;
+        }
+        let l = (p.sun_light - 1) as usize;
+        #[cfg(target_arch = "spirv")]
+        let copy = self.lights[l];
+        #[cfg(target_arch = "spirv")]
+        let light = &copy;
+        #[cfg(not(target_arch = "spirv"))]
+        let light = &self.lights[l];
+        light_transmittance(self.grids, self.depths, light, l, point).xyz()
+    }
+}
+
 /// Per-pixel kernel, `sea.order1`: single scattering down to where the
 /// view ray meets the bottom (section 5.4: eq. 5 with `z_Q` for `z_d`), above
 /// the surface.
@@ -789,13 +823,15 @@ pub fn order1_pixel(
     waves: &[Vec4],
     bottom: &[f32],
     texel: &GBufferTexel,
+    clouds: &CloudShadow,
 ) -> Vec4 {
     let v = sea_view(index, common, p, waves, texel);
     if !v.hit {
         return Vec4::ZERO;
     }
     let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
-    (order1_radiance(p, v.view, depth, p.order1_extinction.xyz()) * v.transmission).extend(0.0)
+    let shade = clouds.at(p, v.point);
+    (order1_radiance(p, v.view, depth, p.order1_extinction.xyz()) * v.transmission * shade).extend(0.0)
 }
 
 /// The weight of layer `j + 1` for a bottom at `depth` between layers `j`
@@ -842,6 +878,7 @@ pub fn order2_pixel(
     accumulated: &[Vec4],
     correction: &[Vec4],
     texel: &GBufferTexel,
+    clouds: &CloudShadow,
 ) -> Vec4 {
     let v = sea_view(index, common, p, waves, texel);
     if !v.hit {
@@ -892,7 +929,7 @@ pub fn order2_pixel(
             value = (value + crate::sea::table::correction_at(p, common, correction, position)).max(Vec3::ZERO);
         }
     }
-    (value * v.transmission).extend(0.0)
+    (value * v.transmission * clouds.at(p, v.point)).extend(0.0)
 }
 
 /// Per-pixel kernel, `sea.bottom`: the bottom's reflection of the refracted
@@ -904,13 +941,14 @@ pub fn bottom_pixel(
     waves: &[Vec4],
     bottom: &[f32],
     texel: &GBufferTexel,
+    clouds: &CloudShadow,
 ) -> Vec4 {
     let v = sea_view(index, common, p, waves, texel);
     if !v.hit {
         return Vec4::ZERO;
     }
     let (depth, cos_gamma) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
-    (bottom_radiance(p, v.view, depth, cos_gamma) * v.transmission).extend(0.0)
+    (bottom_radiance(p, v.view, depth, cos_gamma) * v.transmission * clouds.at(p, v.point)).extend(0.0)
 }
 
 #[spirv(compute(threads(64)))]
@@ -998,12 +1036,23 @@ pub fn order1_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 24)] radiance: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
-        radiance[index as usize] =
-            order1_pixel(common.band_start + index, common, &params[0], waves, bottom, &gbuffer[index as usize]);
+        let clouds = CloudShadow { lights, grids, depths };
+        radiance[index as usize] = order1_pixel(
+            common.band_start + index,
+            common,
+            &params[0],
+            waves,
+            bottom,
+            &gbuffer[index as usize],
+            &clouds,
+        );
     }
 }
 
@@ -1020,10 +1069,14 @@ pub fn order2_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 38)] correction: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 25)] radiance: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
+        let clouds = CloudShadow { lights, grids, depths };
         radiance[index as usize] = order2_pixel(
             common.band_start + index,
             common,
@@ -1033,6 +1086,7 @@ pub fn order2_kernel(
             accumulated,
             correction,
             &gbuffer[index as usize],
+            &clouds,
         );
     }
 }
@@ -1048,12 +1102,23 @@ pub fn bottom_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 26)] radiance: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
-        radiance[index as usize] =
-            bottom_pixel(common.band_start + index, common, &params[0], waves, bottom, &gbuffer[index as usize]);
+        let clouds = CloudShadow { lights, grids, depths };
+        radiance[index as usize] = bottom_pixel(
+            common.band_start + index,
+            common,
+            &params[0],
+            waves,
+            bottom,
+            &gbuffer[index as usize],
+            &clouds,
+        );
     }
 }
 

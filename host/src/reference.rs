@@ -485,7 +485,8 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f6
                 continue;
             }
             let attenuation = (-sigma_t * (distance + t)).exp();
-            sum += e * sigma_s * attenuation * (phase(data, to_light.dot(d)) * falloff);
+            let clouds = crate::volumes::reference::transmittance_strata(data, point, to_light, distance, 32);
+            sum += e * sigma_s * attenuation * clouds * (phase(data, to_light.dot(d)) * falloff);
         }
     }
     sum * dt

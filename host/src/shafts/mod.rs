@@ -310,7 +310,18 @@ impl Pass for Shafts {
         }
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, LIGHTS, LIGHT_MAPS, SHADOW_MAPS, GBUFFER, SHAFTS_PARAMS, SHAFT_TABLES, SHAFT_TILES]
+        resources![
+            COMMON,
+            LIGHTS,
+            LIGHT_MAPS,
+            SHADOW_MAPS,
+            GBUFFER,
+            SHAFTS_PARAMS,
+            SHAFT_TABLES,
+            SHAFT_TILES,
+            crate::volumes::LIGHT_GRIDS,
+            crate::volumes::OPTICAL_DEPTHS
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SHAFTS_RADIANCE]
@@ -366,9 +377,14 @@ impl Pass for Shafts {
             let pixel =
                 if uses_paper_modes(&s.params) { shafts_pixel::<true, true> } else { shafts_pixel::<false, true> };
             let tiles = frame.get::<u32>(&SHAFT_TILES);
+            // The volumes' shadows where their transmittance volumes ran.
+            let depths = frame.get::<Vec4>(&crate::volumes::OPTICAL_DEPTHS);
+            let grids: &[_] = if depths.is_empty() { &[] } else { &scene.volumes.grids };
+            let inputs =
+                slicelight_shaders::common::surface::LightInputs { light_map: &scene.light_map, shadow, grids, depths };
             for_each_invocation(out, common.band_start, progress, |i, px| {
                 let distance = gbuffer[(i - common.band_start) as usize].normal_distance.w;
-                *px = pixel(i, common, &s.params, &scene.lights, &scene.light_map, shadow, &s.tables, tiles, distance);
+                *px = pixel(i, common, &s.params, &scene.lights, &inputs, &s.tables, tiles, distance);
             });
         });
     }

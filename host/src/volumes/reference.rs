@@ -105,13 +105,19 @@ fn optical_depth(data: &SceneData, p: DVec3, dir: DVec3, distance: f64, samples:
 /// The transmittance (rgb) through the volumes from `p` toward a light
 /// along `dir` (unit) for `distance` metres: 1 without volumes, else
 /// `exp(-tau)` with `tau` by 256 jittered strata (the references' shadows
-/// of the volumes on surfaces).
+/// of the volumes on surfaces and the sea).
 pub fn transmittance_toward(data: &SceneData, p: DVec3, dir: DVec3, distance: f64) -> DVec3 {
+    transmittance_strata(data, p, dir, distance, 256)
+}
+
+/// `transmittance_toward` with `strata` strata (the fog's samples take 32
+/// each: they are many, and their jitter differs from sample to sample).
+pub fn transmittance_strata(data: &SceneData, p: DVec3, dir: DVec3, distance: f64, strata: u32) -> DVec3 {
     if !data.volumes.enabled {
         return DVec3::ONE;
     }
     let seed = p.x.to_bits() ^ p.y.to_bits().rotate_left(21) ^ p.z.to_bits().rotate_left(42);
-    (-optical_depth(data, p, dir, distance, 256, seed)).exp()
+    (-optical_depth(data, p, dir, distance, strata, seed)).exp()
 }
 
 /// The volumes' radiance toward the camera along the ray `o + t d` up to

@@ -17,12 +17,14 @@
 use spirv_std::num_traits::Float;
 
 use crate::camera::{camera_ray, pinhole_direction, pixel_ndc};
+use crate::common::surface::LightInputs;
 use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::light::{emitted_visible, emitted_visible4, light_local, transmittance, Lanes};
 use crate::phase;
 use crate::types::{
     CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, PROJECTION_FISHEYE,
 };
+use crate::volumes::{light_transmittance, LightGrid};
 use core::f32::consts::PI;
 use spirv_std::spirv;
 
@@ -496,12 +498,12 @@ pub fn shafts_pixel<const PAPER: bool, const PACKED: bool>(
     common: &CommonParams,
     params: &ShaftsParams,
     lights: &[GpuLight],
-    light_map: &[Vec4],
-    shadow: &[f32],
+    inputs: &LightInputs,
     tables: &[Vec4],
     tiles: &[u32],
     surface_distance: f32,
 ) -> Vec4 {
+    let (light_map, shadow) = (inputs.light_map, inputs.shadow);
     let x = index % common.width;
     let y = index / common.width;
     let lit = tiles[((y / TILE) * tiles_across(common) + x / TILE) as usize];
@@ -577,7 +579,10 @@ pub fn shafts_pixel<const PAPER: bool, const PACKED: bool>(
                             j += 1;
                         }
                     }
-                    let j_mean = j_sum / sub as f32;
+                    // The volumes' shadow (clouds over the haze: shafts
+                    // beneath them), once per interval at its middle.
+                    let clouds = light_transmittance(inputs.grids, inputs.depths, light, l, o + d * (0.5 * (a + b)));
+                    let j_mean = j_sum * clouds / sub as f32;
                     samples += sub;
                     let g = if directional {
                         // g at the interval's middle: nothing in it varies
@@ -643,6 +648,8 @@ macro_rules! shafts_entry_point {
             #[spirv(storage_buffer, descriptor_set = 0, binding = 11)] tables: &[Vec4],
             #[spirv(storage_buffer, descriptor_set = 0, binding = 12)] radiance: &mut [Vec4],
             #[spirv(storage_buffer, descriptor_set = 0, binding = 39)] tiles: &[u32],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
         ) {
             let index = crate::flat_index(id, groups);
             let common = &common[0];
@@ -653,8 +660,7 @@ macro_rules! shafts_entry_point {
                     common,
                     &params[0],
                     lights,
-                    light_map,
-                    shadow,
+                    &LightInputs { light_map, shadow, grids, depths },
                     tables,
                     tiles,
                     distance,

@@ -672,3 +672,72 @@ fn volumes_shadow_the_fog() {
     assert!(shadow > 0.005, "the view must cross the shadow: {shadow}");
     assert!(rms < 0.25 * shadow, "{rms} against a shadow of {shadow}");
 }
+
+/// Fog in front of a volume is not hidden by it: a puff in a scattering
+/// medium seen by rays that cross its box, against the reference, which
+/// sees each fog sample through the volumes in front of it only. Measured:
+/// 0.42 % RMS, 1.2 % max (8-bit), energy 0.968 over 196 pixels; before the
+/// fog's share (`Pass::spans_the_view_ray`), when the fog in front was
+/// dimmed by the whole crossing as the fog behind is, 2.99 % RMS and
+/// energy 0.808 (the bound, 1 %, fails that). What is left is the fog's
+/// light weighted as if uniform along the ray.
+#[test]
+fn fog_in_front_of_a_volume_is_not_hidden() {
+    let data = common::scene_from_str(
+        r#"
+        [camera]
+        position = [0.0, 1.5, 9.0]
+        look_at = [0.0, 1.5, 0.0]
+        vfov_deg = 30.0
+        resolution = [40, 30]
+        [medium]
+        sigma_s = [0.1, 0.1, 0.1]
+        sigma_t = [0.12, 0.12, 0.12]
+        [[directional_light]]
+        direction = [0.3, -1.0, -0.4]
+        irradiance = [2.0, 2.0, 2.0]
+        [[object]]
+        type = "quad"
+        center = [0.0, 0.0, 0.0]
+        u = [30.0, 0.0, 0.0]
+        v = [0.0, 0.0, 30.0]
+        [[volume]]
+        min = [-1.0, 0.5, -1.0]
+        max = [1.0, 2.5, 1.0]
+        sigma_s = [4.0, 4.0, 4.0]
+        sigma_t = [4.0, 4.0, 4.0]
+        metaballs = [[0.0, 1.5, 0.0, 0.95, 1.0]]
+        [volumes]
+        scattering = "single"
+        "#,
+    );
+    let (w, h) = (data.width(), data.height());
+    let v = &data.volumes.volumes[0];
+    let through: Vec<u32> = (0..w * h)
+        .filter(|&i| {
+            let (o, d) = slicelight::shaders::camera::camera_ray(&data.common, i % w, i / w);
+            let (near, far) = slicelight::shaders::geometry::box_span(
+                o,
+                glam::Vec3::ONE / d,
+                v.min.truncate(),
+                v.max.truncate(),
+                0.0,
+                f32::MAX,
+            );
+            near < far
+        })
+        .collect();
+    let image = to_f64(&cpu_image(&data));
+    let (reference, _) = slicelight::reference::render_converged_at(&data, &through, 1e-3);
+    let method: Vec<_> = through.iter().map(|&i| image[i as usize]).collect();
+    let d = difference(&method, &reference, data.exposure);
+    println!(
+        "fog around a puff, {} pixels through its box: {:.3} % RMS, {:.3} % max (8-bit), energy {:.4}",
+        through.len(),
+        d.rms_8bit_percent,
+        d.max_8bit_percent,
+        d.energy_ratio
+    );
+    assert!(through.len() > 50);
+    assert!(d.rms_8bit_percent < 1.0, "{d:?}");
+}

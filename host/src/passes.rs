@@ -205,6 +205,14 @@ pub trait Pass: Sync {
     fn radiance_layer(&self) -> Option<&'static Resource> {
         None
     }
+    /// Whether its radiance layer is light gathered all along the view ray
+    /// (a homogeneous medium's in-scattering) rather than light from where
+    /// the ray ends: a later pass's transmittance layer then attenuates it
+    /// by its `w`, the share of such light the medium in front lets through,
+    /// instead of by the transmittance to the ray's end (rgb).
+    fn spans_the_view_ray(&self) -> bool {
+        false
+    }
     /// Dispatches of a `Whole` pass per frame: a simulation's steps. After
     /// each, the GPU copies every `carry` pair (what the step wrote, over
     /// what the next step reads); the CPU path runs all the steps itself.
@@ -215,8 +223,9 @@ pub trait Pass: Sync {
     fn carry(&self) -> &'static [(&'static Resource, &'static Resource)] {
         &[]
     }
-    /// The per-pixel transmittance (rgb) of what the pass renders, if it
-    /// hides what lies behind it (a participating medium in front of the
+    /// The per-pixel transmittance (rgb; `w`: the share of light gathered
+    /// along the whole ray that passes, see `spans_the_view_ray`) of what
+    /// the pass renders, if it hides what lies behind it (a participating medium in front of the
     /// surfaces and the sky): the renderer multiplies the radiance layers
     /// of every per-pixel pass that runs before it by it, sample by sample,
     /// before they are summed (so each layer holds the light that reaches

@@ -450,7 +450,8 @@ pub(crate) fn unit_from_hash(mut h: u64) -> f64 {
 /// In-scattered radiance along the ray of one sub-pixel sample (eq. 2,
 /// summed over lights), with `samples` stratified samples over the ray up to
 /// `t_surface`, f64. Every sample casts a shadow ray to every light that
-/// lights it.
+/// lights it; with volumes, the light toward it and the view from it pass
+/// through them (nested marches of the analytic field).
 pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f64, samples: u32) -> DVec3 {
     let p = &data.common;
     let sigma_s = d3(p.sigma_s);
@@ -474,6 +475,8 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f6
     for k in 0..samples {
         let t = t0 + (k as f64 + jitter(pixel, k, samples)) * dt;
         let point = o + d * t;
+        // The volumes in front of the sample hide its light (1 without).
+        let view = crate::volumes::reference::transmittance_strata(data, o, d, t, 32);
         for light in &data.lights {
             let (local, to_light, distance) = toward_light(light, point);
             let e = emitted(data, light, local);
@@ -486,7 +489,7 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f6
             }
             let attenuation = (-sigma_t * (distance + t)).exp();
             let clouds = crate::volumes::reference::transmittance_strata(data, point, to_light, distance, 32);
-            sum += e * sigma_s * attenuation * clouds * (phase(data, to_light.dot(d)) * falloff);
+            sum += e * sigma_s * attenuation * clouds * (phase(data, to_light.dot(d)) * falloff) * view;
         }
     }
     sum * dt
@@ -514,15 +517,17 @@ pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> 
             rays.par_iter()
                 .zip(&surfaces)
                 .map(|(&(i, s), &(surface, t))| {
-                    let behind = surface + inscatter_pixel(data, i % w, i / w, s, t, samples);
+                    // The fog's light, each sample seen through the volumes
+                    // in front of it.
+                    let fog = inscatter_pixel(data, i % w, i / w, s, t, samples);
                     match camera_ray(data, i % w, i / w, s).filter(|_| data.volumes.enabled) {
-                        // What lies behind the volumes is seen through them.
+                        // The surface behind the volumes is seen through them.
                         Some((o, d)) => {
                             let ray = i as u64 * spp as u64 + s as u64;
                             let (l, through) = crate::volumes::reference::volume_ray(data, o, d, t, samples, ray);
-                            behind * through + l
+                            surface * through + fog + l
                         }
-                        None => behind,
+                        None => surface + fog,
                     }
                 })
                 .collect(),

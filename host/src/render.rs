@@ -184,7 +184,13 @@ fn attenuate(running: &[Running], frame: &mut Frame) {
         let Some(t) = pass.transmittance_layer().and_then(|t| frame.remove(t).map(|b| (t, b))) else {
             continue;
         };
-        for behind in per_pixel[..k].iter().filter_map(|p| p.radiance_layer()) {
+        for earlier in &per_pixel[..k] {
+            let Some(behind) = earlier.radiance_layer() else {
+                continue;
+            };
+            // Light gathered all along the ray passes the medium in front
+            // of each of its points only: the share in `w`.
+            let along = earlier.spans_the_view_ray();
             if let Some(mut layer) = frame.remove(behind) {
                 layer
                     .as_mut_slice::<Vec4>()
@@ -192,7 +198,8 @@ fn attenuate(running: &[Running], frame: &mut Frame) {
                     .zip(t.1.as_slice::<Vec4>().par_chunks(PIXEL_CHUNK))
                     .for_each(|(l, t)| {
                         for (l, t) in l.iter_mut().zip(t) {
-                            *l = (l.truncate() * t.truncate()).extend(l.w);
+                            let through = if along { glam::Vec3::splat(t.w) } else { t.truncate() };
+                            *l = (l.truncate() * through).extend(l.w);
                         }
                     });
                 frame.insert(behind, layer);

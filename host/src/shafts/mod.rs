@@ -329,6 +329,9 @@ impl Pass for Shafts {
     fn dispatch(&self) -> Dispatch {
         Dispatch::PerPixel
     }
+    fn spans_the_view_ray(&self) -> bool {
+        true
+    }
     fn radiance_layer(&self) -> Option<&'static Resource> {
         Some(&SHAFTS_RADIANCE)
     }

@@ -477,14 +477,19 @@ pub fn volumes_pixel(index: u32, common: &CommonParams, inputs: &VolumeInputs, s
     }
     t_hi = t_hi.min(surface_distance);
     let mut radiance = Vec4::ZERO;
-    let mut view = Vec4::new(1.0, 1.0, 1.0, 0.0);
+    let mut view = Vec4::ONE;
     if t_lo >= t_hi {
         return (radiance, view);
     }
+    // The fog's light along the whole ray is seen through the volumes in
+    // front of each point of it only: `FogShare` gathers its share (`w`).
+    let fog_scatters = common.sigma_s.x > 0.0 || common.sigma_s.y > 0.0 || common.sigma_s.z > 0.0;
+    let mut fog = FogShare::new(common, t_lo);
     let cos_view = d.dot(common.camera_forward.xyz());
     let dz = (params.depth_far - params.depth_near) / params.plane_count as f32;
     let k0 = ((t_lo * cos_view - params.depth_near) / dz).floor().max(0.0) as u32;
     let k1 = (((t_hi * cos_view - params.depth_near) / dz).ceil().max(0.0) as u32).min(params.plane_count);
+    let mut end = t_lo;
     let mut k = k0;
     while k < k1 {
         let z0 = params.depth_near + k as f32 * dz;
@@ -494,9 +499,13 @@ pub fn volumes_pixel(index: u32, common: &CommonParams, inputs: &VolumeInputs, s
         if b <= a {
             continue;
         }
+        end = b;
         let t = 0.5 * (a + b);
         let p = o + d * t;
         let sigma = extinction_at(params, inputs.volumes, inputs.density, p);
+        if fog_scatters {
+            fog.interval(a, b - a, (view.x + view.y + view.z) / 3.0, (sigma.x + sigma.y + sigma.z) / 3.0);
+        }
         if sigma.x <= 0.0 && sigma.y <= 0.0 && sigma.z <= 0.0 {
             continue;
         }
@@ -508,14 +517,57 @@ pub fn volumes_pixel(index: u32, common: &CommonParams, inputs: &VolumeInputs, s
             interval_weight(sigma.z, step.z, b - a),
             0.0,
         );
-        let fog = crate::light::transmittance(common.sigma_t, t);
-        radiance += view * source * weight * fog;
-        view *= step;
+        let fog_t = crate::light::transmittance(common.sigma_t, t);
+        radiance += view * source * weight * fog_t;
+        view = (view.xyz() * step.xyz()).extend(1.0);
         if view.x < 1e-6 && view.y < 1e-6 && view.z < 1e-6 {
             break;
         }
     }
+    view.w = if fog_scatters { fog.share(end, (view.x + view.y + view.z) / 3.0, surface_distance) } else { 1.0 };
     (radiance, view)
+}
+
+/// The share of the homogeneous fog's light along a view ray that the
+/// volumes let through (grey: the channels' means): `int w(t) T(t) dt /
+/// int w(t) dt` over `[0, t_surface]`, `T(t)` the view transmittance
+/// through the volumes up to `t` and `w(t) = exp(-sigma t)` (`sigma` the
+/// fog's mean extinction) the weight of fog light scattered at `t` as if
+/// its source were the same all along the ray (exact for a uniformly lit
+/// fog). Before the volumes `T = 1`; in each interval `T` falls
+/// exponentially; past them it holds.
+struct FogShare {
+    sigma: f32,
+    seen: f32,
+}
+
+impl FogShare {
+    /// Starts the sum with the fog in front of the volumes, `[0, t_lo]`.
+    fn new(common: &CommonParams, t_lo: f32) -> FogShare {
+        let sigma = (common.sigma_t.x + common.sigma_t.y + common.sigma_t.z) / 3.0;
+        FogShare { sigma, seen: interval_weight(sigma, (-sigma * t_lo).exp(), t_lo) }
+    }
+
+    /// Adds the interval `[a, a + length]` entered with transmittance `t`
+    /// through a volume of extinction `sigma_v`.
+    fn interval(&mut self, a: f32, length: f32, t: f32, sigma_v: f32) {
+        let s = self.sigma + sigma_v;
+        self.seen += t * (-self.sigma * a).exp() * interval_weight(s, (-s * length).exp(), length);
+    }
+
+    /// The share, the volumes ending at `end` with transmittance `t`, the
+    /// ray at `t_surface`.
+    fn share(&self, end: f32, t: f32, t_surface: f32) -> f32 {
+        let s = self.sigma;
+        let span = (t_surface - end).max(0.0);
+        let tail = t * (-s * end).exp() * interval_weight(s, (-s * span).exp(), span);
+        let total = interval_weight(s, (-s * t_surface).exp(), t_surface);
+        if total > 0.0 {
+            ((self.seen + tail) / total).clamp(0.0, 1.0)
+        } else {
+            1.0
+        }
+    }
 }
 
 /// `(1 - exp(-sigma L)) / sigma` given `step = exp(-sigma L)`: the

@@ -18,6 +18,36 @@ fn cpu_image(data: &SceneData) -> Vec<glam::Vec4> {
     render(data, &Backend::Cpu, false).unwrap().0
 }
 
+/// A shipped scene at `width x height` with `scattering = "single"`, its
+/// CPU image, and that image's difference from the f64 reference at
+/// `tolerance` (printed).
+fn single_against_reference(
+    name: &str,
+    width: u32,
+    height: u32,
+    tolerance: f64,
+) -> (SceneData, Vec<glam::DVec3>, slicelight::metrics::Difference) {
+    let data = shipped(name, width, height)
+        .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
+        .unwrap();
+    assert!(data.volumes.enabled && data.volumes.params.octaves == 1);
+    let image = to_f64(&cpu_image(&data));
+    let (reference, samples) = slicelight::reference::render_converged(&data, tolerance);
+    let d = difference(&image, &reference, data.exposure);
+    println!(
+        "{name} {width}x{height}: {:.3} % RMS, {:.3} % max of the 8-bit range ({samples} reference samples per ray)",
+        d.rms_8bit_percent, d.max_8bit_percent
+    );
+    (data, image, d)
+}
+
+/// Pixels of `image` that differ (by more than 1e-3 relative) from the
+/// same scene rendered without its volumes: how much of the picture they cover.
+fn covered_pixels(data: &SceneData, image: &[glam::DVec3]) -> usize {
+    let clear = to_f64(&cpu_image(&data.reconfigure(|f| f.volume.clear()).unwrap()));
+    image.iter().zip(&clear).filter(|(a, b)| (**a - **b).length() > 1e-3 * b.length()).count()
+}
+
 /// Every pixel finite and non-negative, and the volumes' transmittance
 /// layer (where it ran) within [0, 1].
 fn assert_sane(what: &str, data: &SceneData) {
@@ -41,22 +71,10 @@ fn assert_sane(what: &str, data: &SceneData) {
 /// grid or the transmittance volume's defaults must keep.
 #[test]
 fn cumulus_matches_the_reference() {
-    let data = shipped("cloud_cumulus", 64, 48)
-        .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
-        .unwrap();
-    assert!(data.volumes.enabled && data.volumes.params.octaves == 1);
-    let image = to_f64(&cpu_image(&data));
-    let (reference, samples) = slicelight::reference::render_converged(&data, 2e-4);
-    let d = difference(&image, &reference, data.exposure);
-    println!(
-        "cumulus 64x48: {:.3} % RMS, {:.3} % max of the 8-bit range ({samples} reference samples per ray)",
-        d.rms_8bit_percent, d.max_8bit_percent
-    );
+    let (data, image, d) = single_against_reference("cloud_cumulus", 64, 48, 2e-4);
     assert!(d.rms_8bit_percent < 0.5, "{d:?}");
     // The cloud is in the picture: it hides part of the sky.
-    let sky_only = data.reconfigure(|f| f.volume.clear()).unwrap();
-    let clear = to_f64(&cpu_image(&sky_only));
-    let changed = image.iter().zip(&clear).filter(|(a, b)| (**a - **b).length() > 1e-3 * b.length()).count();
+    let changed = covered_pixels(&data, &image);
     assert!(changed > image.len() / 20, "the cloud covers {changed} of {} pixels", image.len());
 }
 
@@ -285,20 +303,10 @@ fn bad_volumes_name_the_field() {
 /// docs/volumes.md; the bound is the 1 %.
 #[test]
 fn automaton_clouds_match_the_reference() {
-    let data = shipped("cloud_automaton", 48, 36)
-        .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
-        .unwrap();
+    let (data, image, d) = single_against_reference("cloud_automaton", 48, 36, 1e-3);
     assert!(data.volumes.params.automaton_volume == 1);
-    let image = to_f64(&cpu_image(&data));
-    let (reference, samples) = slicelight::reference::render_converged(&data, 1e-3);
-    let d = difference(&image, &reference, data.exposure);
-    println!(
-        "cloud_automaton 48x36: {:.3} % RMS, {:.3} % max of the 8-bit range ({samples} reference samples per ray)",
-        d.rms_8bit_percent, d.max_8bit_percent
-    );
     assert!(d.rms_8bit_percent < 1.0, "{d:?}");
-    let clear = to_f64(&cpu_image(&data.reconfigure(|f| f.volume.clear()).unwrap()));
-    let changed = image.iter().zip(&clear).filter(|(a, b)| (**a - **b).length() > 1e-3 * b.length()).count();
+    let changed = covered_pixels(&data, &image);
     assert!(changed > image.len() / 20, "the clouds cover {changed} of {} pixels", image.len());
 }
 
@@ -487,17 +495,8 @@ fn volumes_shadow_the_surfaces() {
 /// Measured: see the print and docs/volumes.md; the bound is the 1 %.
 #[test]
 fn grid_cloud_matches_the_reference() {
-    let data = shipped("cloud_grid", 48, 36)
-        .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
-        .unwrap();
+    let (data, _, d) = single_against_reference("cloud_grid", 48, 36, 1e-3);
     assert_eq!(data.volumes.volumes[0].nx, 48);
-    let image = to_f64(&cpu_image(&data));
-    let (reference, samples) = slicelight::reference::render_converged(&data, 1e-3);
-    let d = difference(&image, &reference, data.exposure);
-    println!(
-        "cloud_grid 48x36: {:.3} % RMS, {:.3} % max of the 8-bit range ({samples} reference samples per ray)",
-        d.rms_8bit_percent, d.max_8bit_percent
-    );
     assert!(d.rms_8bit_percent < 1.0, "{d:?}");
 }
 

@@ -112,19 +112,12 @@ impl Pass for Surface {
         let geometry = scene.geometry();
         let glass =
             slicelight_shaders::glass::Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
-        let shadow = frame.get::<f32>(&SHADOW_MAPS);
         // The caustic light at each receiver goes into the G-buffer when
         // this frame has caustics maps (`caustics::caustic_light`).
         let caustic_maps = frame.get::<u32>(&caustics::CAUSTICS_MAPS);
         let no_caustics = slicelight_shaders::caustics::CausticsParams::default();
         let caustics = if caustic_maps.is_empty() { &no_caustics } else { &scene.caustics.params };
-        // The clouds' shadows, where the volumes' transmittance volumes ran.
-        let inputs = slicelight_shaders::common::surface::LightInputs {
-            light_map: &scene.light_map,
-            shadow,
-            grids: if frame.contains(&volumes::OPTICAL_DEPTHS) { &scene.volumes.grids } else { &[] },
-            depths: frame.get(&volumes::OPTICAL_DEPTHS),
-        };
+        let inputs = super::light_inputs(scene, frame);
         // The CPU runs the variant the GPU would (`kernel_for`).
         let pixel = if scene.has_glass() { surface_pixel::<true> } else { surface_pixel::<false> };
         for_each_invocation2(

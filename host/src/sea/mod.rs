@@ -929,9 +929,8 @@ fn run_term(
         let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION);
         let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
         // The clouds' shadow where the volumes' transmittance volumes ran.
-        let depths = frame.get::<Vec4>(&crate::volumes::OPTICAL_DEPTHS);
-        let grids: &[_] = if depths.is_empty() { &[] } else { &scene.volumes.grids };
-        let clouds = CloudShadow { lights: &scene.lights, grids, depths };
+        let lit = crate::common::light_inputs(scene, frame);
+        let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
         for_each_invocation(values, common.band_start, progress, |i, v| {
             let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
             *v = term(i, texel, maps, correction, &clouds);

@@ -374,17 +374,12 @@ impl Pass for Shafts {
         let s = &scene.shafts;
         frame.write_all::<Vec4>(&SHAFTS_RADIANCE, common.band_pixels as usize, |frame, out| {
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
-            let shadow = frame.get::<f32>(&SHADOW_MAPS);
             // The CPU runs the variant the GPU would (`kernel_for`), with
             // its samples in SIMD packets.
             let pixel =
                 if uses_paper_modes(&s.params) { shafts_pixel::<true, true> } else { shafts_pixel::<false, true> };
             let tiles = frame.get::<u32>(&SHAFT_TILES);
-            // The volumes' shadows where their transmittance volumes ran.
-            let depths = frame.get::<Vec4>(&crate::volumes::OPTICAL_DEPTHS);
-            let grids: &[_] = if depths.is_empty() { &[] } else { &scene.volumes.grids };
-            let inputs =
-                slicelight_shaders::common::surface::LightInputs { light_map: &scene.light_map, shadow, grids, depths };
+            let inputs = crate::common::light_inputs(scene, frame);
             for_each_invocation(out, common.band_start, progress, |i, px| {
                 let distance = gbuffer[(i - common.band_start) as usize].normal_distance.w;
                 *px = pixel(i, common, &s.params, &scene.lights, &inputs, &s.tables, tiles, distance);

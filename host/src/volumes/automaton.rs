@@ -107,10 +107,7 @@ impl Setup {
                     let q = weights[((k as u32 * p.ny + j as u32) * p.nx + i as u32) as usize] as f64;
                     if q > 0.0 {
                         let c = lo + (DVec3::new(i as f64, j as f64, k as f64) + 0.5) * size;
-                        let a2 = (x - c).length_squared() / (r * r);
-                        if a2 < 1.0 {
-                            sum += q * (1.0 + a2 * (-22.0 / 9.0 + a2 * (17.0 / 9.0 - a2 * (4.0 / 9.0))));
-                        }
+                        sum += q * super::reference::field((x - c).length_squared() / (r * r));
                     }
                 }
             }

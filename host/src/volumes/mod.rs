@@ -255,6 +255,12 @@ pub struct Setup {
 }
 
 impl Setup {
+    /// A grid volume's values from its file (`None` for other volumes).
+    pub fn file_grid(&self, v: &GpuVolume) -> Option<&[f32]> {
+        let count = (v.nx * v.ny * v.nz) as usize;
+        v.is_file_grid().then(|| &self.grid_values[v.bin_offset as usize..v.bin_offset as usize + count])
+    }
+
     /// Nodes in all lights' transmittance volumes.
     pub fn depth_nodes(&self) -> u64 {
         self.grids.iter().map(|g| g.nu as u64 * g.nv as u64 * g.nz as u64).sum()
@@ -565,7 +571,7 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
             ));
         }
         match file {
-            // A grid volume: no bins (`bins_x == 0`); `bin_offset` is where
+            // A grid volume: no bins (`GpuVolume::is_file_grid`); `bin_offset` is where
             // its values start in the grid buffer.
             Some(g) => {
                 record.bin_offset = grid_values.len() as u32;
@@ -680,7 +686,7 @@ impl Pass for Density {
                 "{} metaballs'{} field{} at {} cell centres ({:.1} MiB)",
                 v.balls.len() as u64 + v.automaton.params.cells as u64,
                 if v.params.automaton_volume > 0 { " (the automaton's)" } else { "" },
-                match v.volumes.iter().filter(|x| x.bins_x == 0).count() {
+                match v.volumes.iter().filter(|x| x.is_file_grid()).count() {
                     0 => String::new(),
                     n => format!(" and {n} grid(s) from files"),
                 },

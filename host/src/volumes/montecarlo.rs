@@ -37,7 +37,7 @@ const SPLIT: u32 = 4;
 /// A volume's majorant grid: its bins split `SPLIT` ways, or one cell for
 /// a grid from a file (which has no bins).
 fn majorant_cells(v: &slicelight_shaders::volumes::GpuVolume) -> (u32, u32, u32) {
-    if v.bins_x == 0 {
+    if v.is_file_grid() {
         (1, 1, 1)
     } else {
         (v.bins_x * SPLIT, v.bins_y * SPLIT, v.bins_z * SPLIT)
@@ -66,14 +66,12 @@ impl Majorants {
             .map(|(index, v)| {
                 let (lo, hi) = (d3(v.min), d3(v.max));
                 let automaton = s.params.automaton_volume == index as u32 + 1;
-                let grid = v.bins_x == 0;
-                let bound = if grid {
-                    // A grid's trilinear values lie within its largest.
-                    let count = (v.nx * v.ny * v.nz) as usize;
-                    let values = &s.grid_values[v.bin_offset as usize..v.bin_offset as usize + count];
-                    values.iter().fold(0.0f32, |a, b| a.max(*b)) as f64
-                } else {
-                    s.automaton.density_bound()
+                let file = s.file_grid(v);
+                let grid = file.is_some();
+                // A grid's trilinear values lie within its largest.
+                let bound = match file {
+                    Some(values) => values.iter().fold(0.0f32, |a, b| a.max(*b)) as f64,
+                    None => s.automaton.density_bound(),
                 } * d3(v.sigma_t).max_element();
                 let (nx, ny, nz) = majorant_cells(v);
                 let cell = (hi - lo) / DVec3::new(nx as f64, ny as f64, nz as f64);
@@ -227,21 +225,17 @@ fn scatter(data: &SceneData, point: &Point, d: DVec3, rng: &mut Rng) -> (DVec3, 
     let cos = sample_hg(g, rng.next());
     let next = rotate(d, cos, rng.next());
     let cos = next.dot(d);
-    // Isotropic sampling for the other kinds: weight by the phase itself.
+    // The Henyey-Greenstein kinds are sampled from their own lobes (the
+    // pdf is the phase function); the other kinds isotropically.
     let pdf: f64 = data
         .volumes
         .volumes
         .iter()
         .zip(&point.parts)
         .map(|(v, s)| {
-            let lobe = |g: f64| crate::reference::phase_f64(slicelight_shaders::types::PHASE_HENYEY_GREENSTEIN, g, cos);
-            let density = if v.phase_kind == PHASE_DOUBLE_HENYEY_GREENSTEIN {
-                v.weight as f64 * lobe(v.g1 as f64) + (1.0 - v.weight as f64) * lobe(v.g2 as f64)
-            } else if v.phase_kind == slicelight_shaders::types::PHASE_HENYEY_GREENSTEIN {
-                lobe(v.g1 as f64)
-            } else {
-                lobe(0.0)
-            };
+            let hg = v.phase_kind == PHASE_DOUBLE_HENYEY_GREENSTEIN
+                || v.phase_kind == slicelight_shaders::types::PHASE_HENYEY_GREENSTEIN;
+            let density = if hg { volume_phase(v, cos) } else { 0.25 * std::f64::consts::FRAC_1_PI };
             s.element_sum() / total * density
         })
         .sum();
@@ -321,54 +315,52 @@ pub fn walk(
 ) -> DVec3 {
     let fog_t = d3(data.common.sigma_t);
     let mut sum = DVec3::ZERO;
-    {
-        let mut rng = Rng(seed.wrapping_mul(0xD1B5_4A32_D192_ED03));
-        let (mut p, mut d, mut limit) = (o, d, t_surface);
-        let mut beta = DVec3::ONE;
-        let mut collisions = 0u32;
-        'walk: while collisions < MAX_COLLISIONS.min(highest) {
-            // Free flight from `p` along `d` to the next real collision.
-            let mut s = 0.0;
-            let point = loop {
-                if s >= limit {
-                    break 'walk;
-                }
-                let Some((mu, run)) = m.at(data, p + d * s, d) else {
-                    break 'walk;
-                };
-                let end = (s + run).min(limit);
-                let step = if mu > 0.0 { -(1.0 - rng.next()).ln() / mu } else { f64::INFINITY };
-                if s + step >= end {
-                    s = end;
-                    continue;
-                }
-                s += step;
-                let point = medium(data, p + d * s);
-                let real = point.sigma_t.element_sum() / (3.0 * mu);
-                if rng.next() < real {
-                    beta *= point.sigma_s / (mu * real);
-                    break point;
-                }
-                beta *= (DVec3::splat(mu) - point.sigma_t) / (mu * (1.0 - real));
+    let mut rng = Rng(seed.wrapping_mul(0xD1B5_4A32_D192_ED03));
+    let (mut p, mut d, mut limit) = (o, d, t_surface);
+    let mut beta = DVec3::ONE;
+    let mut collisions = 0u32;
+    'walk: while collisions < MAX_COLLISIONS.min(highest) {
+        // Free flight from `p` along `d` to the next real collision.
+        let mut s = 0.0;
+        let point = loop {
+            if s >= limit {
+                break 'walk;
+            }
+            let Some((mu, run)) = m.at(data, p + d * s, d) else {
+                break 'walk;
             };
-            beta *= (-fog_t * s).exp();
-            p += d * s;
-            collisions += 1;
-            if collisions >= lowest {
-                sum += beta * next_event(data, m, &point, p, d, &mut rng);
+            let end = (s + run).min(limit);
+            let step = if mu > 0.0 { -(1.0 - rng.next()).ln() / mu } else { f64::INFINITY };
+            if s + step >= end {
+                s = end;
+                continue;
             }
-            let (next, weight) = scatter(data, &point, d, &mut rng);
-            beta *= weight;
-            d = next;
-            limit = nearest(data, p, d, 1e-7 * (1.0 + p.length()), f64::INFINITY).map_or(f64::INFINITY, |hit| hit.t);
-            // Russian roulette on the weight.
-            let largest = beta.max_element();
-            if largest < 0.1 {
-                if rng.next() >= largest * 10.0 {
-                    break;
-                }
-                beta /= largest * 10.0;
+            s += step;
+            let point = medium(data, p + d * s);
+            let real = point.sigma_t.element_sum() / (3.0 * mu);
+            if rng.next() < real {
+                beta *= point.sigma_s / (mu * real);
+                break point;
             }
+            beta *= (DVec3::splat(mu) - point.sigma_t) / (mu * (1.0 - real));
+        };
+        beta *= (-fog_t * s).exp();
+        p += d * s;
+        collisions += 1;
+        if collisions >= lowest {
+            sum += beta * next_event(data, m, &point, p, d, &mut rng);
+        }
+        let (next, weight) = scatter(data, &point, d, &mut rng);
+        beta *= weight;
+        d = next;
+        limit = nearest(data, p, d, 1e-7 * (1.0 + p.length()), f64::INFINITY).map_or(f64::INFINITY, |hit| hit.t);
+        // Russian roulette on the weight.
+        let largest = beta.max_element();
+        if largest < 0.1 {
+            if rng.next() >= largest * 10.0 {
+                break;
+            }
+            beta /= largest * 10.0;
         }
     }
     sum

@@ -33,9 +33,7 @@ pub fn density(data: &SceneData, v: &GpuVolume, p: DVec3) -> f64 {
     if s.params.automaton_volume > 0 && std::ptr::eq(v, &s.volumes[s.params.automaton_volume as usize - 1]) {
         return s.automaton.density_f64(lo, hi, p);
     }
-    if v.bins_x == 0 {
-        let count = (v.nx * v.ny * v.nz) as usize;
-        let values = &s.grid_values[v.bin_offset as usize..v.bin_offset as usize + count];
+    if let Some(values) = s.file_grid(v) {
         return super::grid::density_f64(values, [v.nx, v.ny, v.nz], lo, hi, p);
     }
     let f = (p - lo) / (hi - lo);

@@ -71,6 +71,15 @@ pub struct GpuVolume {
     pub bin_offset: u32,
 }
 
+impl GpuVolume {
+    /// Whether the volume's density is a grid from a file: such a volume
+    /// has no metaball bins (`bins_x == 0`) and its values start at
+    /// `bin_offset` in the grid buffer.
+    pub fn is_file_grid(&self) -> bool {
+        self.bins_x == 0
+    }
+}
+
 /// A metaball: centre (m) and radius `R` (m) in `center_radius`, weight `q`
 /// (density at the centre) in `q.x`.
 #[repr(C)]
@@ -196,9 +205,9 @@ fn volume_of_cell(index: u32, volumes: &[GpuVolume], count: u32) -> (usize, u32)
 ///
 /// The automaton's volume (`params.automaton_volume`) has the automaton's
 /// lattice as its grid, and its density from `automaton::lattice_density`
-/// (`smooth`: the automaton's weights per cell). A grid volume (no bins,
-/// `bins_x == 0`) has its file's values, from `grid_values` at
-/// `bin_offset`.
+/// (`smooth`: the automaton's weights per cell). A grid volume
+/// (`GpuVolume::is_file_grid`) has its file's values, from `grid_values`
+/// at `bin_offset`.
 #[allow(clippy::too_many_arguments)]
 pub fn density_cell(
     index: u32,
@@ -212,7 +221,7 @@ pub fn density_cell(
 ) -> f32 {
     let (v, cell) = volume_of_cell(index, volumes, params.volume_count);
     let vol = &volumes[v];
-    if vol.bins_x == 0 {
+    if vol.is_file_grid() {
         // A grid from a file: its own values at its cell centres.
         return grid_values[(vol.bin_offset + cell) as usize];
     }
@@ -353,7 +362,51 @@ pub fn optical_depth_column(
 /// the grid's `(u, v)` range (no volume lies on those rays) and before
 /// `lo.z`, the last node's value past `hi.z`.
 pub fn light_optical_depth(light: &GpuLight, g: &LightGrid, depths: &[Vec4], p: Vec3) -> Vec4 {
-    light_optical_depths(light, g, depths, p).0
+    let (f, place) = grid_place(light, g, p);
+    if place == PAST_ENTRY {
+        grid_lookup(g, depths, f)
+    } else {
+        Vec4::ZERO
+    }
+}
+
+/// Where a point lies in a light's transmittance volume (`grid_place`).
+const OUTSIDE: u32 = 0;
+const BEFORE_ENTRY: u32 = 1;
+const PAST_ENTRY: u32 = 2;
+
+/// Where `p` lies in light `g`'s transmittance volume: `OUTSIDE` its
+/// `(u, v)` range (or behind a spot), `BEFORE_ENTRY` (`z <= lo.z`) or
+/// `PAST_ENTRY`; and its fractional node coordinates `(z, u, v)`, each
+/// clamped to the grid.
+fn grid_place(light: &GpuLight, g: &LightGrid, p: Vec3) -> (Vec3, u32) {
+    if g.nu == 0 {
+        return (Vec3::ZERO, OUTSIDE);
+    }
+    let local = light_local(light, p);
+    let (u, v, z) = if light.kind == LIGHT_SPOT {
+        if local.z <= 0.0 {
+            return (Vec3::ZERO, OUTSIDE);
+        }
+        (local.x / local.z, local.y / local.z, local.z)
+    } else {
+        (local.x, local.y, local.z)
+    };
+    if u < g.lo.x || u > g.hi.x || v < g.lo.y || v > g.hi.y {
+        return (Vec3::ZERO, OUTSIDE);
+    }
+    let fu = ((u - g.lo.x) / (g.hi.x - g.lo.x).max(1e-30) * (g.nu - 1) as f32).clamp(0.0, (g.nu - 1) as f32);
+    let fv = ((v - g.lo.y) / (g.hi.y - g.lo.y).max(1e-30) * (g.nv - 1) as f32).clamp(0.0, (g.nv - 1) as f32);
+    let fz = ((z - g.lo.z) / (g.hi.z - g.lo.z).max(1e-30) * (g.nz - 1) as f32).clamp(0.0, (g.nz - 1) as f32);
+    (Vec3::new(fz, fu, fv), if z <= g.lo.z { BEFORE_ENTRY } else { PAST_ENTRY })
+}
+
+/// The optical depth at fractional node coordinates `f = (z, u, v)` of
+/// light grid `g`, trilinear between nodes (z fastest: a column is
+/// contiguous).
+fn grid_lookup(g: &LightGrid, depths: &[Vec4], f: Vec3) -> Vec4 {
+    let at = |k: u32, i: u32, j: u32| depths[(g.offset + (j * g.nu + i) * g.nz + k) as usize];
+    trilinear(at, f, UVec3::new(g.nz, g.nu, g.nv))
 }
 
 /// Light `l`'s transmittance (rgb) through the volumes to `p`, from its
@@ -370,32 +423,13 @@ pub fn light_transmittance(grids: &[LightGrid], depths: &[Vec4], light: &GpuLigh
 /// `light_optical_depth` at `p`, and the optical depth through all the
 /// volumes along the light's ray through `p` (the column's last node).
 pub fn light_optical_depths(light: &GpuLight, g: &LightGrid, depths: &[Vec4], p: Vec3) -> (Vec4, Vec4) {
-    if g.nu == 0 {
+    let (f, place) = grid_place(light, g, p);
+    if place == OUTSIDE {
         return (Vec4::ZERO, Vec4::ZERO);
     }
-    let local = light_local(light, p);
-    let (u, v, z) = if light.kind == LIGHT_SPOT {
-        if local.z <= 0.0 {
-            return (Vec4::ZERO, Vec4::ZERO);
-        }
-        (local.x / local.z, local.y / local.z, local.z)
-    } else {
-        (local.x, local.y, local.z)
-    };
-    if u < g.lo.x || u > g.hi.x || v < g.lo.y || v > g.hi.y {
-        return (Vec4::ZERO, Vec4::ZERO);
-    }
-    let fu = ((u - g.lo.x) / (g.hi.x - g.lo.x).max(1e-30) * (g.nu - 1) as f32).clamp(0.0, (g.nu - 1) as f32);
-    let fv = ((v - g.lo.y) / (g.hi.y - g.lo.y).max(1e-30) * (g.nv - 1) as f32).clamp(0.0, (g.nv - 1) as f32);
-    let fz = ((z - g.lo.z) / (g.hi.z - g.lo.z).max(1e-30) * (g.nz - 1) as f32).clamp(0.0, (g.nz - 1) as f32);
-    // Nodes z fastest: `at` takes (z, u, v) so that a column is contiguous.
-    let at = |k: u32, i: u32, j: u32| depths[(g.offset + (j * g.nu + i) * g.nz + k) as usize];
-    let n = UVec3::new(g.nz, g.nu, g.nv);
-    let through = trilinear(at, Vec3::new((g.nz - 1) as f32, fu, fv), n);
-    if z <= g.lo.z {
-        return (Vec4::ZERO, through);
-    }
-    (trilinear(at, Vec3::new(fz, fu, fv), n), through)
+    let through = grid_lookup(g, depths, Vec3::new((g.nz - 1) as f32, f.y, f.z));
+    let tau = if place == PAST_ENTRY { grid_lookup(g, depths, f) } else { Vec4::ZERO };
+    (tau, through)
 }
 
 /// A volume's phase function at `cos_theta` (incident and scattered travel

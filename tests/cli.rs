@@ -99,6 +99,7 @@ fn good_scene_writes_png_exr_and_stats() {
             "cloud_automaton.smooth",
             "volume_density",
             "volume_light",
+            "desert.dunes",
             "surface",
             "caustics",
             "shafts",
@@ -111,7 +112,7 @@ fn good_scene_writes_png_exr_and_stats() {
         ]
     );
     // Every pass the scene needs ran; the self-check waits to be asked for,
-    // and a scene without a [sky], a [sea] or a [[volume]] pays nothing for their passes.
+    // and a scene without a [sky], a [sea], a [[volume]] or dunes pays nothing for their passes.
     let idle = [
         "scatter_check",
         "caustics.table",
@@ -136,6 +137,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "volume_density",
         "volume_light",
         "volumes",
+        "desert.dunes",
     ];
     assert!(passes
         .iter()

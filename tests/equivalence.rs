@@ -106,7 +106,21 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("cloud_automaton", sky("cloud_automaton", 160, 120)),
         ("cloud_grid", sky("cloud_grid", 160, 120)),
         ("cloud_sea", sky("cloud_sea", 160, 120)),
+        ("dunes, 32x32 cells, 60 steps", small_dunes()),
     ]
+}
+
+/// `desert_dunes` with a small field and few steps (each step is eight
+/// dispatches), its automaton's self-check requested.
+fn small_dunes() -> SceneData {
+    let text = std::fs::read_to_string(common::root().join("scenes/desert_dunes.toml")).unwrap();
+    let text = text
+        .replace("resolution = [720, 480]", "resolution = [96, 64]")
+        .replace("cells = [128, 128], steps = 1500", "cells = [32, 32], steps = 60, creep = 0.3");
+    let mut data = common::scene_from_str(&text);
+    assert!(data.desert.dunes.as_ref().is_some_and(|d| d.params.cells == 1024));
+    data.requested_passes.push("desert.dunes".into());
+    data
 }
 
 /// Fig. 8(b)'s torus, coarser, turned by a `rotation` (its table held in
@@ -272,4 +286,16 @@ fn scatter_self_check_passes_on_the_device() {
     let check = stats.passes.iter().find(|p| p.name == "scatter_check").unwrap();
     println!("{:?}", check.report);
     assert!(check.ran && check.report.is_some());
+}
+
+/// The dunes' automaton run by the renderer on the device (`render --pass
+/// desert.dunes`) ends with the heights the CPU built at load, bit for bit.
+#[test]
+fn dunes_self_check_passes_on_the_device() {
+    let ctx = device();
+    let data = small_dunes();
+    let (_, stats) = render::render(&data, &render::Backend::Gpu(Box::new(ctx)), false).expect("the check passes");
+    let check = stats.passes.iter().find(|p| p.name == "desert.dunes").unwrap();
+    println!("{:?}", check.report);
+    assert!(check.ran && check.report.as_deref().is_some_and(|r| r.contains("equal the load's")));
 }

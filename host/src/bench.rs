@@ -132,6 +132,13 @@ pub fn time_renders(data: &SceneData, backend: &Backend, repeats: usize, groups:
     })
 }
 
+/// Every `stride`-th pixel in x and y (row-major indices): where a sweep
+/// measures its error against a costly reference.
+pub fn pixel_lattice(data: &SceneData, stride: u32) -> Vec<u32> {
+    let (w, stride) = (data.width(), stride.max(1) as usize);
+    (0..data.height()).step_by(stride).flat_map(|y| (0..w).step_by(stride).map(move |x| y * w + x)).collect()
+}
+
 /// Rows grouped into plot series by `label` (in the order labels first
 /// appear), each row one point.
 pub fn series_of<R>(

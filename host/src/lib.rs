@@ -32,6 +32,7 @@ pub mod scene;
 // The families.
 pub mod caustics;
 pub mod common;
+pub mod desert;
 pub mod sea;
 pub mod shafts;
 pub mod sky;

@@ -25,10 +25,24 @@ enum Command {
     /// Time against error over a family's settings, each configuration
     /// against the family's reference: CSVs and PNG plots. Each scene goes to
     /// the sweep of its family (glass: caustics; a [sea]: sea; [[volume]]:
-    /// volumes; sky alone: sky; the rest: shafts).
+    /// volumes; [[terrain]]: desert; sky alone: sky; the rest: shafts).
     Bench(BenchArgs),
     /// Print the RMS and max difference of IMAGE against REFERENCE.
     Compare(CompareArgs),
+    /// Write the scene's [[terrain]] height fields (dunes run here) to an
+    /// image a scene can load back with `heights = { file = ... }`.
+    Terrain(TerrainArgs),
+}
+
+#[derive(clap::Args)]
+struct TerrainArgs {
+    /// The scene file (TOML; see scenes/README.md).
+    scene: PathBuf,
+    /// Output: .exr (heights in metres, float) or .png (16-bit grey from 0
+    /// to the highest point; the `scale` to load it back is printed). With
+    /// several terrains, the second goes to NAME_1.EXT, and so on.
+    #[arg(short, long = "output")]
+    output: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -100,7 +114,8 @@ struct BenchArgs {
     /// Scene files [default: the --family's own scenes].
     scenes: Vec<PathBuf>,
     /// The family whose sweep runs when no scene is given: shafts (Fig. 6,
-    /// Fig. 7, the stained glass), sky, sea or caustics [default: shafts].
+    /// Fig. 7, the stained glass), sky, sea, caustics, volumes or desert
+    /// [default: shafts].
     #[arg(long, conflicts_with_all = ["sky", "sea", "caustics"])]
     family: Option<String>,
     /// Short for --family sky (scenes/sky_noon, sky_sunset, sky_twilight).
@@ -286,6 +301,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Reference(args) => reference_command(args),
         Command::Bench(args) => bench_command(args),
         Command::Compare(args) => compare_command(args),
+        Command::Terrain(args) => terrain_command(args),
     }
 }
 
@@ -377,6 +393,15 @@ fn bench_command(args: BenchArgs) -> Result<()> {
     let written = slicelight::bench::run(family.as_deref(), &scenes, Path::new("scenes"), &opts)?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     eprintln!("wrote {}", names.join(", "));
+    Ok(())
+}
+
+fn terrain_command(args: TerrainArgs) -> Result<()> {
+    check_outputs(std::slice::from_ref(&args.output))?;
+    let data = scene::load(&args.scene)?;
+    for (path, note) in slicelight::desert::write_fields(&data.desert, &args.output)? {
+        println!("wrote {}{note}", path.display());
+    }
     Ok(())
 }
 

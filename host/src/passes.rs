@@ -30,7 +30,7 @@ macro_rules! resources {
     }};
 }
 
-use crate::{caustics, common, sea, shafts, sky, volumes};
+use crate::{caustics, common, desert, sea, shafts, sky, volumes};
 
 /// A family: its passes (in the order they run) and its bench sweep.
 pub struct Family {
@@ -45,8 +45,15 @@ pub struct Family {
 /// passes, whose radiance layers are summed into the image in the same
 /// order. A pass reads only what earlier passes wrote (the
 /// `passes_run_after_what_they_read` test checks it).
-static FAMILIES: &[&Family] =
-    &[&common::FAMILY, &caustics::FAMILY, &shafts::FAMILY, &sky::FAMILY, &sea::FAMILY, &volumes::FAMILY];
+static FAMILIES: &[&Family] = &[
+    &common::FAMILY,
+    &caustics::FAMILY,
+    &shafts::FAMILY,
+    &sky::FAMILY,
+    &sea::FAMILY,
+    &volumes::FAMILY,
+    &desert::FAMILY,
+];
 
 /// The registered families (see `FAMILIES`).
 pub fn families() -> &'static [&'static Family] {

@@ -29,6 +29,7 @@ pub mod types;
 // The families, each a folder named as its host folder (`host/src/<family>`).
 pub mod caustics;
 pub mod common;
+pub mod desert;
 pub mod sea;
 pub mod shafts;
 pub mod sky;

@@ -64,6 +64,8 @@ pub struct SceneData {
     pub caustics: crate::caustics::Setup,
     /// The volumes' parameter block, records and metaballs (`enabled` false without `[[volume]]`).
     pub volumes: crate::volumes::Setup,
+    /// The terrains' height fields and the dunes' automaton (empty without `[[terrain]]`).
+    pub desert: crate::desert::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
     /// The parsed file and the folder its paths are relative to: what
@@ -325,7 +327,11 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
             "fisheye"
         ));
     }
-    let objects = geometry::build(&file.object, base)?;
+    let mut objects = geometry::build(&file.object, base)?;
+    let desert = crate::desert::configure(&file.terrain, base, &indicatif::ProgressBar::hidden())?;
+    for (t, f) in file.terrain.iter().zip(&desert.fields) {
+        geometry::push_diffuse(&mut objects, &crate::desert::mesh(t, f), Vec3::from(t.albedo).extend(0.0));
+    }
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
     // The lights cover the geometry and the volumes' boxes (a directional
     // light enters the scene where its bounding sphere begins).
@@ -405,6 +411,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         sea,
         caustics: Default::default(),
         volumes: Default::default(),
+        desert,
         requested_passes: Vec::new(),
         source: std::sync::Arc::new(Source { file: file.clone(), base: base.to_path_buf() }),
     };

@@ -33,6 +33,9 @@ pub struct SceneFile {
     pub volume: Vec<crate::volumes::Volume>,
     #[serde(default)]
     pub volumes: crate::volumes::Settings,
+    /// Height fields (`[[terrain]]`): dunes, ripples, images.
+    #[serde(default)]
+    pub terrain: Vec<crate::desert::Terrain>,
 }
 
 #[derive(Debug, Clone, Deserialize)]

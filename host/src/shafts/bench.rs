@@ -124,7 +124,11 @@ impl crate::bench::Sweep for ShaftsSweep {
         &["fig6_sphere", "fig7_stage", "stained_glass"]
     }
     fn takes(&self, s: &SceneData) -> bool {
-        s.glass_vertices.is_empty() && !s.sea.enabled && !(s.sky.enabled && !s.scatters()) && !s.volumes.enabled
+        s.glass_vertices.is_empty()
+            && !s.sea.enabled
+            && !(s.sky.enabled && !s.scatters())
+            && !s.volumes.enabled
+            && s.desert.fields.is_empty()
     }
     fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         run(scenes, opts)?;
@@ -141,11 +145,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
     for BenchScene { data, name, .. } in scenes {
         let stride = opts.stride.max(1);
-        let width = data.width();
-        let pixels: Vec<u32> = (0..data.height())
-            .step_by(stride as usize)
-            .flat_map(|y| (0..width).step_by(stride as usize).map(move |x| y * width + x))
-            .collect();
+        let pixels = crate::bench::pixel_lattice(data, stride);
         let t = std::time::Instant::now();
         let (refvals, samples) = reference::render_converged_at(data, &pixels, 2e-4);
         eprintln!(

@@ -114,7 +114,12 @@ impl crate::bench::Sweep for SkySweep {
         &["sky_noon", "sky_sunset", "sky_twilight"]
     }
     fn takes(&self, s: &SceneData) -> bool {
-        s.sky.enabled && !s.scatters() && !s.sea.enabled && s.glass_vertices.is_empty() && !s.volumes.enabled
+        s.sky.enabled
+            && !s.scatters()
+            && !s.sea.enabled
+            && s.glass_vertices.is_empty()
+            && !s.volumes.enabled
+            && s.desert.fields.is_empty()
     }
     fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         run(scenes, &opts.backends, opts.repeats, opts.stride, opts.quick, &opts.out_dir)?;

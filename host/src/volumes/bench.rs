@@ -115,11 +115,7 @@ pub fn run(
     let mut rows = Vec::new();
     for BenchScene { path, name, data } in scenes {
         anyhow::ensure!(data.volumes.enabled, "{}: no [[volume]] to benchmark", path.display());
-        let w = data.width();
-        let pixels: Vec<u32> = (0..data.height())
-            .step_by(stride as usize)
-            .flat_map(|y| (0..w).step_by(stride as usize).map(move |x| y * w + x))
-            .collect();
+        let pixels = crate::bench::pixel_lattice(data, stride);
         let mut references = Vec::new();
         for octaves in [1, 8] {
             let d = configure(data, &Config { series: "", planes: None, light_grid: None, octaves })?;

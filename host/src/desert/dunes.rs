@@ -1,0 +1,454 @@
+//! The sand automaton's host side (kernels: `shader-crate/src/desert/sand.rs`):
+//! a `[[terrain]]`'s `dunes = { ... }` settings, their validation and
+//! conversion to the kernel's integer parameters, the CPU run at scene
+//! load, the settling to the angle of repose, and the self-check pass that
+//! runs the same steps on the backend (`--pass desert.dunes`).
+
+use anyhow::{bail, Result};
+use glam::UVec2;
+use indicatif::ProgressBar;
+use serde::Deserialize;
+use slicelight_shaders::desert::sand::{avalanche, relax_cell, sand_cell, SandParams};
+use slicelight_shaders::types::CommonParams;
+
+use crate::cpu::for_each_invocation;
+use crate::passes::*;
+use crate::scene::{invalid, SceneData};
+
+/// `dunes = { ... }` in a `[[terrain]]`: the automaton run at load.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Cells along x and z over the terrain's rectangle (each even or 1).
+    pub cells: [u32; 2],
+    /// Steps run from the random start.
+    pub steps: u32,
+    #[serde(default)]
+    pub seed: u32,
+    /// Mean depth of loose sand at the start (m); default 1.
+    pub sand: Option<f32>,
+    /// A slab's height (m); default a tenth of a cell's width.
+    pub slab: Option<f32>,
+    /// Wind speed (m/s, 10 m above the sand); default 10.
+    pub wind_speed: Option<f32>,
+    /// Where the wind blows to: "+x", "-x", "+z" or "-z"; default "+x".
+    pub wind_direction: Option<String>,
+    /// Below this wind speed (m/s) no grain moves (Bagnold's threshold); default 4.
+    pub threshold_speed: Option<f32>,
+    /// Probability per step that an exposed sand cell gives a slab, at
+    /// winds far above the threshold; default 0.5.
+    pub erosion: Option<f32>,
+    /// Saltation length at 10 m/s (cells), in proportion to the wind; default 5.
+    pub jump: Option<f32>,
+    /// Growth of the saltation length with the source's height (cells per
+    /// metre; Nishimori-Ouchi's `b tau`); default 0.
+    pub jump_growth: Option<f32>,
+    /// Jumps a slab may make before it lands; default 3.
+    pub hops: Option<u32>,
+    /// Probability a slab lands on sand and on bare ground; default [0.6, 0.4] (Werner).
+    pub deposit: Option<[f32; 2]>,
+    /// Angle of repose (degrees); default 33.
+    pub repose_deg: Option<f32>,
+    /// Angle of the wind shadow behind a crest (degrees); default 15 (Werner).
+    pub shadow_deg: Option<f32>,
+    /// Probability per creep round that a cell moves a slab to a lower
+    /// neighbour (two or more slabs below); default 0.1.
+    pub creep: Option<f32>,
+    /// Avalanche and creep rounds per step; default 2 and 1.
+    pub avalanche_rounds: Option<u32>,
+    pub creep_rounds: Option<u32>,
+}
+
+/// Most cells a dune field may have.
+pub const MAX_CELLS: u64 = 1 << 24;
+/// Most steps.
+pub const MAX_STEPS: u32 = 1_000_000;
+/// Most dispatches (steps times phases) a self-check may run on the GPU.
+const MAX_DISPATCHES: u64 = u32::MAX as u64;
+/// Wind speed (m/s) at which `jump` is the saltation length.
+const REFERENCE_WIND: f32 = 10.0;
+/// The longest jump (cells) and the shadow's farthest reach (cells).
+const MAX_JUMP: u32 = 32;
+const MAX_SHADOW_REACH: u32 = 64;
+
+/// Which way the wind blows over the terrain; the automaton's lattice has
+/// the wind along its `+x`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Wind {
+    #[default]
+    PlusX,
+    MinusX,
+    PlusZ,
+    MinusZ,
+}
+
+/// The automaton of one terrain.
+#[derive(Debug, Clone, Default)]
+pub struct Setup {
+    pub params: SandParams,
+    pub steps: u32,
+    pub wind: Wind,
+    /// The terrain's cells along x and z.
+    pub cells: [u32; 2],
+    /// A slab's height (m).
+    pub slab: f32,
+}
+
+impl Setup {
+    /// Dispatches of the kernel: the start, then every phase of every step.
+    pub fn dispatches(&self) -> u32 {
+        1 + self.steps * self.params.phases
+    }
+
+    /// The terrain's cell `(i, k)` (x, z) in the lattice (wind along its x).
+    pub fn lattice_index(&self, i: u32, k: u32) -> usize {
+        let [nx, nz] = self.cells;
+        let (x, z) = match self.wind {
+            Wind::PlusX => (i, k),
+            Wind::MinusX => (nx - 1 - i, k),
+            Wind::PlusZ => (k, i),
+            Wind::MinusZ => (nz - 1 - k, i),
+        };
+        (z * self.params.nx + x) as usize
+    }
+
+    /// Heights (m) over the terrain's cells (x fastest) from the lattice's slabs.
+    pub fn metres(&self, slabs: &[u32]) -> Vec<f32> {
+        let [nx, nz] = self.cells;
+        let mut out = Vec::with_capacity((nx * nz) as usize);
+        for k in 0..nz {
+            for i in 0..nx {
+                out.push(slabs[self.lattice_index(i, k)] as f32 * self.slab);
+            }
+        }
+        out
+    }
+}
+
+fn probability(field: &str, p: f32) -> Result<u32> {
+    if !(0.0..=1.0).contains(&p) {
+        bail!(invalid(field, "a probability in [0, 1]", p));
+    }
+    Ok((p as f64 * 4294967296.0).min(u32::MAX as f64) as u32)
+}
+
+fn positive(field: &str, v: f32) -> Result<f32> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!(invalid(field, "a positive number", v));
+    }
+    Ok(v)
+}
+
+/// Validates `s` (the field `field`) for a terrain `size` metres wide and
+/// builds the kernel's parameters.
+pub fn configure(field: &str, s: &Settings, size: [f32; 2]) -> Result<Setup> {
+    let f = |name: &str| format!("{field}.dunes.{name}");
+    let [cx, cz] = s.cells;
+    let even_or_one = |n: u32| n == 1 || (n.is_multiple_of(2) && (2..=8192).contains(&n));
+    if !(even_or_one(cx) && even_or_one(cz)) {
+        bail!(invalid(
+            &f("cells"),
+            "two cell counts, each 1 or even, at most 8192 (the avalanche's checkerboard wraps around)",
+            s.cells
+        ));
+    }
+    let cells = cx as u64 * cz as u64;
+    if cells > MAX_CELLS {
+        bail!(invalid(&f("cells"), &format!("at most {MAX_CELLS} cells"), s.cells));
+    }
+    if !(1..=MAX_STEPS).contains(&s.steps) {
+        bail!(invalid(&f("steps"), &format!("a step count in 1..={MAX_STEPS}"), s.steps));
+    }
+    let dx = size[0] / cx as f32;
+    if (size[1] / cz as f32 - dx).abs() > 1e-3 * dx {
+        bail!(invalid(
+            &f("cells"),
+            &format!("square cells: the terrain's size {size:?} over the same cell width along x and z"),
+            s.cells
+        ));
+    }
+    let slab = positive(&f("slab"), s.slab.unwrap_or(dx / 10.0))?;
+    let sand = s.sand.unwrap_or(1.0);
+    if !(sand.is_finite() && sand >= 0.0) {
+        bail!(invalid(&f("sand"), "a depth of at least 0 m", sand));
+    }
+    let mean_sand = (sand / slab).round() as u64;
+    // Every cell's height stays below 2^31 slabs (the kernels' differences
+    // of heights are 32-bit signed).
+    if (2 * mean_sand + 1) * cells >= 1 << 31 {
+        bail!(invalid(&f("sand"), "less sand: at most 2^31 slabs in all (raise slab or lower sand)", sand));
+    }
+    let wind = match s.wind_direction.as_deref().unwrap_or("+x") {
+        "+x" => Wind::PlusX,
+        "-x" => Wind::MinusX,
+        "+z" => Wind::PlusZ,
+        "-z" => Wind::MinusZ,
+        other => bail!(invalid(&f("wind_direction"), "one of \"+x\", \"-x\", \"+z\", \"-z\"", other)),
+    };
+    let (nx, nz) = match wind {
+        Wind::PlusX | Wind::MinusX => (cx, cz),
+        Wind::PlusZ | Wind::MinusZ => (cz, cx),
+    };
+    let u = s.wind_speed.unwrap_or(10.0);
+    if !(u.is_finite() && (0.0..=200.0).contains(&u)) {
+        bail!(invalid(&f("wind_speed"), "a speed in [0, 200] m/s", u));
+    }
+    let ut = s.threshold_speed.unwrap_or(4.0);
+    if !(ut.is_finite() && ut >= 0.0) {
+        bail!(invalid(&f("threshold_speed"), "a speed of at least 0 m/s", ut));
+    }
+    // The share of exposed cells that give sand grows from 0 at the
+    // threshold toward `erosion` (the excess shear stress, 1 - (u_t/u)^2).
+    let excess = if u > ut { 1.0 - (ut / u).powi(2) } else { 0.0 };
+    let erosion = s.erosion.unwrap_or(0.5);
+    let erode = probability(&f("erosion"), erosion)?;
+    let erode = (erode as f64 * excess as f64) as u32;
+    let jump = s.jump.unwrap_or(5.0);
+    if !(jump.is_finite() && (0.0..=MAX_JUMP as f32).contains(&jump)) {
+        bail!(invalid(&f("jump"), &format!("a length in [0, {MAX_JUMP}] cells"), jump));
+    }
+    let growth = s.jump_growth.unwrap_or(0.0);
+    if !(growth.is_finite() && (0.0..=1000.0).contains(&growth)) {
+        bail!(invalid(&f("jump_growth"), "cells per metre in [0, 1000]", growth));
+    }
+    let hops = s.hops.unwrap_or(3);
+    if !(1..=8).contains(&hops) {
+        bail!(invalid(&f("hops"), "1 to 8 jumps", hops));
+    }
+    let [ps, pb] = s.deposit.unwrap_or([0.6, 0.4]);
+    let repose = s.repose_deg.unwrap_or(33.0);
+    if !(repose.is_finite() && (5.0..=60.0).contains(&repose)) {
+        bail!(invalid(&f("repose_deg"), "an angle in [5, 60] degrees", repose));
+    }
+    let repose_slabs = (repose.to_radians().tan() * dx / slab).floor();
+    if repose_slabs < 2.0 {
+        bail!(invalid(
+            &f("slab"),
+            &format!(
+                "a slab thin enough that the angle of repose spans 2 slabs per cell: at most {} m",
+                repose.to_radians().tan() * dx / 2.0
+            ),
+            slab
+        ));
+    }
+    let shadow = s.shadow_deg.unwrap_or(15.0);
+    if !(shadow.is_finite() && (1.0..=repose).contains(&shadow)) {
+        bail!(invalid(&f("shadow_deg"), &format!("an angle in [1, repose_deg = {repose}] degrees"), shadow));
+    }
+    // Below 2^25, so that the shadow's fall over its reach (64 cells) fits 32 bits.
+    let shadow_drop = (shadow.to_radians().tan() * dx / slab * 256.0).round().min((1 << 25) as f32);
+    let rounds = |name: &str, v: Option<u32>, default: u32| -> Result<u32> {
+        let r = v.unwrap_or(default);
+        if r > 64 {
+            bail!(invalid(&f(name), "0 to 64 rounds per step", r));
+        }
+        Ok(r)
+    };
+    let avalanche_rounds = rounds("avalanche_rounds", s.avalanche_rounds, 2)?;
+    let creep_rounds = rounds("creep_rounds", s.creep_rounds, 1)?;
+    let phases = 2 + 2 * (avalanche_rounds + creep_rounds);
+    if 1 + s.steps as u64 * phases as u64 > MAX_DISPATCHES {
+        bail!(invalid(&f("steps"), "fewer steps times rounds (the dispatch counter is 32 bits)", s.steps));
+    }
+    // The saltation length in cells, proportional to the wind (1/256 cells).
+    let scale = u / REFERENCE_WIND;
+    let jump_fixed = (jump * scale * 256.0).round().min((MAX_JUMP * 256) as f32) as u32;
+    let growth_fixed = (growth * slab * scale * 256.0).round().min(65536.0) as u32;
+    let max_jump = if growth_fixed == 0 { (jump_fixed >> 8).clamp(1, MAX_JUMP) } else { MAX_JUMP };
+    let params = SandParams {
+        nx,
+        nz,
+        cells: cells as u32,
+        seed: s.seed,
+        phases,
+        avalanche_rounds,
+        creep_rounds,
+        mean_sand: mean_sand as u32,
+        jump: jump_fixed,
+        jump_growth: growth_fixed,
+        max_jump,
+        hops,
+        window: hops * max_jump,
+        erode,
+        deposit_sand: probability(&f("deposit[0]"), ps)?,
+        deposit_bare: probability(&f("deposit[1]"), pb)?,
+        creep: probability(&f("creep"), s.creep.unwrap_or(0.1))?,
+        repose: repose_slabs as u32,
+        shadow_drop: shadow_drop.max(1.0) as u32,
+        shadow_reach: MAX_SHADOW_REACH.min(nx.saturating_sub(1)),
+    };
+    Ok(Setup { params, steps: s.steps, wind, cells: s.cells, slab })
+}
+
+/// Runs dispatches `first..first + count` of the kernel on the CPU from
+/// `state` (the lattice after dispatch `first - 1`), the same function per
+/// cell as on the GPU.
+pub fn run_dispatches(
+    p: &SandParams,
+    mut state: Vec<UVec2>,
+    first: u32,
+    count: u32,
+    progress: &ProgressBar,
+) -> Vec<UVec2> {
+    let mut next = vec![UVec2::ZERO; p.cells as usize];
+    let quiet = ProgressBar::hidden();
+    for k in first..first + count {
+        for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, p, &state));
+        std::mem::swap(&mut state, &mut next);
+        if (k + 1 - first).is_multiple_of(p.phases.max(1)) {
+            progress.inc(1);
+        }
+    }
+    state
+}
+
+/// The automaton's lattice after all its steps (before settling): what the
+/// self-check pass computes.
+pub fn run(setup: &Setup, progress: &ProgressBar) -> Vec<UVec2> {
+    let start = run_dispatches(&setup.params, vec![UVec2::ZERO; setup.params.cells as usize], 0, 1, progress);
+    run_dispatches(&setup.params, start, 1, setup.steps * setup.params.phases, progress)
+}
+
+/// Avalanche rounds (both colours) on `slabs` until nothing moves; returns
+/// the heights and the rounds it took. Each move lowers the sum of squared
+/// heights (`sand.rs`), so this ends; `limit` rounds bound it all the same.
+pub fn settle(p: &SandParams, slabs: &[u32], limit: u32) -> Result<(Vec<u32>, u32)> {
+    let mut state: Vec<UVec2> = slabs.iter().map(|&h| UVec2::new(h, 0)).collect();
+    let mut next = state.clone();
+    for round in 0..limit {
+        let mut moved = false;
+        for colour in 0..2 {
+            let rule = avalanche(p, colour);
+            for_each_invocation(&mut next, 0, &ProgressBar::hidden(), |i, out| {
+                *out = UVec2::new(relax_cell(i, 0, p, &state, rule), 0)
+            });
+            moved |= next != state;
+            std::mem::swap(&mut state, &mut next);
+        }
+        if !moved {
+            return Ok((state.iter().map(|c| c.x).collect(), round));
+        }
+    }
+    bail!("dunes: the sand did not settle to the angle of repose in {limit} avalanche rounds")
+}
+
+pub static SAND_PARAMS: Resource = Resource {
+    binding: 57,
+    name: "sand parameters",
+    kind: ResourceKind::Scene(|s| bytemuck::bytes_of(s.desert.dunes.as_ref().map_or(&NO_PARAMS, |d| &d.params))),
+};
+static NO_PARAMS: SandParams = SandParams {
+    nx: 0,
+    nz: 0,
+    cells: 0,
+    seed: 0,
+    phases: 1,
+    avalanche_rounds: 0,
+    creep_rounds: 0,
+    mean_sand: 0,
+    jump: 0,
+    jump_growth: 0,
+    max_jump: 0,
+    hops: 0,
+    window: 0,
+    erode: 0,
+    deposit_sand: 0,
+    deposit_bare: 0,
+    creep: 0,
+    repose: 0,
+    shadow_drop: 0,
+    shadow_reach: 0,
+};
+fn lattice_bytes(s: &SceneData) -> u64 {
+    s.desert.dunes.as_ref().map_or(0, |d| d.params.cells as u64 * 8)
+}
+/// The lattice a dispatch reads (the GPU copies the dispatch's output over it).
+pub static SAND_STATE: Resource =
+    Resource { binding: 58, name: "sand lattice", kind: ResourceKind::Frame(lattice_bytes) };
+/// The lattice a dispatch writes: after the last, the final state.
+pub static SAND_NEXT: Resource =
+    Resource { binding: 59, name: "sand next lattice", kind: ResourceKind::Frame(lattice_bytes) };
+pub static SAND_COUNTER: Resource = Resource { binding: 60, name: "sand dispatch", kind: ResourceKind::Frame(|_| 4) };
+pub static SAND_NEXT_COUNTER: Resource =
+    Resource { binding: 61, name: "sand next dispatch", kind: ResourceKind::Frame(|_| 4) };
+
+/// The dunes' automaton run on the backend: a self-check (the terrain is
+/// built on the CPU at load, since the BVH needs its heights), requested by
+/// name; its result must equal the load's bit for bit.
+pub struct Dunes;
+
+impl Pass for Dunes {
+    fn name(&self) -> &'static str {
+        "desert.dunes"
+    }
+    fn kernel(&self) -> &'static str {
+        "desert::sand::sand_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SAND_PARAMS, SAND_STATE, SAND_COUNTER]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SAND_NEXT, SAND_NEXT_COUNTER]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn repeats(&self, scene: &SceneData) -> u32 {
+        scene.desert.dunes.as_ref().map_or(1, |d| d.dispatches())
+    }
+    fn carry(&self) -> &'static [(&'static Resource, &'static Resource)] {
+        static CARRY: [(&Resource, &Resource); 2] = [(&SAND_NEXT, &SAND_STATE), (&SAND_NEXT_COUNTER, &SAND_COUNTER)];
+        &CARRY
+    }
+    fn keeps(&self) -> &'static [&'static Resource] {
+        resources![SAND_NEXT]
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        let Some(d) = &scene.desert.dunes else {
+            return Plan::skip("no dunes");
+        };
+        if !scene.requested_passes.iter().any(|p| p == self.name()) {
+            return Plan::skip(
+                "a self-check (the dunes are built on the CPU at load); run it with --pass desert.dunes",
+            );
+        }
+        let p = &d.params;
+        Plan::run(
+            format!(
+                "requested: {} steps of {}x{} cells ({} dispatches), against the load's",
+                d.steps,
+                p.nx,
+                p.nz,
+                d.dispatches()
+            ),
+            p.cells as u64,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let d = scene.desert.dunes.as_ref().expect("planned only with dunes");
+        let state = run(d, progress);
+        frame.insert(&SAND_NEXT, Buffer::from_bytes(bytemuck::cast_slice(&state)));
+        frame.insert(&SAND_NEXT_COUNTER, Buffer::from_bytes(bytemuck::bytes_of(&d.dispatches())));
+    }
+    fn report(&self, scene: &SceneData, frame: &Frame) -> Result<Option<String>> {
+        let Some(d) = &scene.desert.dunes else { return Ok(None) };
+        let Some(loaded) = &scene.desert.dune_slabs else { return Ok(None) };
+        let got: Vec<u32> = frame.get::<UVec2>(&SAND_NEXT).iter().map(|c| c.x).collect();
+        let differ = got.iter().zip(loaded).filter(|(a, b)| a != b).count();
+        if differ > 0 || got.len() != loaded.len() {
+            bail!("desert.dunes: {differ} of {} cells differ from the heights built at load", loaded.len());
+        }
+        Ok(Some(format!("all {} cells equal the load's after {} steps", got.len(), d.steps)))
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Integer rules and a counter-based hash: the same bits, or a bug.
+        let (a, b) = (gpu.get::<UVec2>(&SAND_NEXT), cpu.get::<UVec2>(&SAND_NEXT));
+        let differ = a.iter().zip(b).filter(|(x, y)| x != y).count();
+        let k = (gpu.get::<u32>(&SAND_NEXT_COUNTER)[0], cpu.get::<u32>(&SAND_NEXT_COUNTER)[0]);
+        if differ > 0 || a.len() != b.len() || k.0 != k.1 {
+            bail!("{differ} of {} cells differ; dispatches {} and {}", a.len(), k.0, k.1);
+        }
+        let slabs: u64 = a.iter().map(|c| c.x as u64).sum();
+        Ok(format!("all {} cells identical after {} dispatches ({slabs} slabs)", a.len(), k.0))
+    }
+}

@@ -1,0 +1,378 @@
+//! Desert scenes (the survey's section 5; kernels in
+//! `shader-crate/src/desert/`): `[[terrain]]` height fields, from an image,
+//! from procedural noise, or formed by the sand automaton (`dunes`), drawn
+//! as the paper's mesh of quadrilaterals (two triangles each, through the
+//! BVH, so that shadows, the sky's sun and every pass see them as any
+//! object), and written out by `slicelight terrain`.
+
+use anyhow::{anyhow, bail, Result};
+use glam::Vec3;
+use indicatif::ProgressBar;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+use crate::passes::{Family, Pass};
+use crate::scene::geometry::IndexedMesh;
+use crate::scene::{invalid, validate};
+
+pub mod bench;
+pub mod dunes;
+
+static PASSES: &[&dyn Pass] = &[&dunes::Dunes];
+
+pub static FAMILY: Family = Family { name: "desert", passes: PASSES, bench: Some(&bench::DesertSweep) };
+
+/// A `[[terrain]]`: a height field over the rectangle `min .. min + size`
+/// (x, z; metres), its height 0 at `elevation` (y), from exactly one of
+/// `heights`, `procedural` or `dunes`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Terrain {
+    pub min: [f32; 2],
+    pub size: [f32; 2],
+    #[serde(default)]
+    pub elevation: f32,
+    pub heights: Option<HeightsFile>,
+    pub procedural: Option<Procedural>,
+    pub dunes: Option<dunes::Settings>,
+    #[serde(default = "default_sand")]
+    pub albedo: [f32; 3],
+    /// Quadrilaterals along x and z; default one per cell of the field
+    /// (at most 512 x 512).
+    pub mesh: Option<[u32; 2]>,
+    /// Passes of a 3 x 3 binomial filter over the field before it is
+    /// meshed (display only: the automaton's whole slabs become slopes);
+    /// default 1 for dunes, 0 otherwise.
+    pub smoothing: Option<u32>,
+}
+
+fn default_sand() -> [f32; 3] {
+    [0.78, 0.62, 0.42]
+}
+
+/// `heights = { file, scale }`: a grey image (8- or 16-bit PNG, or a float
+/// EXR's red channel), its first row at `min`'s z, each pixel a node of the
+/// field; height = value times `scale` metres (PNG values run 0 to 1).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeightsFile {
+    pub file: PathBuf,
+    #[serde(default = "one")]
+    pub scale: f32,
+    /// Whether the field wraps around (as a field `slicelight terrain`
+    /// wrote from dunes does): its nodes then sit at the cells' corners and
+    /// the last row and column meet the first.
+    #[serde(default)]
+    pub periodic: bool,
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+/// `procedural = { ... }`: value noise, `octaves` octaves from `wavelength`
+/// metres down by halves, each half the last's amplitude; heights in
+/// `[0, amplitude]` metres.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Procedural {
+    pub cells: [u32; 2],
+    pub amplitude: f32,
+    pub wavelength: f32,
+    #[serde(default = "four")]
+    pub octaves: u32,
+    #[serde(default)]
+    pub seed: u32,
+}
+
+fn four() -> u32 {
+    4
+}
+
+/// A height field: `heights` (m above the terrain's elevation) at
+/// `nx x nz` nodes, x fastest. A periodic field (the automaton's, which
+/// wraps around) has its nodes at the cells' corners `min + i size / n`,
+/// node `n` being node 0; otherwise the nodes span the rectangle edge to
+/// edge (`min + i size / (n - 1)`).
+#[derive(Debug, Clone, Default)]
+pub struct Field {
+    pub nx: u32,
+    pub nz: u32,
+    pub heights: Vec<f32>,
+    pub periodic: bool,
+}
+
+impl Field {
+    fn at(&self, i: i64, k: i64) -> f32 {
+        let (nx, nz) = (self.nx as i64, self.nz as i64);
+        let (i, k) =
+            if self.periodic { (i.rem_euclid(nx), k.rem_euclid(nz)) } else { (i.clamp(0, nx - 1), k.clamp(0, nz - 1)) };
+        self.heights[(k * nx + i) as usize]
+    }
+
+    /// The height at `(u, v)` in `[0, 1]^2` of the rectangle, bilinear.
+    pub fn sample(&self, u: f64, v: f64) -> f32 {
+        let span = |n: u32| if self.periodic { n as f64 } else { (n.max(2) - 1) as f64 };
+        let (x, z) = (u * span(self.nx), v * span(self.nz));
+        let (i, k) = (x.floor(), z.floor());
+        let (fx, fz) = ((x - i) as f32, (z - k) as f32);
+        let (i, k) = (i as i64, k as i64);
+        let a = self.at(i, k) * (1.0 - fx) + self.at(i + 1, k) * fx;
+        let b = self.at(i, k + 1) * (1.0 - fx) + self.at(i + 1, k + 1) * fx;
+        a * (1.0 - fz) + b * fz
+    }
+
+    /// The field filtered once by the 3 x 3 binomial kernel (1 2 1 along
+    /// each axis, over 16), wrapping around a periodic field and holding the
+    /// edge values of another.
+    pub fn smoothed(&self) -> Field {
+        let mut heights = Vec::with_capacity(self.heights.len());
+        for k in 0..self.nz as i64 {
+            for i in 0..self.nx as i64 {
+                let mut sum = 0.0;
+                for (dk, wk) in [(-1, 1.0), (0, 2.0), (1, 1.0)] {
+                    for (di, wi) in [(-1, 1.0), (0, 2.0), (1, 1.0)] {
+                        sum += wk * wi * self.at(i + di, k + dk);
+                    }
+                }
+                heights.push(sum / 16.0);
+            }
+        }
+        Field { heights, ..*self }
+    }
+
+    /// Quadrilaterals per axis the field has.
+    fn quads(&self) -> [u32; 2] {
+        let q = |n: u32| if self.periodic { n } else { n.saturating_sub(1).max(1) };
+        [q(self.nx), q(self.nz)]
+    }
+}
+
+/// The family's share of a scene: each terrain's field, and the first
+/// dunes' automaton (what the `desert.dunes` self-check runs) with the
+/// slabs it ended with at load, before settling.
+#[derive(Debug, Clone, Default)]
+pub struct Setup {
+    pub fields: Vec<Field>,
+    pub dunes: Option<dunes::Setup>,
+    pub dune_slabs: Option<Vec<u32>>,
+}
+
+/// Most quadrilaterals a terrain's mesh may have (8 million triangles).
+const MAX_QUADS: u64 = 1 << 22;
+/// Most nodes a height field may have.
+const MAX_NODES: u64 = 1 << 26;
+
+/// Validates the terrains and builds their fields (running the dunes'
+/// automaton, with a progress bar when `progress` is shown).
+pub fn configure(terrains: &[Terrain], base: &Path, progress: &ProgressBar) -> Result<Setup> {
+    let mut setup = Setup::default();
+    for (t, terrain) in terrains.iter().enumerate() {
+        let field = format!("terrain[{t}]");
+        validate::finite3(&format!("{field}.min"), [terrain.min[0], 0.0, terrain.min[1]])?;
+        if !terrain.size.iter().all(|s| s.is_finite() && *s > 0.0) {
+            bail!(invalid(&format!("{field}.size"), "two positive lengths (m) along x and z", terrain.size));
+        }
+        if !terrain.elevation.is_finite() {
+            bail!(invalid(&format!("{field}.elevation"), "a finite height (m)", terrain.elevation));
+        }
+        validate::albedo(&format!("{field}.albedo"), terrain.albedo)?;
+        let sources =
+            terrain.heights.is_some() as u32 + terrain.procedural.is_some() as u32 + terrain.dunes.is_some() as u32;
+        if sources != 1 {
+            bail!(invalid(&field, "exactly one of heights, procedural or dunes", format!("{sources} of them")));
+        }
+        let f = if let Some(h) = &terrain.heights {
+            read_heights(&format!("{field}.heights"), base, h)?
+        } else if let Some(p) = &terrain.procedural {
+            procedural(&format!("{field}.procedural"), p)?
+        } else {
+            let d = terrain.dunes.as_ref().expect("one source");
+            let s = dunes::configure(&field, d, terrain.size)?;
+            let state = dunes::run(&s, progress);
+            let slabs: Vec<u32> = state.iter().map(|c| c.x).collect();
+            let (settled, _) = dunes::settle(&s.params, &slabs, 1 << 20)?;
+            let heights = s.metres(&settled);
+            let field = Field { nx: s.cells[0], nz: s.cells[1], heights, periodic: true };
+            if setup.dunes.is_none() {
+                setup.dunes = Some(s);
+                setup.dune_slabs = Some(slabs);
+            }
+            field
+        };
+        let passes = terrain.smoothing.unwrap_or(if terrain.dunes.is_some() { 1 } else { 0 });
+        if passes > 16 {
+            bail!(invalid(&format!("{field}.smoothing"), "0 to 16 filter passes", passes));
+        }
+        let f = (0..passes).fold(f, |f, _| f.smoothed());
+        if let Some(m) = terrain.mesh {
+            if m[0] == 0 || m[1] == 0 || m[0] as u64 * m[1] as u64 > MAX_QUADS {
+                bail!(invalid(
+                    &format!("{field}.mesh"),
+                    &format!("two positive counts, at most {MAX_QUADS} quadrilaterals"),
+                    m
+                ));
+            }
+        }
+        setup.fields.push(f);
+    }
+    Ok(setup)
+}
+
+/// The terrain's mesh: `mesh` quadrilaterals (default the field's, at most
+/// 512 a side), two triangles each facing up, vertices on the field.
+pub fn mesh(terrain: &Terrain, field: &Field) -> IndexedMesh {
+    let [mx, mz] = terrain.mesh.unwrap_or_else(|| field.quads().map(|q| q.min(512)));
+    let (x0, z0) = (terrain.min[0] as f64, terrain.min[1] as f64);
+    let (sx, sz) = (terrain.size[0] as f64, terrain.size[1] as f64);
+    let mut mesh = IndexedMesh::default();
+    for k in 0..=mz {
+        for i in 0..=mx {
+            let (u, v) = (i as f64 / mx as f64, k as f64 / mz as f64);
+            let y = terrain.elevation + field.sample(u, v);
+            mesh.positions.push(Vec3::new((x0 + u * sx) as f32, y, (z0 + v * sz) as f32));
+        }
+    }
+    let row = mx + 1;
+    for k in 0..mz {
+        for i in 0..mx {
+            let a = k * row + i;
+            let (b, c, d) = (a + 1, a + row + 1, a + row);
+            mesh.indices.push([a, c, b]);
+            mesh.indices.push([a, d, c]);
+        }
+    }
+    // Smooth normals (area-weighted), though diffuse triangles shade flat.
+    mesh.normals = vec![Vec3::ZERO; mesh.positions.len()];
+    for f in &mesh.indices {
+        let [a, b, c] = f.map(|i| mesh.positions[i as usize]);
+        let n = (b - a).cross(c - a);
+        for i in f {
+            mesh.normals[*i as usize] += n;
+        }
+    }
+    for n in &mut mesh.normals {
+        *n = n.normalize_or(Vec3::Y);
+    }
+    mesh
+}
+
+fn read_heights(field: &str, base: &Path, h: &HeightsFile) -> Result<Field> {
+    if !(h.scale.is_finite() && h.scale > 0.0) {
+        bail!(invalid(&format!("{field}.scale"), "a positive number of metres per unit", h.scale));
+    }
+    let path = base.join(&h.file);
+    let img = image::open(&path)
+        .map_err(|e| anyhow!("{field}.file: cannot read the height image '{}': {e}", path.display()))?;
+    let (w, hgt) = (img.width(), img.height());
+    if w as u64 * hgt as u64 > MAX_NODES {
+        bail!(invalid(
+            &format!("{field}.file"),
+            &format!("an image of at most {MAX_NODES} pixels"),
+            format!("{w}x{hgt} ({})", path.display())
+        ));
+    }
+    let rgb = img.to_rgb32f();
+    let mut heights = Vec::with_capacity((w * hgt) as usize);
+    for (i, p) in rgb.pixels().enumerate() {
+        let v = p.0[0];
+        if !v.is_finite() {
+            bail!(invalid(
+                &format!("{field}.file"),
+                "finite heights in every pixel",
+                format!("{v} at pixel ({}, {}) of '{}'", i as u32 % w, i as u32 / w, path.display())
+            ));
+        }
+        heights.push(v * h.scale);
+    }
+    Ok(Field { nx: w, nz: hgt, heights, periodic: h.periodic })
+}
+
+/// Value noise on integer lattice points (the counter-based hash), smoothed.
+fn procedural(field: &str, p: &Procedural) -> Result<Field> {
+    let [nx, nz] = p.cells;
+    if nx < 2 || nz < 2 || nx as u64 * nz as u64 > MAX_NODES {
+        bail!(invalid(
+            &format!("{field}.cells"),
+            &format!("two node counts of at least 2, at most {MAX_NODES} in all"),
+            p.cells
+        ));
+    }
+    if !(p.amplitude.is_finite() && p.amplitude >= 0.0) {
+        bail!(invalid(&format!("{field}.amplitude"), "a height of at least 0 m", p.amplitude));
+    }
+    if !(p.wavelength.is_finite() && p.wavelength > 0.0) {
+        bail!(invalid(&format!("{field}.wavelength"), "a positive number of metres", p.wavelength));
+    }
+    if !(1..=12).contains(&p.octaves) {
+        bail!(invalid(&format!("{field}.octaves"), "1 to 12 octaves", p.octaves));
+    }
+    use slicelight_shaders::volumes::automaton::random;
+    let lattice = |o: u32, i: i64, k: i64| {
+        let cell = (i as u32).wrapping_mul(0x9e37_79b9) ^ (k as u32);
+        random(cell, o, p.seed, 300) as f32 / u32::MAX as f32
+    };
+    let smooth = |t: f32| t * t * (3.0 - 2.0 * t);
+    let mut heights = Vec::with_capacity((nx * nz) as usize);
+    let norm: f32 = (0..p.octaves).map(|o| 0.5f32.powi(o as i32)).sum();
+    for k in 0..nz {
+        for i in 0..nx {
+            let mut h = 0.0;
+            for o in 0..p.octaves {
+                // Node (i, k) in units of this octave's wavelength (nodes a node apart, 1 m each).
+                let cells_per_wave = p.wavelength / 2f32.powi(o as i32);
+                let (x, z) = (i as f32 / cells_per_wave, k as f32 / cells_per_wave);
+                let (xi, zi) = (x.floor() as i64, z.floor() as i64);
+                let (fx, fz) = (smooth(x - x.floor()), smooth(z - z.floor()));
+                let a = lattice(o, xi, zi) * (1.0 - fx) + lattice(o, xi + 1, zi) * fx;
+                let b = lattice(o, xi, zi + 1) * (1.0 - fx) + lattice(o, xi + 1, zi + 1) * fx;
+                h += (a * (1.0 - fz) + b * fz) * 0.5f32.powi(o as i32);
+            }
+            heights.push(h / norm * p.amplitude);
+        }
+    }
+    Ok(Field { nx, nz, heights, periodic: false })
+}
+
+/// Writes each terrain's heights (m above its elevation): a float EXR
+/// (grey in r, g and b), or a 16-bit grey PNG from 0 to the field's highest
+/// point; `path` for the first, `stem_1.ext` ... for the others. Returns the
+/// files written, each with a note (a PNG's `scale`).
+pub fn write_fields(setup: &Setup, path: &Path) -> Result<Vec<(PathBuf, String)>> {
+    if setup.fields.is_empty() {
+        bail!("the scene has no [[terrain]] to write");
+    }
+    let png = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if !png && !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+        bail!("{}: expected a .exr or .png file name", path.display());
+    }
+    let mut written = Vec::new();
+    for (t, f) in setup.fields.iter().enumerate() {
+        let out = if t == 0 {
+            path.to_path_buf()
+        } else {
+            let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            let ext = path.extension().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            path.with_file_name(format!("{stem}_{t}.{ext}"))
+        };
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        let periodic = if f.periodic { ", periodic = true" } else { "" };
+        let (image, note) = if png {
+            let top = f.heights.iter().fold(0.0f32, |m, &h| m.max(h));
+            let scale = if top > 0.0 { top } else { 1.0 };
+            let grey: Vec<u16> =
+                f.heights.iter().map(|&h| (h.max(0.0) / scale * 65535.0).round().min(65535.0) as u16).collect();
+            let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(f.nx, f.nz, grey).expect("nx * nz values");
+            (image::DynamicImage::ImageLuma16(img), format!(" (heights = {{ file, scale = {scale}{periodic} }})"))
+        } else {
+            let pixels: Vec<f32> = f.heights.iter().flat_map(|&h| [h, h, h]).collect();
+            let img = image::Rgb32FImage::from_raw(f.nx, f.nz, pixels).expect("nx * nz * 3 values");
+            (image::DynamicImage::ImageRgb32F(img), format!(" (heights = {{ file{periodic} }})"))
+        };
+        let format = if png { image::ImageFormat::Png } else { image::ImageFormat::OpenExr };
+        image.write_to(&mut bytes, format).map_err(|e| anyhow!("{}: cannot encode the heights: {e}", out.display()))?;
+        crate::output::write_atomically(&out, bytes.get_ref())?;
+        written.push((out, note));
+    }
+    Ok(written)
+}

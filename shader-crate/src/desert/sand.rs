@@ -1,0 +1,416 @@
+//! The sand automaton: Werner's slab model of dunes (Werner 1995, "Eolian
+//! dunes: computer simulations and attractor interpretation", Geology 23)
+//! with Nishimori and Ouchi's height-dependent saltation length and surface
+//! creep (Nishimori and Ouchi 1993, "Formation of ripple patterns and dunes
+//! by wind-blown sand", PRL 71; the survey's [16], section 5.1).
+//!
+//! Heights are whole slabs (`u32`), so every rule moves whole slabs and the
+//! total is conserved exactly. The wind blows along `+x` of the lattice
+//! (the host turns the lattice to the scene's wind); both axes wrap around.
+//! A step is a sequence of synchronous phases, each a pure function of the
+//! previous phase's lattice (so both backends compute the same bits):
+//!
+//! 1. **saltation, source**: a sand cell outside the wind shadow gives a slab
+//!    with probability `erode`; the slab jumps `L = L0 + b h` cells downwind
+//!    (Nishimori-Ouchi's `L = L0 + b tau h`, the wind's `tau` in `L0` and
+//!    `b`), and lands there with probability `deposit_sand` on sand,
+//!    `deposit_bare` on bare ground, always in a wind shadow, else jumps
+//!    again, at most `hops` times (Werner's rule, bounded so that the
+//!    gather below has a fixed window). A cell is in the wind shadow if
+//!    the line falling at the shadow angle (Werner: 15 degrees) from some
+//!    upwind cell's top passes above it: `(h(x - d) - h(x)) > d tan(15) dx
+//!    / slab` for some `d` up to `shadow_reach` cells (fixed point, 1/256
+//!    slab).
+//! 2. **saltation, gather**: each cell loses the slab it gave and gains the
+//!    slabs whose jump ends on it (it looks `hops * max_jump` cells upwind).
+//! 3. **avalanches, then creep**: in rounds of two colours (a checkerboard),
+//!    each cell of the round's colour whose steepest 4-neighbour lies more
+//!    than `threshold` slabs below moves one slab to it. Avalanches use the
+//!    angle of repose (`repose` slabs, about 33 degrees) and always move;
+//!    creep (Nishimori-Ouchi's relaxation toward the neighbours) uses one
+//!    slab and moves with probability `creep`. Senders and receivers are of
+//!    different colours, so a round is a gather without conflicts; with
+//!    `repose >= 2` every avalanche move lowers the sum of squared heights,
+//!    so rounds repeated until nothing moves (`settled`) end.
+//!
+//! Random numbers: the counter-based hash of (cell, step, seed, stream) the
+//! cloud automaton uses; probabilities are thresholds on its 32 bits.
+
+use crate::glam::{UVec2, UVec3};
+use crate::volumes::automaton::random;
+use spirv_std::spirv;
+
+/// The automaton's parameter block (the host fills it from the scene's
+/// `dunes = { ... }` or `ripples = { ... }`).
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct SandParams {
+    /// Cells along the wind (x) and across it (z), and both; each axis even
+    /// or 1 (the checkerboard wraps around).
+    pub nx: u32,
+    pub nz: u32,
+    pub cells: u32,
+    pub seed: u32,
+    /// Phases per step: 2 + 2 (avalanche_rounds + creep_rounds).
+    pub phases: u32,
+    pub avalanche_rounds: u32,
+    pub creep_rounds: u32,
+    /// The random start: `mean_sand` slabs per cell, give or take one.
+    pub mean_sand: u32,
+    /// Saltation length `L0` (1/256 cells) and its growth `b` per slab of
+    /// the source's height (1/256 cells per slab); at most `max_jump` cells.
+    pub jump: u32,
+    pub jump_growth: u32,
+    pub max_jump: u32,
+    /// Jumps a slab may make before it lands wherever it is.
+    pub hops: u32,
+    /// Cells the gather looks upwind: `hops * max_jump`.
+    pub window: u32,
+    /// Probabilities as thresholds on 32 random bits (`p * 2^32`).
+    pub erode: u32,
+    pub deposit_sand: u32,
+    pub deposit_bare: u32,
+    pub creep: u32,
+    /// The largest height difference (slabs) between 4-neighbours at rest:
+    /// `floor(tan(repose) dx / slab)`.
+    pub repose: u32,
+    /// The wind shadow's fall per cell (1/256 slab): `tan(15) dx / slab`
+    /// (`shadow_reach * shadow_drop` below 2^32).
+    pub shadow_drop: u32,
+    /// Cells behind a crest its shadow may reach.
+    pub shadow_reach: u32,
+}
+
+#[cfg(not(target_arch = "spirv"))]
+mod pod {
+    // SAFETY: `repr(C)` of 4-byte scalars, 80 bytes, no padding.
+    unsafe impl bytemuck::Zeroable for super::SandParams {}
+    unsafe impl bytemuck::Pod for super::SandParams {}
+}
+
+/// The hash's streams (one per decision, so that no two share bits).
+const STREAM_START: u32 = 100;
+const STREAM_ERODE: u32 = 101;
+/// `STREAM_DEPOSIT + hop`.
+const STREAM_DEPOSIT: u32 = 110;
+/// `STREAM_RELAX + relax phase`.
+const STREAM_RELAX: u32 = 200;
+
+/// A relaxation's kind: moves a slab down a drop of more than `threshold`
+/// slabs, with probability `probability / 2^32` (`u32::MAX`: always).
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub struct Relax {
+    pub colour: u32,
+    pub threshold: u32,
+    pub probability: u32,
+    pub stream: u32,
+}
+
+/// The avalanche rule of colour `colour` (rounds until nothing moves use it).
+pub fn avalanche(p: &SandParams, colour: u32) -> Relax {
+    Relax { colour, threshold: p.repose, probability: u32::MAX, stream: STREAM_RELAX }
+}
+
+/// `v` wrapped into `0..n` (the offsets here are a few lattices at most:
+/// adding or subtracting beats an integer division).
+fn wrap(v: i32, n: u32) -> u32 {
+    let n = n as i32;
+    let mut r = v;
+    while r < 0 {
+        r += n;
+    }
+    while r >= n {
+        r -= n;
+    }
+    r as u32
+}
+
+/// The index of cell `(x, z)` (wrapped around).
+fn at(p: &SandParams, x: i32, z: i32) -> usize {
+    (wrap(z, p.nz) * p.nx + wrap(x, p.nx)) as usize
+}
+
+/// The cell at step 0: a nearly flat bed, `mean_sand` slabs give or take
+/// one (uniform over the three), or bare (`mean_sand` 0).
+pub fn start_height(index: u32, p: &SandParams) -> u32 {
+    if p.mean_sand == 0 {
+        return 0;
+    }
+    p.mean_sand + random(index, 0, p.seed, STREAM_START) % 3 - 1
+}
+
+/// Whether cell `(x, z)` lies in the wind shadow of a crest upwind: some
+/// `h(x - d) - h(x) > d drop / 256` (slabs; for whole slabs that is `>
+/// floor(d drop / 256)`, so no product of a height overflows).
+fn shadowed(p: &SandParams, state: &[UVec2], x: i32, z: i32) -> bool {
+    let h = state[at(p, x, z)].x;
+    let mut d = 1;
+    while d <= p.shadow_reach {
+        let up = state[at(p, x - d as i32, z)].x;
+        if up > h && up - h > (d * p.shadow_drop) >> 8 {
+            return true;
+        }
+        d += 1;
+    }
+    false
+}
+
+/// The saltation length (cells) from a cell `h` slabs high.
+pub fn jump_length(p: &SandParams, h: u32) -> u32 {
+    // Heights above 4096 slabs jump as 4096 (keeps the product in 32 bits).
+    let h = if h < 4096 { h } else { 4096 };
+    let l = (p.jump + p.jump_growth * h) >> 8;
+    if l < 1 {
+        1
+    } else if l > p.max_jump {
+        p.max_jump
+    } else {
+        l
+    }
+}
+
+/// Phase 1: cell `index`'s slab (if it gives one) and where it lands, as
+/// the offset downwind (0: none). The wind shadow is looked up only where a
+/// decision needs it (a scan of up to `shadow_reach` cells).
+fn saltation_offset(index: u32, step: u32, p: &SandParams, state: &[UVec2]) -> u32 {
+    let (x, z) = ((index % p.nx) as i32, (index / p.nx) as i32);
+    let own = state[index as usize].x;
+    if own == 0 || random(index, step, p.seed, STREAM_ERODE) >= p.erode || shadowed(p, state, x, z) {
+        return 0;
+    }
+    let l = jump_length(p, own);
+    let mut d = 0;
+    let mut hop = 0;
+    loop {
+        d += l;
+        hop += 1;
+        if hop >= p.hops {
+            break;
+        }
+        let t = x + d as i32;
+        let target = state[at(p, t, z)].x;
+        let chance = if target > 0 { p.deposit_sand } else { p.deposit_bare };
+        if random(index, step, p.seed, STREAM_DEPOSIT + hop) < chance || shadowed(p, state, t, z) {
+            break;
+        }
+    }
+    // A jump around the whole lattice back onto itself moves nothing.
+    if d % p.nx == 0 {
+        0
+    } else {
+        d
+    }
+}
+
+/// Phase 2: the height after the saltation (`state`'s `y`: phase 1's offset).
+fn gathered(index: u32, p: &SandParams, state: &[UVec2]) -> u32 {
+    let (x, z) = ((index % p.nx) as i32, (index / p.nx) as i32);
+    let mut h = state[index as usize].x;
+    if state[index as usize].y != 0 {
+        h -= 1;
+    }
+    let mut d = 1;
+    while d <= p.window {
+        if state[at(p, x - d as i32, z)].y == d {
+            h += 1;
+        }
+        d += 1;
+    }
+    h
+}
+
+/// The 4-neighbours of `(x, z)` (wrapped around), in the order +x, -x,
+/// +z, -z (directions 1 to 4).
+fn neighbours(p: &SandParams, x: u32, z: u32) -> [u32; 4] {
+    let row = z * p.nx;
+    let xp = if x + 1 == p.nx { 0 } else { x + 1 };
+    let xm = if x == 0 { p.nx - 1 } else { x - 1 };
+    let zp = if z + 1 == p.nz { 0 } else { z + 1 };
+    let zm = if z == 0 { p.nz - 1 } else { z - 1 };
+    [row + xp, row + xm, zp * p.nx + x, zm * p.nx + x]
+}
+
+/// The direction cell `(x, z)` sends a slab to under `rule` (0: none): its
+/// steepest 4-neighbour if the drop exceeds the threshold (the first in
+/// the order +x, -x, +z, -z on ties).
+fn relax_choice(p: &SandParams, state: &[UVec2], x: u32, z: u32, step: u32, rule: Relax) -> u32 {
+    if (x + z) & 1 != rule.colour {
+        return 0;
+    }
+    let index = z * p.nx + x;
+    let h = state[index as usize].x as i32;
+    let n = neighbours(p, x, z);
+    let mut best = 0;
+    let mut drop = rule.threshold as i32;
+    let mut dir = 0;
+    while dir < 4 {
+        let d = h - state[n[dir] as usize].x as i32;
+        if d > drop {
+            best = dir as u32 + 1;
+            drop = d;
+        }
+        dir += 1;
+    }
+    if best != 0 && rule.probability != u32::MAX && random(index, step, p.seed, rule.stream) >= rule.probability {
+        return 0;
+    }
+    best
+}
+
+/// Phase 3: cell `index`'s height after one relaxation round of one colour.
+pub fn relax_cell(index: u32, step: u32, p: &SandParams, state: &[UVec2], rule: Relax) -> u32 {
+    let (x, z) = (index % p.nx, index / p.nx);
+    let mut h = state[index as usize].x;
+    if (x + z) & 1 == rule.colour {
+        // A sender this round (its neighbours are of the other colour).
+        if relax_choice(p, state, x, z, step, rule) != 0 {
+            h -= 1;
+        }
+        return h;
+    }
+    let n = neighbours(p, x, z);
+    let mut dir = 0;
+    while dir < 4 {
+        let m = n[dir];
+        // The neighbour sends toward us if it chose the opposite direction
+        // (on a 2-cell axis, both sides are one cell: counted once, from
+        // the side its choice names).
+        let opposite = if dir % 2 == 0 { dir as u32 + 2 } else { dir as u32 };
+        if relax_choice(p, state, m % p.nx, m / p.nx, step, rule) == opposite {
+            h += 1;
+        }
+        dir += 1;
+    }
+    h
+}
+
+/// Cell `index` after the automaton's dispatch `counter`: dispatch 0 lays
+/// the random start, dispatch `1 + s phases + k` is phase `k` of step `s`.
+/// `x` of each cell is its height (slabs), `y` what a phase hands the next.
+pub fn sand_cell(index: u32, counter: u32, p: &SandParams, state: &[UVec2]) -> UVec2 {
+    if counter == 0 {
+        return UVec2::new(start_height(index, p), 0);
+    }
+    let step = (counter - 1) / p.phases;
+    let phase = (counter - 1) % p.phases;
+    let own = state[index as usize];
+    match phase {
+        0 => UVec2::new(own.x, saltation_offset(index, step, p, state)),
+        1 => UVec2::new(gathered(index, p, state), 0),
+        _ => {
+            let r = phase - 2;
+            let round = r / 2;
+            let rule = if round < p.avalanche_rounds {
+                avalanche(p, r % 2)
+            } else {
+                Relax { colour: r % 2, threshold: 1, probability: p.creep, stream: STREAM_RELAX + r }
+            };
+            UVec2::new(relax_cell(index, step, p, state, rule), 0)
+        }
+    }
+}
+
+/// The automaton's entry point: every cell, `state` after dispatch
+/// `counter[0] - 1` to `next`; invocation 0 advances the counter (the host
+/// copies `next` and `counter_next` back between dispatches: `Pass::carry`).
+#[spirv(compute(threads(64)))]
+pub fn sand_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 57)] params: &[SandParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 58)] state: &[UVec2],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 59)] next: &mut [UVec2],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 60)] counter: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 61)] counter_next: &mut [u32],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index >= p.cells {
+        return;
+    }
+    let k = counter[0];
+    next[index as usize] = sand_cell(index, k, p, state);
+    if index == 0 {
+        counter_next[0] = k + 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params(nx: u32, nz: u32) -> SandParams {
+        let f = |p: f64| (p * 4294967296.0) as u32;
+        SandParams {
+            nx,
+            nz,
+            cells: nx * nz,
+            seed: 3,
+            phases: 2 + 2 * 3,
+            avalanche_rounds: 2,
+            creep_rounds: 1,
+            mean_sand: 4,
+            jump: 3 * 256,
+            jump_growth: 0,
+            max_jump: 3,
+            hops: 3,
+            window: 9,
+            erode: f(0.5),
+            deposit_sand: f(0.6),
+            deposit_bare: f(0.4),
+            creep: f(0.3),
+            repose: 3,
+            shadow_drop: 256,
+            shadow_reach: 8,
+        }
+    }
+
+    fn run(p: &SandParams, dispatches: u32) -> Vec<UVec2> {
+        let mut state = vec![UVec2::ZERO; p.cells as usize];
+        for k in 0..dispatches {
+            state = (0..p.cells).map(|i| sand_cell(i, k, p, &state)).collect();
+        }
+        state
+    }
+
+    #[test]
+    fn every_phase_conserves_the_sand() {
+        for (nx, nz) in [(16, 8), (2, 2), (1, 6), (6, 1), (2, 4)] {
+            let p = params(nx, nz);
+            let mut state = run(&p, 1);
+            let total: u32 = state.iter().map(|c| c.x).sum();
+            for k in 1..200 {
+                state = (0..p.cells).map(|i| sand_cell(i, k, &p, &state)).collect();
+                assert_eq!(state.iter().map(|c| c.x).sum::<u32>(), total, "{nx}x{nz}, dispatch {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_slab_jumps_downwind_and_lands() {
+        // One tall cell on bare ground, no shadow, certain erosion and deposit.
+        let mut p = params(16, 1);
+        p.erode = u32::MAX;
+        p.deposit_bare = u32::MAX;
+        p.deposit_sand = u32::MAX;
+        p.shadow_reach = 0;
+        let mut state = vec![UVec2::ZERO; 16];
+        state[2].x = 1;
+        assert_eq!(saltation_offset(2, 0, &p, &state), 3);
+        state[2].y = 3;
+        assert_eq!(gathered(5, &p, &state), 1);
+        assert_eq!(gathered(2, &p, &state), 0);
+    }
+
+    #[test]
+    fn a_crest_shadows_the_cells_behind_it() {
+        let p = params(16, 1);
+        let mut state = vec![UVec2::ZERO; 16];
+        state[4].x = 5;
+        // 1 slab per cell: the shadow falls 5 slabs over 5 cells (strictly above).
+        assert!(shadowed(&p, &state, 5, 0));
+        assert!(shadowed(&p, &state, 8, 0));
+        assert!(!shadowed(&p, &state, 9, 0));
+        assert!(!shadowed(&p, &state, 3, 0));
+    }
+}

@@ -1,0 +1,371 @@
+//! The desert family: the sand automaton (mass, repose, migration, ripple
+//! wavelength, stress), terrains from images and noise, and their errors.
+
+mod common;
+
+use indicatif::ProgressBar;
+use slicelight::desert::dunes::{self, run_dispatches, Settings};
+use slicelight::shaders::glam::UVec2;
+
+/// A dune field's settings from the body of a `dunes = { ... }` table.
+fn settings(body: &str) -> Settings {
+    toml::from_str(body).unwrap_or_else(|e| panic!("{body}: {e}"))
+}
+
+/// Heights after `steps` from `start` (slabs, the lattice's order).
+fn evolve(setup: &dunes::Setup, start: &[u32], steps: u32) -> Vec<u32> {
+    let state: Vec<UVec2> = start.iter().map(|&h| UVec2::new(h, 0)).collect();
+    let p = &setup.params;
+    run_dispatches(p, state, 1, steps * p.phases, &ProgressBar::hidden()).iter().map(|c| c.x).collect()
+}
+
+/// The dominant wavelength (cells) of rows along x: the peak of the rows'
+/// mean power spectrum (wave numbers 2 and up, so not the lattice's size).
+fn wavelength(h: &[u32], nx: usize, nz: usize) -> f64 {
+    let mut power = vec![0.0f64; nx / 2];
+    for z in 0..nz {
+        let row = &h[z * nx..(z + 1) * nx];
+        for (k, p) in power.iter_mut().enumerate().skip(2) {
+            let (mut re, mut im) = (0.0, 0.0);
+            for (x, &v) in row.iter().enumerate() {
+                let a = std::f64::consts::TAU * (k * x) as f64 / nx as f64;
+                re += v as f64 * a.cos();
+                im += v as f64 * a.sin();
+            }
+            *p += re * re + im * im;
+        }
+    }
+    let k = (2..nx / 2).max_by(|&a, &b| power[a].total_cmp(&power[b])).unwrap();
+    nx as f64 / k as f64
+}
+
+fn start(s: &dunes::Setup) -> Vec<u32> {
+    (0..s.params.cells).map(|i| slicelight::shaders::desert::sand::start_height(i, &s.params)).collect()
+}
+
+/// Slabs move whole and every phase hands each on exactly once: the total
+/// is the same integer after 10^4 steps (and at every 1000th on the way).
+#[test]
+fn sand_is_conserved_exactly_over_ten_thousand_steps() {
+    let s = dunes::configure(
+        "t",
+        &settings("cells = [32, 32]\nsteps = 1\nsand = 1.0\nslab = 0.1\ncreep = 0.2"),
+        [32.0, 32.0],
+    )
+    .unwrap();
+    let mut h = start(&s);
+    let total: u64 = h.iter().map(|&v| v as u64).sum();
+    for _ in 0..10 {
+        h = evolve(&s, &h, 1000);
+        assert_eq!(h.iter().map(|&v| v as u64).sum::<u64>(), total);
+    }
+    // The sand moved (a test of a frozen lattice would prove nothing).
+    assert_ne!(h, start(&s));
+    println!("{total} slabs after 10^4 steps on 32x32 cells");
+}
+
+/// The largest height difference between 4-neighbours (slabs), wrapping.
+fn steepest(h: &[u32], nx: usize, nz: usize) -> u32 {
+    let at = |x: usize, z: usize| h[(z % nz) * nx + x % nx] as i64;
+    let mut m = 0;
+    for z in 0..nz {
+        for x in 0..nx {
+            m = m.max((at(x, z) - at(x + 1, z)).unsigned_abs()).max((at(x, z) - at(x, z + 1)).unsigned_abs());
+        }
+    }
+    m as u32
+}
+
+/// After settling, no slope between neighbours is steeper than the angle
+/// of repose (33 degrees: tan 33 x 1 m / 0.1 m = 6.49, so 6 slabs); a
+/// column of sand 200 slabs high starts far steeper.
+#[test]
+fn settled_sand_rests_at_the_angle_of_repose() {
+    let s =
+        dunes::configure("t", &settings("cells = [48, 48]\nsteps = 1\nsand = 0.0\nslab = 0.1"), [48.0, 48.0]).unwrap();
+    assert_eq!(s.params.repose, 6);
+    let mut h = vec![0u32; 48 * 48];
+    h[24 * 48 + 24] = 200;
+    h[10 * 48 + 5] = 90;
+    assert!(steepest(&h, 48, 48) > 6);
+    let (settled, rounds) = dunes::settle(&s.params, &h, 100_000).unwrap();
+    let steepest = steepest(&settled, 48, 48);
+    println!(
+        "settled in {rounds} rounds; steepest step {steepest} slabs = {:.1} degrees",
+        (steepest as f64 * 0.1).atan().to_degrees()
+    );
+    assert!(steepest <= 6, "{steepest} slabs");
+    assert_eq!(settled.iter().sum::<u32>(), 290);
+}
+
+/// A pile of height `height` slabs (a cosine bump 24 cells long, across
+/// the whole lattice) on bare ground; its centroid along x after `steps`.
+fn migration(height: u32, steps: u32) -> f64 {
+    let s = dunes::configure(
+        "t",
+        &settings("cells = [256, 8]\nsteps = 1\nsand = 0.0\nslab = 0.1\ncreep = 0.0\nseed = 4"),
+        [256.0, 8.0],
+    )
+    .unwrap();
+    let bump = |x: usize| {
+        let d = (x as f64 - 40.0) / 12.0;
+        if d.abs() < 1.0 {
+            (height as f64 * 0.5 * (1.0 + (std::f64::consts::PI * d).cos())).round() as u32
+        } else {
+            0
+        }
+    };
+    let start: Vec<u32> = (0..8 * 256).map(|i| bump(i % 256)).collect();
+    let (start, _) = dunes::settle(&s.params, &start, 100_000).unwrap();
+    // The circular mean of x (the lattice wraps around), as an angle.
+    let centroid = |h: &[u32]| {
+        let (mut c, mut s) = (0.0, 0.0);
+        for (i, &v) in h.iter().enumerate() {
+            let a = std::f64::consts::TAU * (i % 256) as f64 / 256.0;
+            c += a.cos() * v as f64;
+            s += a.sin() * v as f64;
+        }
+        s.atan2(c)
+    };
+    let end = evolve(&s, &start, steps);
+    // In (-pi, pi]: a pile that moved upwind gives a negative turn.
+    let d = centroid(&end) - centroid(&start);
+    let turn = d.sin().atan2(d.cos());
+    turn * 256.0 / std::f64::consts::TAU
+}
+
+/// Dunes move downwind, and the higher the slower (Bagnold: the crest moves
+/// at `c = Q / H`, the flux over the crest over the height). Measured on
+/// piles of 20, 40 and 80 slabs (2, 4 and 8 m on 1 m cells): c H was 5.8,
+/// 3.1 and 3.7 cells x slabs per step (the lowest pile spreads as a sheet
+/// more than it migrates as a dune; the two dunes are within 20 % of Q / H).
+#[test]
+fn dunes_migrate_downwind_slower_when_higher() {
+    let steps = 150;
+    let speeds: Vec<(u32, f64)> = [20, 40, 80].map(|h| (h, migration(h, steps) / steps as f64)).to_vec();
+    for (h, c) in &speeds {
+        println!("height {h} slabs: {c:.4} cells per step, c H = {:.2}", c * *h as f64);
+    }
+    assert!(speeds.iter().all(|(_, c)| *c > 0.0), "{speeds:?}");
+    assert!(speeds[0].1 > speeds[1].1 && speeds[1].1 > speeds[2].1, "{speeds:?}");
+}
+
+/// Nishimori and Ouchi's ripples: with the saltation length growing with
+/// the height (`jump_growth`), a flat bed of 10 slabs breaks into ripples
+/// whose wavelength follows the mean jump `L = L0 + b h`: 1 + b x 1 m cells.
+#[test]
+fn ripple_wavelength_grows_with_the_saltation_length() {
+    let mut found = Vec::new();
+    for growth in [5.0, 10.0, 20.0] {
+        let s = dunes::configure(
+            "t",
+            &settings(&format!(
+                "cells = [256, 32]\nsteps = 1\nsand = 1.0\nslab = 0.1\njump = 1.0\njump_growth = {growth}\ncreep = 0.3"
+            )),
+            [256.0, 32.0],
+        )
+        .unwrap();
+        let h = evolve(&s, &start(&s), 200);
+        let mean_jump = 1.0 + growth * 1.0;
+        let lambda = wavelength(&h, 256, 32);
+        println!(
+            "jump growth {growth} cells/m: mean jump {mean_jump} cells, wavelength {lambda:.1} cells ({:.2} jumps)",
+            lambda / mean_jump
+        );
+        found.push((mean_jump, lambda));
+    }
+    assert!(found.windows(2).all(|w| w[1].1 > w[0].1), "{found:?}");
+    // A wavelength of one to two and a half jumps (measured: 1.2 to 1.5).
+    assert!(found.iter().all(|(l, lambda)| (1.0..=2.5).contains(&(lambda / l))), "{found:?}");
+}
+
+/// A scene with one terrain: `source` is the `[[terrain]]`'s source line
+/// (`dunes = {...}`, `heights = {...}`, `procedural = {...}`), `extra` more lines.
+fn terrain_scene(source: &str, extra: &str) -> String {
+    sized_terrain_scene(source, extra, [64.0, 64.0])
+}
+
+fn sized_terrain_scene(source: &str, extra: &str, size: [f32; 2]) -> String {
+    format!(
+        r#"
+        [camera]
+        position = [0.0, 40.0, 60.0]
+        look_at = [0.0, 0.0, 0.0]
+        vfov_deg = 50.0
+        resolution = [48, 32]
+        [[directional_light]]
+        direction = [0.3, -1.0, 0.2]
+        irradiance = [2.0, 2.0, 2.0]
+        [[terrain]]
+        min = [-32.0, -32.0]
+        size = {size:?}
+        {source}
+        {extra}
+        "#
+    )
+}
+
+fn load_error(toml: &str, files: &[(&str, Vec<u8>)]) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, bytes) in files {
+        std::fs::write(dir.path().join(name), bytes).unwrap();
+    }
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, toml).unwrap();
+    format!("{:#}", slicelight::scene::load(&path).expect_err(toml))
+}
+
+/// A float EXR of `w x h` grey pixels.
+fn exr(w: u32, h: u32, value: impl Fn(u32, u32) -> f32) -> Vec<u8> {
+    let pixels: Vec<f32> = (0..w * h).flat_map(|i| [value(i % w, i / w); 3]).collect();
+    let img = image::Rgb32FImage::from_raw(w, h, pixels).unwrap();
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    image::DynamicImage::ImageRgb32F(img).write_to(&mut bytes, image::ImageFormat::OpenExr).unwrap();
+    bytes.into_inner()
+}
+
+#[test]
+fn bad_terrains_name_the_field() {
+    let nan = exr(4, 4, |x, y| if (x, y) == (2, 1) { f32::NAN } else { 1.0 });
+    // (source line, another line, files beside the scene, expected error)
+    type Case<'a> = (&'a str, &'a str, &'a [(&'a str, Vec<u8>)], &'a str);
+    let cases: &[Case] = &[
+        (
+            "heights = { file = \"h.exr\" }",
+            "",
+            &[("h.exr", nan.clone())],
+            "terrain[0].heights.file: expected finite heights in every pixel, got \"NaN at pixel (2, 1) of",
+        ),
+        ("heights = { file = \"missing.png\" }", "", &[], "terrain[0].heights.file: cannot read the height image"),
+        (
+            "dunes = { cells = [31, 32], steps = 1 }",
+            "",
+            &[],
+            "terrain[0].dunes.cells: expected two cell counts, each 1 or even",
+        ),
+        (
+            "dunes = { cells = [32, 32], steps = 1, wind_direction = \"north\" }",
+            "",
+            &[],
+            "terrain[0].dunes.wind_direction",
+        ),
+        (
+            "dunes = { cells = [32, 32], steps = 1, slab = 2.0 }",
+            "",
+            &[],
+            "terrain[0].dunes.slab: expected a slab thin enough",
+        ),
+        ("dunes = { cells = [32, 32], steps = 0 }", "", &[], "terrain[0].dunes.steps"),
+        (
+            "dunes = { cells = [32, 32], steps = 1, deposit = [1.5, 0.4] }",
+            "",
+            &[],
+            "terrain[0].dunes.deposit[0]: expected a probability",
+        ),
+        ("dunes = { cells = [32, 16], steps = 1 }", "", &[], "terrain[0].dunes.cells: expected square cells"),
+        (
+            "procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }",
+            "heights = { file = \"h.exr\" }",
+            &[],
+            "terrain[0]: expected exactly one of heights, procedural or dunes, got \"2 of them\"",
+        ),
+        (
+            "procedural = { cells = [8, 8], amplitude = -1.0, wavelength = 4.0 }",
+            "",
+            &[],
+            "terrain[0].procedural.amplitude",
+        ),
+        ("procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }", "mesh = [0, 4]", &[], "terrain[0].mesh"),
+        (
+            "procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }",
+            "smoothing = 99",
+            &[],
+            "terrain[0].smoothing",
+        ),
+    ];
+    for (source, extra, files, expected) in cases {
+        let e = load_error(&terrain_scene(source, extra), files);
+        assert!(e.contains(expected), "{source} {extra}: {e}");
+    }
+}
+
+/// Dunes whose settings a case edits: `body` is the inline table's body.
+fn dune_field(body: &str) -> slicelight::scene::SceneData {
+    sized_dune_field(body, [64.0, 64.0])
+}
+
+fn sized_dune_field(body: &str, size: [f32; 2]) -> slicelight::scene::SceneData {
+    common::scene_from_str(&sized_terrain_scene(&format!("dunes = {{ {body} }}"), "", size))
+}
+
+fn assert_finite_and_conserved(data: &slicelight::scene::SceneData, what: &str) {
+    let d = data.desert.dunes.as_ref().unwrap();
+    let slabs = data.desert.dune_slabs.as_ref().unwrap();
+    let start: u64 = start(d).iter().map(|&v| v as u64).sum();
+    assert_eq!(slabs.iter().map(|&v| v as u64).sum::<u64>(), start, "{what}");
+    assert!(data.desert.fields[0].heights.iter().all(|h| h.is_finite() && *h >= 0.0), "{what}");
+    assert!(data.triangles.iter().all(|t| t.v0.is_finite() && t.v1.is_finite() && t.v2.is_finite()), "{what}");
+}
+
+/// The edges of the automaton's parameters: no wind (only avalanches and
+/// creep move sand), a gale of 100 m/s (jumps capped at 32 cells), a field
+/// one cell wide either way, a flat field, bare ground.
+#[test]
+fn dunes_at_the_edges_of_their_parameters() {
+    // No wind: saltation stops; the nearly flat start is already at rest
+    // (steps of at most 2 slabs), and creep is off, so nothing moves.
+    let calm = dune_field("cells = [32, 32], steps = 50, wind_speed = 0.0, creep = 0.0");
+    assert_eq!(calm.desert.dunes.as_ref().unwrap().params.erode, 0);
+    let d = calm.desert.dunes.as_ref().unwrap();
+    assert_eq!(calm.desert.dune_slabs.as_ref().unwrap(), &start(d));
+    let gale = dune_field("cells = [32, 32], steps = 50, wind_speed = 100.0");
+    assert_eq!(gale.desert.dunes.as_ref().unwrap().params.max_jump, 32);
+    assert_finite_and_conserved(&gale, "100 m/s");
+    for (body, size, what) in [
+        ("cells = [1, 64], steps = 50", [1.0, 64.0], "1 x 64"),
+        ("cells = [64, 1], steps = 50", [64.0, 1.0], "64 x 1"),
+        ("cells = [64, 1], steps = 50, wind_direction = \"+z\"", [64.0, 1.0], "64 x 1, wind along z"),
+        ("cells = [2, 2], steps = 50", [2.0, 2.0], "2 x 2"),
+        ("cells = [32, 32], steps = 20, sand = 0.0", [64.0, 64.0], "bare ground"),
+        (
+            "cells = [32, 32], steps = 20, wind_direction = \"-z\", jump_growth = 50.0",
+            [64.0, 64.0],
+            "-z, growing jumps",
+        ),
+    ] {
+        let data = sized_dune_field(&format!("{body}, slab = 0.05"), size);
+        assert_finite_and_conserved(&data, what);
+    }
+    // A flat field: sand evenly everywhere (0 slabs of noise come from
+    // the start only; creep and avalanches find nothing to move).
+    let flat = common::scene_from_str(&terrain_scene(
+        "procedural = { cells = [16, 16], amplitude = 0.0, wavelength = 4.0 }",
+        "",
+    ));
+    assert!(flat.desert.fields[0].heights.iter().all(|&h| h == 0.0));
+    assert!(flat.triangles.iter().all(|t| t.v0.y == 0.0 && t.v1.y == 0.0 && t.v2.y == 0.0));
+}
+
+/// `slicelight terrain` writes what was meshed; loading it back as
+/// `heights = { file, periodic = true }` gives the same mesh.
+#[test]
+fn written_heights_load_back_to_the_same_terrain() {
+    let dunes = dune_field("cells = [32, 32], steps = 30, seed = 2");
+    let dir = tempfile::tempdir().unwrap();
+    let written = slicelight::desert::write_fields(&dunes.desert, &dir.path().join("dunes.exr")).unwrap();
+    assert_eq!(written.len(), 1);
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, terrain_scene("heights = { file = \"dunes.exr\", periodic = true }", "")).unwrap();
+    let again = slicelight::scene::load(&path).unwrap();
+    assert_eq!(again.desert.fields[0].heights, dunes.desert.fields[0].heights);
+    assert_eq!(again.triangles.len(), dunes.triangles.len());
+    let key = |t: &slicelight::shaders::types::GpuTriangle| (t.v0.to_array(), t.v1.to_array(), t.v2.to_array());
+    let (mut a, mut b): (Vec<_>, Vec<_>) =
+        (again.triangles.iter().map(key).collect(), dunes.triangles.iter().map(key).collect());
+    a.sort_by(|x, y| x.partial_cmp(y).unwrap());
+    b.sort_by(|x, y| x.partial_cmp(y).unwrap());
+    assert_eq!(a, b);
+    // The PNG keeps 16 bits: within a 65535th of the highest point.
+    let png = slicelight::desert::write_fields(&dunes.desert, &dir.path().join("dunes.png")).unwrap();
+    assert!(png[0].1.contains("scale = "), "{}", png[0].1);
+}

@@ -272,6 +272,15 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         return (sky.unwrap_or(DVec3::ZERO), f64::INFINITY);
     };
     let sigma_t = d3(p.sigma_t);
+    // The air between the eye and the surface (aerial perspective).
+    let air = |radiance: DVec3| {
+        if data.sky.enabled && data.sky.aerial {
+            let (light, through) = SkyReference::new(&data.sky.params, SKY_TOLERANCE).segment(d, hit.t);
+            radiance * through + light
+        } else {
+            radiance
+        }
+    };
     if data.materials[hit.material as usize].kind == MATERIAL_GLASS {
         // Through glass: the opaque surface behind, lit directly, per channel.
         let mut radiance = DVec3::ZERO;
@@ -281,9 +290,13 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
                 radiance[c] += l[c] * weight;
             }
         }
-        return (radiance * (-sigma_t * hit.t).exp(), hit.t);
+        return (air(radiance * (-sigma_t * hit.t).exp()), hit.t);
     }
-    (direct(data, o, d, &hit) * (-sigma_t * hit.t).exp(), hit.t)
+    // The sky's own light on a surface seen directly (not through glass,
+    // as the skylight pass takes it).
+    let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
+    let sky = crate::sky::reference::sky_light(data, o + d * hit.t, normal, hit.albedo);
+    (air((direct(data, o, d, &hit) + sky) * (-sigma_t * hit.t).exp()), hit.t)
 }
 
 /// Points per line light of the reference's direct light: the midpoint

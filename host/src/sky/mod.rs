@@ -9,6 +9,7 @@ use anyhow::{bail, Result};
 use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use serde::Deserialize;
+use slicelight_shaders::sky::light::{irradiance_texel, sky_light_pixel, IRRADIANCE_HEIGHT, IRRADIANCE_WIDTH};
 use slicelight_shaders::sky::{
     hits_ground, optical_depth_to_top, sky_pixel, sky_view_texel, transmittance_texel, SkyParams, MIE_CORNETTE_SHANKS,
     MIE_HENYEY_GREENSTEIN,
@@ -18,7 +19,7 @@ use slicelight_shaders::types::{CommonParams, GBufferTexel};
 use crate::passes::*;
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
-pub static PASSES: &[&dyn Pass] = &[&SkyTransmittance, &SkyView, &Sky];
+pub static PASSES: &[&dyn Pass] = &[&SkyTransmittance, &SkyView, &SkyIrradiance, &Sky, &SkyLight, &Aerial];
 
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family = Family { name: "sky", passes: PASSES, bench: Some(&bench::SkySweep) };
@@ -40,6 +41,23 @@ pub static SKY_VIEW: Resource =
 /// Sky radiance per pixel (rgb) where no surface is seen.
 pub static SKY_RADIANCE: Resource =
     Resource { binding: 18, name: "sky radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
+/// The skylight's irradiance over normals (`sky::light`).
+pub static SKY_IRRADIANCE: Resource = Resource {
+    binding: 62,
+    name: "sky irradiance table",
+    kind: ResourceKind::Frame(|_| (IRRADIANCE_WIDTH * IRRADIANCE_HEIGHT) as u64 * 16),
+};
+pub static SKY_LIGHT_RADIANCE: Resource =
+    Resource { binding: 63, name: "skylight radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
+/// The air's light in front of the surfaces (aerial perspective).
+pub static AERIAL_RADIANCE: Resource =
+    Resource { binding: 64, name: "aerial radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
+/// The air's transmittance to the surfaces (rgb; w 1).
+pub static AERIAL_TRANSMITTANCE: Resource = Resource {
+    binding: 65,
+    name: "aerial transmittance",
+    kind: ResourceKind::PerPixel { blank: || bytemuck::bytes_of(&Vec4::ONE).to_vec() },
+};
 
 /// The scene's `[sky]` table.
 #[derive(Debug, Clone, Deserialize)]
@@ -67,6 +85,18 @@ pub struct Settings {
     /// the sun's colour after the air it crosses to the observer).
     #[serde(default = "yes")]
     pub light_scene: bool,
+    /// Whether the sky's own light (not the sun's) falls on the scene's
+    /// diffuse surfaces (with `light_scene`).
+    #[serde(default = "yes")]
+    pub sky_light: bool,
+    /// Rays per pixel finding how much of the sky a surface sees (0:
+    /// unshadowed skylight).
+    #[serde(default = "sky_light_rays")]
+    pub sky_light_rays: u32,
+    /// Whether the air between the eye and the surfaces scatters the sun's
+    /// light toward the eye and dims what lies behind it.
+    #[serde(default = "yes")]
+    pub aerial_perspective: bool,
     /// Quadrature samples per view ray.
     #[serde(default = "view_samples")]
     pub view_samples: u32,
@@ -97,6 +127,9 @@ fn ground_albedo() -> [f32; 3] {
 }
 fn yes() -> bool {
     true
+}
+fn sky_light_rays() -> u32 {
+    8
 }
 fn view_samples() -> u32 {
     32
@@ -192,6 +225,13 @@ pub struct Setup {
     /// Whether the scene has a `[sky]`.
     pub enabled: bool,
     pub params: SkyParams,
+    /// Whether the sky lights the scene's surfaces (`sky_light` and `light_scene`).
+    pub light: bool,
+    /// Whether the air in front of the surfaces is drawn (`aerial_perspective`).
+    pub aerial: bool,
+    /// The references' skylight grid (`reference::sky_light_grid`), made
+    /// the first time a reference needs it.
+    pub reference_grid: std::sync::OnceLock<Vec<(glam::DVec3, glam::DVec3)>>,
 }
 
 impl Setup {
@@ -267,6 +307,9 @@ pub fn configure(s: &Settings) -> Result<Setup> {
     if !(1..=65536).contains(&s.table_samples) {
         bail!(invalid("sky.table_samples", "a sample count in 1..=65536", s.table_samples));
     }
+    if s.sky_light_rays > 1024 {
+        bail!(invalid("sky.sky_light_rays", "0 to 1024 rays per pixel", s.sky_light_rays));
+    }
     table_size("sky.transmittance_table", s.transmittance_table, false)?;
     table_size("sky.sky_view_table", s.sky_view_table, true)?;
     let a = &s.atmosphere;
@@ -333,10 +376,16 @@ pub fn configure(s: &Settings) -> Result<Setup> {
         use_sky_view: s.sky_view as u32,
         horizon: 0.0,
         sea: 0,
-        _pad: 0,
+        light_rays: s.sky_light_rays,
     };
     let params = SkyParams { horizon: slicelight_shaders::sky::horizon_elevation(&params), ..params };
-    Ok(Setup { enabled: true, params })
+    Ok(Setup {
+        enabled: true,
+        params,
+        light: s.sky_light && s.light_scene,
+        aerial: s.aerial_perspective,
+        reference_grid: Default::default(),
+    })
 }
 
 fn skip_without_sky(scene: &SceneData) -> Option<Plan> {
@@ -492,5 +541,215 @@ impl Pass for Sky {
         // and sun or ground: at most 1e-3 of the values.
         let cpu_values = cpu.get::<Vec4>(&SKY_RADIANCE);
         compare_rgb("sky radiance", gpu.get(&SKY_RADIANCE), cpu_values, 2e-3, cpu_values.len() * 3 / 1000 + 1)
+    }
+}
+
+/// Why the skylight does not run, if it does not.
+fn skip_without_sky_light(scene: &SceneData) -> Option<Plan> {
+    if let Some(skip) = skip_without_sky(scene) {
+        return Some(skip);
+    }
+    if !scene.sky.light {
+        return Some(Plan::skip("the sky does not light the scene (sky_light or light_scene false)"));
+    }
+    if !scene.has_geometry() {
+        return Some(Plan::skip("no surfaces to light"));
+    }
+    None
+}
+
+pub struct SkyIrradiance;
+
+impl Pass for SkyIrradiance {
+    fn name(&self) -> &'static str {
+        "sky_irradiance"
+    }
+    fn kernel(&self) -> &'static str {
+        "sky::irradiance_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SKY_IRRADIANCE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sky_light(scene) {
+            return skip;
+        }
+        use slicelight_shaders::sky::light::{SPHERE_AZIMUTHS, SPHERE_ZENITHS};
+        Plan::run(
+            format!(
+                "the sky's irradiance over {IRRADIANCE_WIDTH}x{IRRADIANCE_HEIGHT} normals, {} sky directions each",
+                SPHERE_AZIMUTHS * SPHERE_ZENITHS
+            ),
+            (IRRADIANCE_WIDTH * IRRADIANCE_HEIGHT) as u64,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sky.params;
+        frame.write::<Vec4>(&SKY_IRRADIANCE, (IRRADIANCE_WIDTH * IRRADIANCE_HEIGHT) as usize, |frame, out| {
+            let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
+            let sky_view = frame.get::<Vec4>(&SKY_VIEW);
+            for_each_invocation(out, 0, progress, |i, v| *v = irradiance_texel(i, p, transmittance, sky_view));
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // A sum of 3072 sky-view lookups (each through asin and acos, to
+        // 4096 ulps on Vulkan, see `Sky::compare`): 1e-3 of the peak.
+        compare_rgb("sky irradiance", gpu.get(&SKY_IRRADIANCE), cpu.get(&SKY_IRRADIANCE), 1e-3, 0)
+    }
+}
+
+pub struct SkyLight;
+
+impl Pass for SkyLight {
+    fn name(&self) -> &'static str {
+        "sky_light"
+    }
+    fn kernel(&self) -> &'static str {
+        "sky::sky_light_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![
+            COMMON,
+            SPHERES,
+            TRIANGLES,
+            BVH_NODES,
+            MATERIALS,
+            GBUFFER,
+            SKY_PARAMS,
+            SKY_TRANSMITTANCE,
+            SKY_VIEW,
+            SKY_IRRADIANCE
+        ]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SKY_LIGHT_RADIANCE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&SKY_LIGHT_RADIANCE)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sky_light(scene) {
+            return skip;
+        }
+        let rays = scene.sky.params.light_rays;
+        let shadow = if rays == 0 { "unshadowed".to_string() } else { format!("{rays} visibility rays per pixel") };
+        Plan::run(format!("the sky's light on diffuse surfaces (irradiance table), {shadow}"), 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let n = common.band_pixels as usize;
+        let p = &scene.sky.params;
+        let blank = slicelight_shaders::common::surface::no_surface();
+        let geometry = scene.geometry();
+        frame.write_all::<Vec4>(&SKY_LIGHT_RADIANCE, n, |frame, out| {
+            let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
+            let sky_view = frame.get::<Vec4>(&SKY_VIEW);
+            let irradiance = frame.get::<Vec4>(&SKY_IRRADIANCE);
+            let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            for_each_invocation(out, common.band_start, progress, |i, v| {
+                let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
+                *v = sky_light_pixel(
+                    i,
+                    common,
+                    p,
+                    transmittance,
+                    sky_view,
+                    irradiance,
+                    &geometry,
+                    &scene.materials,
+                    texel,
+                );
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // The irradiance table's bilinear lookup through acos and atan2 (4096
+        // ulps on Vulkan) on a smooth table, and visibility rays that may
+        // graze an edge differently on the two backends (a ray flips a
+        // pixel's share by 1/8): 2e-3 of the peak, and at most 1 % of the
+        // values beyond it.
+        let cpu_values = cpu.get::<Vec4>(&SKY_LIGHT_RADIANCE);
+        compare_rgb("skylight", gpu.get(&SKY_LIGHT_RADIANCE), cpu_values, 2e-3, cpu_values.len() * 3 / 100 + 1)
+    }
+}
+
+pub struct Aerial;
+
+impl Pass for Aerial {
+    fn name(&self) -> &'static str {
+        "sky_aerial"
+    }
+    fn kernel(&self) -> &'static str {
+        "sky::aerial_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, SKY_PARAMS, SKY_TRANSMITTANCE]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![AERIAL_RADIANCE, AERIAL_TRANSMITTANCE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&AERIAL_RADIANCE)
+    }
+    fn transmittance_layer(&self) -> Option<&'static Resource> {
+        Some(&AERIAL_TRANSMITTANCE)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sky(scene) {
+            return skip;
+        }
+        if !scene.sky.aerial {
+            return Plan::skip("aerial_perspective = false");
+        }
+        if !scene.has_geometry() {
+            return Plan::skip("no surfaces in front of the sky");
+        }
+        Plan::run(
+            format!(
+                "the air between the eye and the surfaces: its light and transmittance, a sample per {} m",
+                slicelight_shaders::sky::aerial::AERIAL_STEP
+            ),
+            0,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let n = common.band_pixels as usize;
+        let p = &scene.sky.params;
+        let blank = slicelight_shaders::common::surface::no_surface();
+        let gbuffer = frame.get::<GBufferTexel>(&GBUFFER).to_vec();
+        let table = frame.get::<Vec4>(&SKY_TRANSMITTANCE).to_vec();
+        let mut light = vec![Vec4::ZERO; n];
+        let mut through = vec![Vec4::ONE; n];
+        crate::cpu::for_each_invocation2(&mut light, &mut through, common.band_start, progress, |i, l, t| {
+            let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
+            (*l, *t) = slicelight_shaders::sky::aerial::aerial_pixel(i, common, p, &table, texel);
+        });
+        frame.insert(&AERIAL_RADIANCE, Buffer::from_bytes(bytemuck::cast_slice(&light)));
+        frame.insert(&AERIAL_TRANSMITTANCE, Buffer::from_bytes(bytemuck::cast_slice(&through)));
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Sums of up to 4 `view_samples` products of f32 exps and the
+        // transmittance table's bilinear lookups, through the pixel's
+        // direction (sin, cos to 2^-11 on Vulkan): 1e-3 of the peak.
+        let radiance = compare_rgb("aerial radiance", gpu.get(&AERIAL_RADIANCE), cpu.get(&AERIAL_RADIANCE), 1e-3, 0)?;
+        let t = compare_rgb(
+            "aerial transmittance",
+            gpu.get(&AERIAL_TRANSMITTANCE),
+            cpu.get(&AERIAL_TRANSMITTANCE),
+            1e-4,
+            0,
+        )?;
+        Ok(format!("{radiance}; {t}"))
     }
 }

@@ -179,7 +179,21 @@ impl SkyReference {
     }
 
     fn in_shadow(&self, p: DVec3) -> bool {
-        self.ground_hit(p, self.sun).is_some()
+        self.ground_hit(self.lifted(p), self.sun).is_some()
+    }
+
+    /// `p`, or where a point below the ground sphere is taken to be: on
+    /// the ground over it (an aerial segment's points below the observer's
+    /// altitude 0, where the scene's own ground lies; the kernels clamp
+    /// such altitudes to 0 the same way). Points on or above the ground
+    /// are left exactly as they are.
+    fn lifted(&self, p: DVec3) -> DVec3 {
+        let r = p.length();
+        if r < self.ground {
+            p * (self.ground / r.max(1e-300))
+        } else {
+            p
+        }
     }
 
     /// Optical depth along `o + t d` over `[a, b]`.
@@ -196,6 +210,7 @@ impl SkyReference {
 
     /// Transmittance of sunlight to `p` (0 in the Earth's shadow).
     fn sun_transmittance(&self, p: DVec3) -> DVec3 {
+        let p = self.lifted(p);
         if self.in_shadow(p) {
             return DVec3::ZERO;
         }
@@ -242,15 +257,54 @@ impl SkyReference {
     /// single scattering, the ground's reflection of the direct sun where the
     /// ray meets the ground, and the sun's disk, W/(m^2 sr).
     pub fn radiance(&self, d: DVec3) -> DVec3 {
-        let o = self.observer;
-        let Some((enter, mut leave)) = Self::sphere(o, d, self.top) else { return DVec3::ZERO };
-        let enter = enter.max(0.0);
-        if leave <= enter {
+        let Some((mut radiance, tau, ground)) = self.single_scattering(d, f64::INFINITY, true) else {
             return DVec3::ZERO;
+        };
+        match ground {
+            Some(t) => {
+                let g = self.observer + d * t;
+                let mu_s = g.normalize().dot(self.sun);
+                if mu_s > 0.0 {
+                    radiance +=
+                        self.albedo / PI * self.sun_irradiance * self.sun_transmittance(g) * (-tau).exp() * mu_s;
+                }
+            }
+            None => {
+                if d.dot(self.sun) >= self.cos_sun_radius {
+                    radiance += self.sun_irradiance / self.sun_solid_angle * (-tau).exp();
+                }
+            }
         }
-        let ground = self.ground_hit(o, d);
+        radiance
+    }
+
+    /// The air's light along unit `d` from the observer to distance `t`
+    /// (m) and its transmittance (aerial perspective; no ground, no sun's
+    /// disk: the scene's surfaces stand in for the ground, and the air
+    /// below the observer's altitude 0 is taken as the air at 0).
+    pub fn segment(&self, d: DVec3, t: f64) -> (DVec3, DVec3) {
+        match self.single_scattering(d, t, false) {
+            Some((radiance, tau, _)) => (radiance, (-tau).exp()),
+            None => (DVec3::ZERO, DVec3::ONE),
+        }
+    }
+
+    /// Single scattering along `d` up to `t_max` (or where the ray leaves
+    /// the atmosphere or, with `ground`, meets the ground): the radiance,
+    /// the optical depth, and the distance to the ground if the ray meets
+    /// it before `t_max`.
+    fn single_scattering(&self, d: DVec3, t_max: f64, ground: bool) -> Option<(DVec3, DVec3, Option<f64>)> {
+        let o = self.observer;
+        let (enter, mut leave) = Self::sphere(o, d, self.top)?;
+        let enter = enter.max(0.0);
+        let ground = if ground { self.ground_hit(o, d).filter(|&t| t <= t_max) } else { None };
+        leave = leave.min(t_max);
         if let Some(t) = ground {
             leave = leave.min(t);
+        }
+        if leave <= enter {
+            // No air on the way; the ground (if met at once) still shows.
+            return ground.map(|t| (DVec3::ZERO, DVec3::ZERO, Some(t)));
         }
         // Cuts: the lowest point and every change of shadow, found by a scan
         // and bisection on the exact shadow test.
@@ -287,23 +341,7 @@ impl SkyReference {
             sum += l;
             tau = tau_b;
         }
-        let mut radiance = sum * self.sun_irradiance;
-        match ground {
-            Some(t) => {
-                let g = o + d * t;
-                let mu_s = g.normalize().dot(self.sun);
-                if mu_s > 0.0 {
-                    radiance +=
-                        self.albedo / PI * self.sun_irradiance * self.sun_transmittance(g) * (-tau).exp() * mu_s;
-                }
-            }
-            None => {
-                if d.dot(self.sun) >= self.cos_sun_radius {
-                    radiance += self.sun_irradiance / self.sun_solid_angle * (-tau).exp();
-                }
-            }
-        }
-        radiance
+        Some((sum * self.sun_irradiance, tau, ground))
     }
 
     /// Optical depth straight up from altitude `h` to the top.
@@ -316,4 +354,49 @@ impl SkyReference {
     pub fn sun_at_observer(&self) -> DVec3 {
         self.sun_transmittance(self.observer)
     }
+}
+
+/// The reference's skylight grid: `(direction, radiance)` at the midpoints
+/// of `REFERENCE_AZIMUTHS x REFERENCE_ZENITHS` equal solid angles over the
+/// sphere, the radiance by the f64 quadrature (no tables, no sun disk).
+pub const REFERENCE_AZIMUTHS: usize = 96;
+pub const REFERENCE_ZENITHS: usize = 48;
+
+pub fn sky_light_grid(p: &SkyParams) -> Vec<(DVec3, DVec3)> {
+    use rayon::prelude::*;
+    let sky = SkyReference::new(p, crate::reference::SKY_TOLERANCE);
+    (0..REFERENCE_AZIMUTHS * REFERENCE_ZENITHS)
+        .into_par_iter()
+        .map(|k| {
+            let (i, j) = (k % REFERENCE_AZIMUTHS, k / REFERENCE_AZIMUTHS);
+            let mu = -1.0 + 2.0 * (j as f64 + 0.5) / REFERENCE_ZENITHS as f64;
+            let phi = std::f64::consts::TAU * (i as f64 + 0.5) / REFERENCE_AZIMUTHS as f64;
+            let ring = (1.0 - mu * mu).max(0.0).sqrt();
+            let w = DVec3::new(ring * phi.cos(), mu, ring * phi.sin());
+            // The sun's disk lights the scene as a directional light: not here.
+            let disk = w.dot(sky.sun) >= sky.cos_sun_radius;
+            (w, if disk { DVec3::ZERO } else { sky.radiance(w) })
+        })
+        .collect()
+}
+
+/// The sky's light reflected by a diffuse surface of `albedo` at `point`
+/// (unit `normal`, toward the viewer), f64: `albedo / pi` times the
+/// irradiance summed over the grid's directions above the surface that a
+/// ray from the point leaves the scene by (against the real geometry).
+pub fn sky_light(data: &crate::scene::SceneData, point: DVec3, normal: DVec3, albedo: DVec3) -> DVec3 {
+    if !data.sky.enabled || !data.sky.light {
+        return DVec3::ZERO;
+    }
+    let grid = data.sky.reference_grid.get_or_init(|| sky_light_grid(&data.sky.params));
+    let scale = point.abs().max_element().max(1.0);
+    let solid_angle = 4.0 * std::f64::consts::PI / grid.len() as f64;
+    let mut e = DVec3::ZERO;
+    for (w, l) in grid {
+        let c = normal.dot(*w);
+        if c > 0.0 && crate::reference::nearest(data, point, *w, 1e-9 * scale / c.max(1e-3), f64::INFINITY).is_none() {
+            e += *l * c;
+        }
+    }
+    albedo * e * solid_angle / std::f64::consts::PI
 }

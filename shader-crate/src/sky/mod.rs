@@ -43,6 +43,9 @@ use crate::types::{CommonParams, GBufferTexel, NO_OBJECT};
 use core::f32::consts::{FRAC_1_PI, FRAC_PI_2, PI};
 use spirv_std::spirv;
 
+pub mod aerial;
+pub mod light;
+
 /// The sky passes' parameter block.
 #[repr(C)]
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
@@ -94,7 +97,9 @@ pub struct SkyParams {
     pub horizon: f32,
     /// 1 when a sea covers every downward view (the sea passes draw it).
     pub sea: u32,
-    pub _pad: u32,
+    /// Rays per pixel that find how much of the sky a surface sees (the
+    /// skylight's shadow, `light::sky_light_pixel`; 0: unshadowed).
+    pub light_rays: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
@@ -622,6 +627,86 @@ pub fn sky_kernel(
     if index < common.band_pixels {
         radiance[index as usize] =
             sky_pixel(common.band_start + index, common, &params[0], transmittance, sky_view, &gbuffer[index as usize]);
+    }
+}
+
+/// The skylight's irradiance table over normals (`light::irradiance_texel`).
+#[spirv(compute(threads(64)))]
+pub fn irradiance_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] params: &[SkyParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] transmittance: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] sky_view: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 62)] irradiance: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    if index < light::IRRADIANCE_WIDTH * light::IRRADIANCE_HEIGHT {
+        irradiance[index as usize] = light::irradiance_texel(index, &params[0], transmittance, sky_view);
+    }
+}
+
+/// The per-pixel skylight (`light::sky_light_pixel`).
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn sky_light_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[crate::types::GpuMaterial],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] params: &[SkyParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] transmittance: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] sky_view: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 62)] irradiance: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 63)] radiance: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let common = &common[0];
+    if index < common.band_pixels {
+        let geometry = crate::scene_geometry(common, spheres, triangles, nodes);
+        radiance[index as usize] = light::sky_light_pixel(
+            common.band_start + index,
+            common,
+            &params[0],
+            transmittance,
+            sky_view,
+            irradiance,
+            &geometry,
+            materials,
+            &gbuffer[index as usize],
+        );
+    }
+}
+
+/// The per-pixel aerial perspective (`aerial::aerial_pixel`).
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn aerial_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] params: &[SkyParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] transmittance: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 64)] radiance: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 65)] through: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let common = &common[0];
+    if index < common.band_pixels {
+        let (l, t) = aerial::aerial_pixel(
+            common.band_start + index,
+            common,
+            &params[0],
+            transmittance,
+            &gbuffer[index as usize],
+        );
+        radiance[index as usize] = l;
+        through[index as usize] = t;
     }
 }
 

@@ -369,3 +369,57 @@ fn written_heights_load_back_to_the_same_terrain() {
     let png = slicelight::desert::write_fields(&dunes.desert, &dir.path().join("dunes.png")).unwrap();
     assert!(png[0].1.contains("scale = "), "{}", png[0].1);
 }
+
+/// `desert_dunes` at 180x120 with fewer steps, its ripples' LOD `lod`
+/// (`None`: no ripples).
+fn small_desert(lod: Option<bool>) -> slicelight::scene::SceneData {
+    let text = std::fs::read_to_string(common::root().join("scenes/desert_dunes.toml")).unwrap();
+    let ripples = match lod {
+        Some(on) => format!("ripples = {{ size = 16.0, strength = 2.0, steps = 150, lod = {on} }}"),
+        None => String::new(),
+    };
+    let text = text
+        .replace("resolution = [720, 480]", "resolution = [180, 120]")
+        .replace("steps = 1500", "steps = 300")
+        .replace("ripples = { size = 16.0, strength = 2.0 }", &ripples);
+    common::scene_from_str(&text)
+}
+
+/// The paper's LOD (5.2): each triangle's ripple texture at the resolution
+/// its distance calls for. Like with like: ripples narrower than a pixel
+/// are what a pixel averages, so the truth is the full resolution averaged
+/// over each pixel (4x4 sub-pixel samples); against it, the LOD image at the
+/// pixel centre, the full resolution at the pixel centre (which aliases),
+/// and no ripples at all. The full-resolution image agrees with the
+/// reference (which bumps the normal at full resolution too) at the same
+/// pixel centres.
+#[test]
+fn ripple_lod_against_full_resolution() {
+    use slicelight::render::{render, Backend};
+    let full = small_desert(Some(false));
+    let image =
+        |d: &slicelight::scene::SceneData| slicelight::metrics::to_f64(&render(d, &Backend::Cpu, false).unwrap().0);
+    let mut averaged = full.clone();
+    averaged.set_samples_per_pixel(16).unwrap();
+    let truth = image(&averaged);
+    let f = image(&full);
+    let measure = |i: &[glam::DVec3]| slicelight::metrics::difference(i, &truth, full.exposure);
+    let (lod, point, none) =
+        (measure(&image(&small_desert(Some(true)))), measure(&f), measure(&image(&small_desert(None))));
+    println!("against the pixel-averaged full resolution:\n  LOD {lod:?}\n  full resolution at the centre {point:?}\n  no ripples {none:?}");
+    // Measured: LOD 2.10 %, the centre samples 4.89 %, no ripples 2.08 %
+    // RMS of the 8-bit range (at 180x120 most ripples are narrower than a
+    // pixel, and all three include the truth's antialiased silhouettes):
+    // the LOD removes more than half of what point-sampling the full
+    // resolution adds.
+    assert!(lod.rms_8bit_percent < 0.6 * point.rms_8bit_percent, "{lod:?} {point:?}");
+    // Every 7th pixel each way against the reference.
+    let pixels = slicelight::bench::pixel_lattice(&full, 7);
+    let (reference, _) = slicelight::reference::render_converged_at(&full, &pixels, 2e-4);
+    let at: Vec<_> = pixels.iter().map(|&i| f[i as usize]).collect();
+    let d = slicelight::metrics::difference(&at, &reference, full.exposure);
+    println!("full resolution against the reference at {} pixels: {d:?}", pixels.len());
+    // Measured 0.32 % (the skylight's 8 visibility rays; 0.044 % with the
+    // sun alone).
+    assert!(d.rms_8bit_percent < 0.5, "{d:?}");
+}

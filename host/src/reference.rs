@@ -292,6 +292,8 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         }
         return (air(radiance * (-sigma_t * hit.t).exp()), hit.t);
     }
+    // A terrain's ripples at their full resolution (the LOD's truth).
+    let hit = crate::desert::reference::rippled(data, o, d, hit.clone());
     // The sky's own light on a surface seen directly (not through glass,
     // as the skylight pass takes it).
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };

@@ -173,7 +173,10 @@ pub struct GpuMaterial {
     pub albedo: Vec4,
     /// One of the `MATERIAL_*` constants.
     pub kind: u32,
-    pub _pad: [u32; 3],
+    /// A terrain's ripple texture: its record's index + 1 (0: none;
+    /// `desert::ripples`).
+    pub ripples: u32,
+    pub _pad: [u32; 2],
     /// Glass: index of refraction per channel (w unused; 1 for diffuse).
     pub ior: Vec4,
     /// Glass: absorption coefficient inside per channel, 1/m (w unused).

@@ -78,7 +78,9 @@ impl Pass for Surface {
             caustics::CAUSTICS_PARAMS,
             caustics::CAUSTICS_MAPS,
             volumes::LIGHT_GRIDS,
-            volumes::OPTICAL_DEPTHS
+            volumes::OPTICAL_DEPTHS,
+            crate::desert::RIPPLE_RECORDS,
+            crate::desert::RIPPLE_NORMALS
         ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
@@ -118,6 +120,7 @@ impl Pass for Surface {
         let no_caustics = slicelight_shaders::caustics::CausticsParams::default();
         let caustics = if caustic_maps.is_empty() { &no_caustics } else { &scene.caustics.params };
         let inputs = super::light_inputs(scene, frame);
+        let ripples = scene.desert.ripples();
         // The CPU runs the variant the GPU would (`kernel_for`).
         let pixel = if scene.has_glass() { surface_pixel::<true> } else { surface_pixel::<false> };
         for_each_invocation2(
@@ -136,6 +139,7 @@ impl Pass for Surface {
                     &inputs,
                     caustics,
                     caustic_maps,
+                    &ripples,
                 );
             },
         );

@@ -11,12 +11,15 @@ use indicatif::ProgressBar;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
-use crate::passes::{Family, Pass};
+use crate::passes::{Family, Pass, Resource, ResourceKind};
 use crate::scene::geometry::IndexedMesh;
 use crate::scene::{invalid, validate};
+use glam::Vec4;
+use slicelight_shaders::desert::ripples::{RippleRecord, Ripples};
 
 pub mod bench;
 pub mod dunes;
+pub(crate) mod reference;
 
 static PASSES: &[&dyn Pass] = &[&dunes::Dunes];
 
@@ -40,6 +43,8 @@ pub struct Terrain {
     /// Quadrilaterals along x and z; default one per cell of the field
     /// (at most 512 x 512).
     pub mesh: Option<[u32; 2]>,
+    /// Wind ripples on the terrain as bump textures (the survey's 5.2).
+    pub ripples: Option<RippleSettings>,
     /// Passes of a 3 x 3 binomial filter over the field before it is
     /// meshed (display only: the automaton's whole slabs become slopes);
     /// default 1 for dunes, 0 otherwise.
@@ -48,6 +53,38 @@ pub struct Terrain {
 
 fn default_sand() -> [f32; 3] {
     [0.78, 0.62, 0.42]
+}
+
+/// `ripples = { ... }`: a ripple field formed by the sand automaton at
+/// ripple scale (Nishimori and Ouchi: the saltation length grows with the
+/// height, `jump_growth`), tiled over the terrain as a bump texture whose
+/// resolution each triangle takes by its distance from the eye.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RippleSettings {
+    /// The square tile's side, m; default 4.
+    pub size: Option<f32>,
+    /// Texels a side (a power of two, 32..=2048); default 256.
+    pub cells: Option<u32>,
+    /// Automaton steps; default 300.
+    pub steps: Option<u32>,
+    #[serde(default)]
+    pub seed: u32,
+    /// Growth of the saltation length per slab of height (a slab is a
+    /// fiftieth of a texel), texels; default 1. The ripples' wavelength
+    /// grows with it (tests/desert.rs).
+    pub jump_growth: Option<f32>,
+    /// Creep probability per round; default 0.3.
+    pub creep: Option<f32>,
+    /// How much the ripples tilt the surface: their heights times this; default 1.
+    pub strength: Option<f32>,
+    /// `false`: always the full resolution (what the LOD is measured against).
+    #[serde(default = "yes")]
+    pub lod: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// `heights = { file, scale }`: a grey image (8- or 16-bit PNG, or a float
@@ -156,7 +193,29 @@ pub struct Setup {
     pub fields: Vec<Field>,
     pub dunes: Option<dunes::Setup>,
     pub dune_slabs: Option<Vec<u32>>,
+    /// The ripple textures (`shaders::desert::ripples`) and, per terrain,
+    /// its record's index + 1 (0: no ripples).
+    pub ripple_records: Vec<RippleRecord>,
+    pub ripple_normals: Vec<Vec4>,
+    pub ripple_of_terrain: Vec<u32>,
 }
+
+impl Setup {
+    pub fn ripples(&self) -> Ripples<'_> {
+        Ripples { records: &self.ripple_records, normals: &self.ripple_normals }
+    }
+}
+
+pub static RIPPLE_RECORDS: Resource = Resource {
+    binding: 66,
+    name: "ripple records",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.desert.ripple_records)),
+};
+pub static RIPPLE_NORMALS: Resource = Resource {
+    binding: 67,
+    name: "ripple normals",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.desert.ripple_normals)),
+};
 
 /// Most quadrilaterals a terrain's mesh may have (8 million triangles).
 const MAX_QUADS: u64 = 1 << 22;
@@ -215,8 +274,107 @@ pub fn configure(terrains: &[Terrain], base: &Path, progress: &ProgressBar) -> R
             }
         }
         setup.fields.push(f);
+        let record = match &terrain.ripples {
+            Some(r) => {
+                ripple_texture(&format!("{field}.ripples"), r, terrain, &mut setup, progress)?;
+                setup.ripple_records.len() as u32
+            }
+            None => 0,
+        };
+        setup.ripple_of_terrain.push(record);
     }
     Ok(setup)
+}
+
+/// Runs the ripple automaton for `r`, and appends its record and its
+/// normals at every level (full resolution, then each halving to 32).
+fn ripple_texture(
+    field: &str,
+    r: &RippleSettings,
+    t: &Terrain,
+    setup: &mut Setup,
+    progress: &ProgressBar,
+) -> Result<()> {
+    let size = r.size.unwrap_or(4.0);
+    if !(size.is_finite() && size > 0.0) {
+        bail!(invalid(&format!("{field}.size"), "a positive tile side, m", size));
+    }
+    let n = r.cells.unwrap_or(256);
+    if !(n.is_power_of_two() && (32..=2048).contains(&n)) {
+        bail!(invalid(&format!("{field}.cells"), "a power of two in 32..=2048", n));
+    }
+    let strength = r.strength.unwrap_or(1.0);
+    if !(strength.is_finite() && (0.0..=100.0).contains(&strength)) {
+        bail!(invalid(&format!("{field}.strength"), "a factor in [0, 100]", strength));
+    }
+    let dx = size / n as f32;
+    let settings = dunes::Settings {
+        cells: [n, n],
+        steps: r.steps.unwrap_or(300),
+        seed: r.seed,
+        sand: Some(dx * 0.2),
+        slab: Some(dx * 0.02),
+        wind_speed: None,
+        wind_direction: None,
+        threshold_speed: None,
+        erosion: None,
+        jump: Some(1.0),
+        jump_growth: Some(r.jump_growth.unwrap_or(1.0) / (dx * 0.02)),
+        hops: Some(1),
+        deposit: None,
+        repose_deg: None,
+        shadow_deg: None,
+        creep: Some(r.creep.unwrap_or(0.3)),
+        avalanche_rounds: None,
+        creep_rounds: None,
+    };
+    let s = dunes::configure(field, &settings, [size, size])?;
+    let state = dunes::run(&s, progress);
+    let slabs: Vec<u32> = state.iter().map(|c| c.x).collect();
+    let (settled, _) = dunes::settle(&s.params, &slabs, 1 << 20)?;
+    let mut heights: Vec<f32> = s.metres(&settled).iter().map(|h| h * strength).collect();
+    let offset = setup.ripple_normals.len() as u32;
+    let mut side = n;
+    let mut levels = 0;
+    loop {
+        // Normals by central differences over the periodic field.
+        let at =
+            |i: i64, k: i64| heights[(k.rem_euclid(side as i64) * side as i64 + i.rem_euclid(side as i64)) as usize];
+        let texel = size / side as f32;
+        for k in 0..side as i64 {
+            for i in 0..side as i64 {
+                let dhdx = (at(i + 1, k) - at(i - 1, k)) / (2.0 * texel);
+                let dhdz = (at(i, k + 1) - at(i, k - 1)) / (2.0 * texel);
+                setup.ripple_normals.push(Vec3::new(-dhdx, 1.0, -dhdz).normalize().extend(0.0));
+            }
+        }
+        levels += 1;
+        if side <= 32 {
+            break;
+        }
+        // The next level: each 2 x 2 block's mean height.
+        let half = side / 2;
+        let mut coarse = Vec::with_capacity((half * half) as usize);
+        for k in 0..half {
+            for i in 0..half {
+                let (a, b) = ((2 * k * side + 2 * i) as usize, ((2 * k + 1) * side + 2 * i) as usize);
+                coarse.push(0.25 * (heights[a] + heights[a + 1] + heights[b] + heights[b + 1]));
+            }
+        }
+        heights = coarse;
+        side = half;
+    }
+    setup.ripple_records.push(RippleRecord {
+        origin_x: t.min[0],
+        origin_z: t.min[1],
+        inverse_size: 1.0 / size,
+        texel: dx,
+        resolution: n,
+        levels,
+        offset,
+        lod: r.lod as u32,
+    });
+    Ok(())
 }
 
 /// The terrain's mesh: `mesh` quadrilaterals (default the field's, at most

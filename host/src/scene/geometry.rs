@@ -185,10 +185,11 @@ fn shape_key(obj: &Object, base: &Path) -> u128 {
     twox_hash::XxHash3_128::oneshot(text.as_bytes())
 }
 
-/// Appends a diffuse mesh of `albedo` as one more object (a terrain).
-pub fn push_diffuse(out: &mut Objects, mesh: &IndexedMesh, albedo: Vec4) {
+/// Appends a diffuse mesh of `albedo` as one more object (a terrain), with
+/// the ripple texture `ripples` (`GpuMaterial::ripples`; 0: none).
+pub fn push_diffuse(out: &mut Objects, mesh: &IndexedMesh, albedo: Vec4, ripples: u32) {
     let id = out.materials.len() as u32;
-    out.materials.push(GpuMaterial { albedo, kind: MATERIAL_DIFFUSE, ior: Vec4::ONE, ..Default::default() });
+    out.materials.push(GpuMaterial { albedo, kind: MATERIAL_DIFFUSE, ior: Vec4::ONE, ripples, ..Default::default() });
     // Not glass: no table, so no cache key.
     out.shape_keys.push(0);
     push_mesh(out, mesh, id, false, Quat::IDENTITY, Vec3::ZERO);

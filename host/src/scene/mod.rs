@@ -329,8 +329,9 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     }
     let mut objects = geometry::build(&file.object, base)?;
     let desert = crate::desert::configure(&file.terrain, base, &indicatif::ProgressBar::hidden())?;
-    for (t, f) in file.terrain.iter().zip(&desert.fields) {
-        geometry::push_diffuse(&mut objects, &crate::desert::mesh(t, f), Vec3::from(t.albedo).extend(0.0));
+    for (k, (t, f)) in file.terrain.iter().zip(&desert.fields).enumerate() {
+        let ripples = desert.ripple_of_terrain[k];
+        geometry::push_diffuse(&mut objects, &crate::desert::mesh(t, f), Vec3::from(t.albedo).extend(0.0), ripples);
     }
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
     // The lights cover the geometry and the volumes' boxes (a directional

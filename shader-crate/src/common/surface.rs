@@ -5,6 +5,7 @@
 
 use crate::camera::{camera_ray, in_image};
 use crate::caustics::{caustic_light, pack_rgb, CausticsParams};
+use crate::desert::ripples::{rippled, RippleRecord, Ripples};
 use crate::geometry::{occluded, trace_nearest, Geometry, Hit, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::glass::{dispersive, is_glass, shading_normal, trace_through, Glass, PATH_OUT};
@@ -232,6 +233,7 @@ pub fn surface_pixel<const GLASS: bool>(
     inputs: &LightInputs,
     caustics: &CausticsParams,
     caustic_maps: &[u32],
+    ripples: &Ripples,
 ) -> (Vec4, GBufferTexel) {
     let x = index % params.width;
     let y = index / params.width;
@@ -243,14 +245,33 @@ pub fn surface_pixel<const GLASS: bool>(
     if hit.distance == NO_HIT {
         return (Vec4::ZERO, no_surface());
     }
-    let normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
+    let mut normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
+    // A terrain's ripples tilt the shading normal of what the eye sees
+    // directly (the survey's 5.2).
+    let bump = materials[hit.material as usize].ripples;
+    if bump != 0 && hit.primitive != NO_OBJECT {
+        let triangle = &geometry.triangles[hit.primitive as usize];
+        normal = rippled(
+            params,
+            ripples.records,
+            ripples.normals,
+            bump,
+            triangle,
+            origin,
+            origin + dir * hit.distance,
+            normal,
+        );
+    }
     let mut radiance = Vec4::ZERO;
     let mut caustic = Vec4::ZERO;
     if GLASS {
         let channels = view_channels(materials, &hit);
         let mut c = 0;
         while c < channels {
-            let r = receiver(params, geometry, glass, materials, origin, dir, &hit, c);
+            let mut r = receiver(params, geometry, glass, materials, origin, dir, &hit, c);
+            if bump != 0 && !is_glass(materials, &hit) {
+                r.normal = normal;
+            }
             if r.found {
                 let albedo = materials[r.material as usize].albedo;
                 let l = direct_radiance(params, lights, geometry, inputs, r.point, r.normal, albedo) * r.weight;
@@ -262,7 +283,8 @@ pub fn surface_pixel<const GLASS: bool>(
             c += 1;
         }
     } else {
-        let r = opaque_receiver(params, origin, dir, &hit);
+        let mut r = opaque_receiver(params, origin, dir, &hit);
+        r.normal = normal;
         let albedo = materials[r.material as usize].albedo;
         radiance = direct_radiance(params, lights, geometry, inputs, r.point, r.normal, albedo) * r.weight;
     }
@@ -300,6 +322,8 @@ macro_rules! surface_entry_point {
             #[spirv(storage_buffer, descriptor_set = 0, binding = 34)] caustic_maps: &[u32],
             #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
             #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 66)] ripple_records: &[RippleRecord],
+            #[spirv(storage_buffer, descriptor_set = 0, binding = 67)] ripple_normals: &[Vec4],
         ) {
             let index = crate::flat_index(id, groups);
             let params = &common[0];
@@ -316,6 +340,7 @@ macro_rules! surface_entry_point {
                     &LightInputs { light_map, shadow, grids, depths },
                     &caustics[0],
                     caustic_maps,
+                    &Ripples { records: ripple_records, normals: ripple_normals },
                 );
                 radiance[index as usize] = color;
                 gbuffer[index as usize] = texel;

@@ -87,9 +87,9 @@ pub fn irradiance_lookup(p: &SkyParams, table: &[Vec4], n: Vec3) -> Vec3 {
     let (x0, y0) = (x.floor() as u32, y.floor() as u32);
     let (x1, y1) = ((x0 + 1).min(IRRADIANCE_WIDTH - 1), (y0 + 1).min(IRRADIANCE_HEIGHT - 1));
     let (fx, fy) = (x - x0 as f32, y - y0 as f32);
-    let at = |c: u32, r: u32| table[(r * IRRADIANCE_WIDTH + c) as usize].xyz();
-    let top = at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx;
-    let bottom = at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx;
+    let w = IRRADIANCE_WIDTH;
+    let top = table[(y0 * w + x0) as usize].xyz() * (1.0 - fx) + table[(y0 * w + x1) as usize].xyz() * fx;
+    let bottom = table[(y1 * w + x0) as usize].xyz() * (1.0 - fx) + table[(y1 * w + x1) as usize].xyz() * fx;
     top * (1.0 - fy) + bottom * fy
 }
 

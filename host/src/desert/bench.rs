@@ -8,6 +8,8 @@
 //!   reference (`reference`, shadow rays against the real triangles) of the
 //!   scene meshed at the field's full resolution: what coarser meshes cost
 //!   in accuracy, and what the renderer's own error is at full resolution;
+//!   with ripples, the full mesh again with the ripples at full
+//!   resolution everywhere (no LOD), as the reference takes them;
 //! - `automaton`: the scene's dunes (first terrain with `dunes`) on
 //!   lattices of 64^2 up to 512^2 cells of its cell width (256^2 with
 //!   `--quick`), 20 steps
@@ -109,8 +111,20 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
         );
         let sizes: Vec<u32> = if quick { vec![full / 8, full] } else { vec![full / 8, full / 4, full / 2, full] };
         for backend in backends {
-            for &n in &sizes {
-                let d = meshed(data, n)?;
+            // The mesh series, then (with ripples) the full mesh with the
+            // ripples at full resolution everywhere: what the LOD costs
+            // against the reference's full-resolution ripples.
+            let rippled = data.source.file.terrain.iter().any(|t| t.ripples.is_some());
+            let configs =
+                sizes.iter().map(|&n| ("mesh", n)).chain(rippled.then_some(("mesh-ripples-full", full)));
+            for (series, n) in configs {
+                let d = if series == "mesh" {
+                    meshed(data, n)?
+                } else {
+                    finest.reconfigure(|f| {
+                        f.terrain.iter_mut().filter_map(|t| t.ripples.as_mut()).for_each(|r| r.lod = false)
+                    })?
+                };
                 let timed = time_renders(&d, backend, repeats, &[])?;
                 let img = &timed.last.image;
                 let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
@@ -118,7 +132,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
                 let row = Row {
                     scene: name.clone(),
                     backend: backend.name(),
-                    series: "mesh",
+                    series,
                     size: n,
                     median_seconds: timed.total_seconds,
                     seconds_per_step: None,
@@ -126,7 +140,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
                     max_8bit_percent: Some(diff.max_8bit_percent),
                 };
                 eprintln!(
-                    "{name:>14} {:>4} mesh {n:>4}^2 {:>8.4} s  rms {:.3}%  max {:.2}%",
+                    "{name:>14} {:>4} {series} {n:>4}^2 {:>8.4} s  rms {:.3}%  max {:.2}%",
                     row.backend, row.median_seconds, diff.rms_8bit_percent, diff.max_8bit_percent
                 );
                 rows.push(row);
@@ -185,10 +199,10 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
 /// The mesh series' error against the median render time, one line per
 /// scene and backend.
 fn plot(path: &Path, rows: &[Row]) -> Result<()> {
-    let mesh: Vec<&Row> = rows.iter().filter(|r| r.series == "mesh").collect();
+    let mesh: Vec<&Row> = rows.iter().filter(|r| r.series.starts_with("mesh")).collect();
     let series = crate::bench::series_of(
         &mesh,
-        |r| format!("{} ({}, mesh)", r.scene, r.backend),
+        |r| format!("{} ({}, {})", r.scene, r.backend, r.series),
         |r| (r.median_seconds, r.rms_8bit_percent.unwrap_or(0.0)),
     );
     let labels = crate::bench::LogLogPlot {

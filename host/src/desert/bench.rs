@@ -115,8 +115,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
             // ripples at full resolution everywhere: what the LOD costs
             // against the reference's full-resolution ripples.
             let rippled = data.source.file.terrain.iter().any(|t| t.ripples.is_some());
-            let configs =
-                sizes.iter().map(|&n| ("mesh", n)).chain(rippled.then_some(("mesh-ripples-full", full)));
+            let configs = sizes.iter().map(|&n| ("mesh", n)).chain(rippled.then_some(("mesh-ripples-full", full)));
             for (series, n) in configs {
                 let d = if series == "mesh" {
                     meshed(data, n)?

@@ -450,3 +450,40 @@ fn bad_sea_settings_name_the_field() {
         assert_rejected(&run, needles);
     }
 }
+
+/// Issue 22, item 4 (data loss) and 5 (late failure), and the argument
+/// ranges of item 7: an output that is an input (the scene, an image being
+/// compared) or another output, an output that is a folder, and a tolerance,
+/// path count, repeat count or stride that cannot work are refused before
+/// any work, and the inputs are left as they were.
+#[test]
+fn outputs_never_overwrite_inputs_and_bad_ranges_are_refused() {
+    let cases: &[(&[&str], &[&str])] = &[
+        (&["render", "scene.toml", "-o", "o.png", "--stats", "scene.toml"], &["scene.toml", "the scene"]),
+        (&["render", "scene.toml", "-o", "scene.toml"], &["scene.toml"]),
+        (&["render", "scene.toml", "-o", "o.png", "--stats", "o.png"], &["o.png", "more than once"]),
+        (&["render", "scene.toml", "-o", "o.png", "-o", "./o.png"], &["o.png", "more than once"]),
+        (&["render", "scene.toml", "-o", "folder.png"], &["folder.png", "a folder"]),
+        (&["reference", "scene.toml", "-o", "o.png", "--tolerance", "nan"], &["--tolerance"]),
+        (&["reference", "scene.toml", "-o", "o.png", "--tolerance", "0"], &["--tolerance"]),
+        (&["reference", "scene.toml", "-o", "o.png", "--tolerance=-1"], &["--tolerance"]),
+        (&["reference", "scene.toml", "-o", "o.png", "--paths", "0"], &["--paths"]),
+        (&["bench", "scene.toml", "--repeats", "0"], &["--repeats"]),
+        (&["bench", "scene.toml", "--stride", "0"], &["--stride"]),
+        (&["compare", "a.png", "b.png", "--diff", "a.png"], &["a.png", "input"]),
+        (&["terrain", "scene.toml", "-o", "scene.toml"], &["scene.toml"]),
+    ];
+    for (args, needles) in cases {
+        let dir = scene_dir(GOOD);
+        std::fs::create_dir(dir.path().join("folder.png")).unwrap();
+        for name in ["a.png", "b.png"] {
+            image::RgbImage::new(2, 2).save(dir.path().join(name)).unwrap();
+        }
+        let before = std::fs::read(dir.path().join("a.png")).unwrap();
+        let run = run_in(dir, args);
+        assert_rejected(&run, needles);
+        assert_eq!(std::fs::read_to_string(run.out("scene.toml")).unwrap(), GOOD, "{args:?}");
+        assert_eq!(std::fs::read(run.out("a.png")).unwrap(), before, "{args:?}");
+        assert!(!run.out("o.png").exists(), "{args:?}");
+    }
+}

@@ -312,6 +312,8 @@ fn render_command(args: RenderArgs) -> Result<()> {
     if let Some(path) = &stats {
         check_outputs_dir(path)?;
     }
+    let written: Vec<&Path> = output.iter().map(|p| p.as_path()).chain(stats.as_deref()).collect();
+    check_distinct(&written, &[(&scene, "the scene")])?;
     let mut data = scene::load(&scene)?;
     shafts.apply(&mut data)?;
     set_spp(&mut data, spp)?;
@@ -352,6 +354,13 @@ fn render_command(args: RenderArgs) -> Result<()> {
 fn reference_command(args: ReferenceArgs) -> Result<()> {
     let ReferenceArgs { scene, output, tolerance, spp, paths, transmission_only } = args;
     check_outputs(&output)?;
+    check_distinct(&output.iter().map(|p| p.as_path()).collect::<Vec<_>>(), &[(&scene, "the scene")])?;
+    if !(tolerance.is_finite() && tolerance > 0.0 && tolerance < 1.0) {
+        return Err(anyhow!("command line: --tolerance: expected a relative change in (0, 1), got {tolerance}"));
+    }
+    if paths == 0 {
+        return Err(anyhow!("command line: --paths: expected at least 1 light path, got 0"));
+    }
     let mut data = scene::load(&scene)?;
     set_spp(&mut data, spp)?;
     let t = Instant::now();
@@ -385,6 +394,12 @@ fn reference_command(args: ReferenceArgs) -> Result<()> {
 
 fn bench_command(args: BenchArgs) -> Result<()> {
     let BenchArgs { scenes, family, sky, sea, caustics, backend, repeats, stride, quick, out_dir } = args;
+    if repeats == 0 {
+        return Err(anyhow!("command line: --repeats: expected at least 1 render per configuration, got 0"));
+    }
+    if stride == 0 {
+        return Err(anyhow!("command line: --stride: expected at least 1 (every pixel), got 0"));
+    }
     let family = family.or_else(|| {
         [(sky, "sky"), (sea, "sea"), (caustics, "caustics")].iter().find(|(on, _)| *on).map(|(_, n)| n.to_string())
     });
@@ -398,6 +413,7 @@ fn bench_command(args: BenchArgs) -> Result<()> {
 
 fn terrain_command(args: TerrainArgs) -> Result<()> {
     check_outputs(std::slice::from_ref(&args.output))?;
+    check_distinct(&[args.output.as_path()], &[(&args.scene, "the scene")])?;
     let data = scene::load(&args.scene)?;
     for (path, note) in slicelight::desert::write_fields(&data.desert, &args.output)? {
         println!("wrote {}{note}", path.display());
@@ -407,6 +423,14 @@ fn terrain_command(args: TerrainArgs) -> Result<()> {
 
 fn compare_command(args: CompareArgs) -> Result<()> {
     let CompareArgs { image, reference, exposure, scene, diff } = args;
+    if let Some(path) = &diff {
+        let mut inputs = vec![(image.as_path(), "an input image"), (reference.as_path(), "an input image")];
+        if let Some(s) = &scene {
+            inputs.push((s.as_path(), "the scene"));
+        }
+        check_distinct(&[path.as_path()], &inputs)?;
+        check_outputs_dir(path)?;
+    }
     let exposure = match (exposure, &scene) {
         (Some(e), _) => e,
         (None, Some(path)) => scene::load(path)?.exposure,
@@ -435,6 +459,36 @@ fn compare_command(args: CompareArgs) -> Result<()> {
                     "wrote {}: per channel |image - reference| / {largest:.4e} (white: that difference; linear, no tone mapping)",
                     path.display()
                 );
+    }
+    Ok(())
+}
+
+/// Refuses, before any work, outputs that would destroy an input or each
+/// other: an output that is one of `inputs` (the scene, an image being
+/// compared), the same file given twice, or a folder. Files are compared by
+/// what they resolve to, so `o.png` and `./o.png` are one.
+fn check_distinct(outputs: &[&Path], inputs: &[(&Path, &str)]) -> Result<()> {
+    let resolve = |p: &Path| -> PathBuf {
+        let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let dir = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
+        dir.join(p.file_name().unwrap_or_default())
+    };
+    for (k, out) in outputs.iter().enumerate() {
+        if out.is_dir() {
+            return Err(anyhow!("{}: expected a file to write, but it is a folder", out.display()));
+        }
+        let r = resolve(out);
+        for (input, what) in inputs {
+            if resolve(input) == r {
+                return Err(anyhow!(
+                    "{}: is {what} this command reads; an output may not overwrite its input",
+                    out.display()
+                ));
+            }
+        }
+        if outputs[..k].iter().any(|o| resolve(o) == r) {
+            return Err(anyhow!("{}: given as an output more than once", out.display()));
+        }
     }
     Ok(())
 }

@@ -309,6 +309,16 @@ pub fn run(setup: &Setup, progress: &ProgressBar) -> Vec<UVec2> {
     run_dispatches(&setup.params, start, 1, setup.steps * setup.params.phases, progress)
 }
 
+/// The field the automaton `setup` forms: its slabs after all steps (what
+/// the self-check compares) and its heights (m, the terrain's cells) after
+/// settling to the angle of repose.
+pub fn formed(setup: &Setup, progress: &ProgressBar) -> Result<(Vec<u32>, Vec<f32>)> {
+    let slabs: Vec<u32> = run(setup, progress).iter().map(|c| c.x).collect();
+    let (settled, _) = settle(&setup.params, &slabs, 1 << 20)?;
+    let heights = setup.metres(&settled);
+    Ok((slabs, heights))
+}
+
 /// Avalanche rounds (both colours) on `slabs` until nothing moves; returns
 /// the heights and the rounds it took. Each move lowers the sum of squared
 /// heights (`sand.rs`), so this ends; `limit` rounds bound it all the same.

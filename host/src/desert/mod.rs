@@ -248,10 +248,7 @@ pub fn configure(terrains: &[Terrain], base: &Path, progress: &ProgressBar) -> R
         } else {
             let d = terrain.dunes.as_ref().expect("one source");
             let s = dunes::configure(&field, d, terrain.size)?;
-            let state = dunes::run(&s, progress);
-            let slabs: Vec<u32> = state.iter().map(|c| c.x).collect();
-            let (settled, _) = dunes::settle(&s.params, &slabs, 1 << 20)?;
-            let heights = s.metres(&settled);
+            let (slabs, heights) = dunes::formed(&s, progress)?;
             let field = Field { nx: s.cells[0], nz: s.cells[1], heights, periodic: true };
             if setup.dunes.is_none() {
                 setup.dunes = Some(s);
@@ -329,10 +326,7 @@ fn ripple_texture(
         creep_rounds: None,
     };
     let s = dunes::configure(field, &settings, [size, size])?;
-    let state = dunes::run(&s, progress);
-    let slabs: Vec<u32> = state.iter().map(|c| c.x).collect();
-    let (settled, _) = dunes::settle(&s.params, &slabs, 1 << 20)?;
-    let mut heights: Vec<f32> = s.metres(&settled).iter().map(|h| h * strength).collect();
+    let mut heights: Vec<f32> = dunes::formed(&s, progress)?.1.iter().map(|h| h * strength).collect();
     let offset = setup.ripple_normals.len() as u32;
     let mut side = n;
     let mut levels = 0;

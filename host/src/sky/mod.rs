@@ -727,13 +727,12 @@ impl Pass for Aerial {
         let n = common.band_pixels as usize;
         let p = &scene.sky.params;
         let blank = slicelight_shaders::common::surface::no_surface();
-        let gbuffer = frame.get::<GBufferTexel>(&GBUFFER).to_vec();
-        let table = frame.get::<Vec4>(&SKY_TRANSMITTANCE).to_vec();
         let mut light = vec![Vec4::ZERO; n];
         let mut through = vec![Vec4::ONE; n];
+        let (gbuffer, table) = (frame.get::<GBufferTexel>(&GBUFFER), frame.get::<Vec4>(&SKY_TRANSMITTANCE));
         crate::cpu::for_each_invocation2(&mut light, &mut through, common.band_start, progress, |i, l, t| {
             let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-            (*l, *t) = slicelight_shaders::sky::aerial::aerial_pixel(i, common, p, &table, texel);
+            (*l, *t) = slicelight_shaders::sky::aerial::aerial_pixel(i, common, p, table, texel);
         });
         frame.insert(&AERIAL_RADIANCE, Buffer::from_bytes(bytemuck::cast_slice(&light)));
         frame.insert(&AERIAL_TRANSMITTANCE, Buffer::from_bytes(bytemuck::cast_slice(&through)));

@@ -7,7 +7,7 @@
 //!
 //! and the air's transmittance `T_view(0, t)`, which dims the surface's light.
 
-use super::{altitude_along, atmosphere_span, extinction, mie_phase, scattering, sun_transmittance, SkyParams};
+use super::{altitude_along, atmosphere_span, extinction, mie_phase, scattered_sunlight, SkyParams};
 use crate::camera::{camera_ray, in_image};
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
 use crate::phase;
@@ -53,12 +53,8 @@ pub fn aerial_segment(p: &SkyParams, table: &[Vec4], dir: Vec3, t: f32) -> (Vec3
         let s = t0 + (k as f32 + 0.5) * ds;
         let h_s = altitude_along(p, h, mu, s);
         let sigma = extinction(p, h_s);
-        let r_s = p.ground_radius + h_s;
-        let mu_s_s = ((r * mu_s + s * nu) / r_s).clamp(-1.0, 1.0);
-        let sun = sun_transmittance(p, table, h_s, mu_s_s);
-        let (beta_r, beta_m) = scattering(p, h_s);
         let view = (-(tau + sigma * (0.5 * ds))).exp();
-        sum += (beta_r * phase_r + Vec3::splat(beta_m * phase_m)) * sun * view * ds;
+        sum += scattered_sunlight(p, table, r, mu_s, nu, s, h_s, phase_r, phase_m) * view * ds;
         tau += sigma * ds;
         k += 1;
     }

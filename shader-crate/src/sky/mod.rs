@@ -446,12 +446,8 @@ pub fn inscatter(p: &SkyParams, table: &[Vec4], mu: f32, mu_s: f32, nu: f32) -> 
                 let h_t = altitude_along(p, h, mu, t);
                 let sigma = extinction(p, h_t);
                 if lit {
-                    let r_t = p.ground_radius + h_t;
-                    let mu_s_t = ((r * mu_s + t * nu) / r_t).clamp(-1.0, 1.0);
-                    let sun = sun_transmittance(p, table, h_t, mu_s_t);
-                    let (beta_r, beta_m) = scattering(p, h_t);
                     let view = (-(tau + sigma * (0.5 * w))).exp();
-                    sum += (beta_r * phase_r + Vec3::splat(beta_m * phase_m)) * sun * view * w;
+                    sum += scattered_sunlight(p, table, r, mu_s, nu, t, h_t, phase_r, phase_m) * view * w;
                 }
                 tau += sigma * w;
                 k += 1;
@@ -470,6 +466,31 @@ pub fn inscatter(p: &SkyParams, table: &[Vec4], mu: f32, mu_s: f32, nu: f32) -> 
         }
     }
     (radiance, transmittance)
+}
+
+/// The sunlight scattered toward the eye per metre at distance `t` along
+/// a view ray from radius `r` (altitude `h_t` there), per unit solar
+/// irradiance, before the view's transmittance:
+/// `(beta_R P_R + beta_M P_M) T_sun`, the integrand of eq. 1 that
+/// `inscatter` (to the top of the atmosphere) and the aerial perspective
+/// (to a surface) share.
+#[allow(clippy::too_many_arguments)]
+pub fn scattered_sunlight(
+    p: &SkyParams,
+    table: &[Vec4],
+    r: f32,
+    mu_s: f32,
+    nu: f32,
+    t: f32,
+    h_t: f32,
+    phase_r: f32,
+    phase_m: f32,
+) -> Vec3 {
+    let r_t = p.ground_radius + h_t;
+    let mu_s_t = ((r * mu_s + t * nu) / r_t).clamp(-1.0, 1.0);
+    let sun = sun_transmittance(p, table, h_t, mu_s_t);
+    let (beta_r, beta_m) = scattering(p, h_t);
+    (beta_r * phase_r + Vec3::splat(beta_m * phase_m)) * sun
 }
 
 /// The sun's disk along unit view direction `dir`: the sun's radiance

@@ -36,6 +36,7 @@ pub mod desert;
 pub mod sea;
 pub mod shafts;
 pub mod sky;
+pub mod smoke;
 pub mod volumes;
 
 pub use slicelight_shaders as shaders;

@@ -82,6 +82,43 @@ struct RenderArgs {
     /// scatter accumulation's self-check). Give it more than once for several.
     #[arg(long = "pass")]
     passes: Vec<String>,
+    /// Render an animation: frames FIRST..END (END excluded), frame `f` at
+    /// the scene's `[time] seconds + f / fps`; every output (and --stats)
+    /// then holds a `%d`-style field for the frame number (`%04d`).
+    #[arg(long, value_parser = parse_frames)]
+    frames: Option<(u32, u32)>,
+    /// Frames per second of `--frames`.
+    #[arg(long, default_value_t = 24.0)]
+    fps: f64,
+    /// With `--frames`: skip frames whose outputs all exist (a render that
+    /// stopped, or a range shared with another machine, goes on).
+    #[arg(long, requires = "frames")]
+    resume: bool,
+}
+
+/// `A..B`: frames A up to B, B excluded.
+fn parse_frames(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| format!("expected FIRST..END (0..120), got {s:?}"))?;
+    let a: u32 = a.trim().parse().map_err(|e| format!("{s:?}: first frame: {e}"))?;
+    let b: u32 = b.trim().parse().map_err(|e| format!("{s:?}: end frame: {e}"))?;
+    if b <= a {
+        return Err(format!("expected END above FIRST (END is excluded), got {s:?}"));
+    }
+    Ok((a, b))
+}
+
+/// `path` with its `%d` / `%0Nd` field replaced by `frame`; `None` if it has none.
+fn frame_path(path: &Path, frame: u32) -> Option<PathBuf> {
+    let text = path.to_str()?;
+    let start = text.find('%')?;
+    let rest = &text[start + 1..];
+    let end = rest.find('d')?;
+    let spec = &rest[..end];
+    if !spec.chars().all(|c| c.is_ascii_digit()) {
+        return None;
+    }
+    let width: usize = if spec.is_empty() { 0 } else { spec.parse().ok()? };
+    Some(PathBuf::from(format!("{}{frame:0width$}{}", &text[..start], &rest[end + 1..])))
 }
 
 #[derive(clap::Args)]
@@ -306,47 +343,118 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn render_command(args: RenderArgs) -> Result<()> {
-    let RenderArgs { scene, output, backend, stats, quiet, verbose, exposure, shafts, spp, surface_shadows, passes } =
-        args;
-    check_outputs(&output)?;
-    if let Some(path) = &stats {
-        check_outputs_dir(path)?;
-    }
-    let written: Vec<&Path> = output.iter().map(|p| p.as_path()).chain(stats.as_deref()).collect();
-    check_distinct(&written, &[(&scene, "the scene")])?;
-    let mut data = scene::load(&scene)?;
-    shafts.apply(&mut data)?;
-    set_spp(&mut data, spp)?;
-    if let Some(e) = exposure {
-        if !(e.is_finite() && e > 0.0) {
-            return Err(anyhow!("command line: --exposure: expected a positive number, got {e}"));
-        }
-        data.exposure = e;
-    }
-    if let Some(s) = surface_shadows {
-        data.set_surface_shadows(s.code())?;
-    }
+    let RenderArgs {
+        scene,
+        output,
+        backend,
+        stats,
+        quiet,
+        verbose,
+        exposure,
+        shafts,
+        spp,
+        surface_shadows,
+        passes,
+        frames,
+        fps,
+        resume,
+    } = args;
     for name in &passes {
         if slicelight::passes::by_name(name).is_none() {
             let known: Vec<_> = slicelight::passes::PASSES.iter().map(|p| p.name()).collect();
             return Err(anyhow!("command line: --pass: expected one of {}, got {name:?}", known.join(", ")));
         }
     }
-    data.requested_passes = passes;
+    // The frames to render, each with its outputs and stats path.
+    let jobs: Vec<(Option<u32>, Vec<PathBuf>, Option<PathBuf>)> = match frames {
+        None => vec![(None, output.clone(), stats.clone())],
+        Some((first, end)) => {
+            if !(fps.is_finite() && fps > 0.0) {
+                return Err(anyhow!("command line: --fps: expected a positive number of frames per second, got {fps}"));
+            }
+            for p in output.iter().chain(&stats) {
+                if frame_path(p, 0).is_none() {
+                    return Err(anyhow!(
+                        "{}: expected a frame-number field (%d or %04d) in every output with --frames",
+                        p.display()
+                    ));
+                }
+            }
+            (first..end)
+                .map(|f| {
+                    let at = |p: &PathBuf| frame_path(p, f).expect("checked above");
+                    (Some(f), output.iter().map(at).collect(), stats.as_ref().map(at))
+                })
+                .collect()
+        }
+    };
+    let base = scene::load(&scene)?;
+    for (_, outs, st) in &jobs {
+        check_outputs(outs)?;
+        if let Some(path) = st {
+            check_outputs_dir(path)?;
+        }
+        let written: Vec<&Path> = outs.iter().map(|p| p.as_path()).chain(st.as_deref()).collect();
+        check_distinct(&written, &[(&scene, "the scene")])?;
+    }
     let backend = Backend::open(backend)?;
     if !quiet {
         eprintln!("backend: {} on {}", backend.name(), backend.device());
     }
     let show = !quiet && std::io::stderr().is_terminal();
-    let rendered = render::render_layers(&data, &backend, show)?;
-    let st = &rendered.stats;
-    if !quiet {
-        print_summary(st, verbose || stats.is_some());
-    }
-    write_outputs(&output, &rendered.image, &rendered.layer_slices(), &data, quiet)?;
-    if let Some(path) = stats {
-        let json = serde_json::to_vec_pretty(st)?;
-        output::write_atomically(&path, &json)?;
+    let total = jobs.len();
+    let clock = Instant::now();
+    let mut done = 0usize;
+    for (k, (frame, outs, st)) in jobs.iter().enumerate() {
+        if resume && outs.iter().chain(st).all(|p| p.exists()) {
+            if !quiet {
+                eprintln!("frame {}: its outputs exist, skipped (--resume)", frame.unwrap_or(0));
+            }
+            continue;
+        }
+        let frame_clock = Instant::now();
+        let mut data = match frame {
+            None => base.clone(),
+            Some(f) => {
+                let t = base.time + *f as f64 / fps;
+                base.reconfigure(|file| file.time.seconds = t).map_err(|e| anyhow!("{}: {e}", scene.display()))?
+            }
+        };
+        shafts.apply(&mut data)?;
+        set_spp(&mut data, spp)?;
+        if let Some(e) = exposure {
+            if !(e.is_finite() && e > 0.0) {
+                return Err(anyhow!("command line: --exposure: expected a positive number, got {e}"));
+            }
+            data.exposure = e;
+        }
+        if let Some(s) = surface_shadows {
+            data.set_surface_shadows(s.code())?;
+        }
+        data.requested_passes = passes.clone();
+        let rendered = render::render_layers(&data, &backend, show && frame.is_none())?;
+        let stats_of = &rendered.stats;
+        if !quiet && frame.is_none() {
+            print_summary(stats_of, verbose || st.is_some());
+        }
+        write_outputs(outs, &rendered.image, &rendered.layer_slices(), &data, quiet || frame.is_some())?;
+        if let Some(path) = st {
+            let json = serde_json::to_vec_pretty(stats_of)?;
+            output::write_atomically(path, &json)?;
+        }
+        done += 1;
+        if let (Some(f), false) = (frame, quiet) {
+            let per_frame = clock.elapsed().as_secs_f64() / done as f64;
+            let left = total - k - 1;
+            eprintln!(
+                "frame {f} ({} of {total}, t = {:.3} s): {:.2} s, wrote {}; about {:.0} s to go",
+                k + 1,
+                data.time,
+                frame_clock.elapsed().as_secs_f64(),
+                outs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
+                per_frame * left as f64
+            );
+        }
     }
     Ok(())
 }

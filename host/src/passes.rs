@@ -30,7 +30,7 @@ macro_rules! resources {
     }};
 }
 
-use crate::{caustics, common, desert, sea, shafts, sky, volumes};
+use crate::{caustics, common, desert, sea, shafts, sky, smoke, volumes};
 
 /// A family: its passes (in the order they run) and its bench sweep.
 pub struct Family {
@@ -53,6 +53,7 @@ static FAMILIES: &[&Family] = &[
     &sea::FAMILY,
     &volumes::FAMILY,
     &desert::FAMILY,
+    &smoke::FAMILY,
 ];
 
 /// The registered families (see `FAMILIES`).

@@ -33,6 +33,7 @@ pub mod desert;
 pub mod sea;
 pub mod shafts;
 pub mod sky;
+pub mod smoke;
 pub mod volumes;
 
 pub use spirv_std::glam;

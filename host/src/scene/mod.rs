@@ -68,6 +68,8 @@ pub struct SceneData {
     pub desert: crate::desert::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
+    /// The instant shown, s (`[time] seconds`): simulations run to it.
+    pub time: f64,
     /// The parsed file and the folder its paths are relative to: what
     /// `reconfigure` edits and validates again.
     pub source: std::sync::Arc<Source>,
@@ -310,6 +312,10 @@ fn medium(m: &Medium, common: &mut CommonParams) -> Result<()> {
 
 /// Validates a parsed scene and converts it to kernel buffers.
 pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
+    let time = file.time.seconds;
+    if !(time.is_finite() && (0.0..=1e7).contains(&time)) {
+        bail!(invalid("time.seconds", "a time in [0, 1e7] seconds", time));
+    }
     let mut common = camera(&file.camera)?;
     common.surface_shadows = file.surface.shadows.code();
     medium(&file.medium, &mut common)?;
@@ -414,6 +420,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         volumes: Default::default(),
         desert,
         requested_passes: Vec::new(),
+        time,
         source: std::sync::Arc::new(Source { file: file.clone(), base: base.to_path_buf() }),
     };
     data.lay_out_shadow_maps()?;

@@ -36,6 +36,19 @@ pub struct SceneFile {
     /// Height fields (`[[terrain]]`): dunes, ripples, images.
     #[serde(default)]
     pub terrain: Vec<crate::desert::Terrain>,
+    /// The instant shown (`[time]`); an animation's frames count from it.
+    #[serde(default)]
+    pub time: Time,
+}
+
+/// `[time]`: the scene's clock.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Time {
+    /// Seconds at the instant a still shows (default 0); `render --frames`
+    /// shows frame `f` at `seconds + f / fps`. Simulations (smoke) run to it.
+    #[serde(default)]
+    pub seconds: f64,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -109,6 +109,9 @@ pub struct Volume {
     pub automaton: Option<automaton::Settings>,
     /// A density grid from a file fills the box (instead of metaballs).
     pub grid: Option<GridFile>,
+    /// Smoke simulated in the box (`crate::smoke`): its puffs are the
+    /// metaballs (or its density field the grid).
+    pub smoke: Option<crate::smoke::Settings>,
 }
 
 /// `grid = { file = "..." }`: a Mitsuba `.vol` file (version 3, float32,
@@ -413,6 +416,61 @@ fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMet
     Ok((record, balls, file))
 }
 
+/// A smoke volume: the fluid simulated to the scene's time, its puffs
+/// the volume's metaballs (`render = "puffs"`) or its density field the
+/// grid (`"density"`).
+fn smoke_volume(
+    field: &str,
+    v: &Volume,
+    s: &crate::smoke::Settings,
+    data: &SceneData,
+    base: &Path,
+) -> Result<(GpuVolume, Vec<GpuMetaball>, Option<grid::Grid>)> {
+    let others = [!v.metaballs.is_empty() || v.metaballs_file.is_some(), v.automaton.is_some(), v.grid.is_some()];
+    if others.iter().any(|o| *o) {
+        bail!(invalid(&format!("{field}.smoke"), "smoke alone (no metaballs, automaton or grid besides it)", "both"));
+    }
+    let lo = validate::finite3(&format!("{field}.min"), v.min)?;
+    let hi = validate::finite3(&format!("{field}.max"), v.max)?;
+    if !hi.cmpgt(lo).all() {
+        bail!(invalid(&format!("{field}.max"), "a corner above min in every axis (a box with volume)", v.max));
+    }
+    let config = crate::smoke::configure(field, s, lo, hi)?;
+    let cells = if config.obstacles {
+        crate::smoke::voxelise(data, &config.params, lo)
+    } else {
+        vec![1; config.params.cells as usize]
+    };
+    let progress = crate::smoke::progress_bar(field);
+    let fluid = crate::smoke::simulate(&config, cells, config.seconds as f64 + data.time, &progress);
+    let mut plain = v.clone();
+    plain.smoke = None;
+    match config.render {
+        crate::smoke::Render::Puffs => {
+            plain.metaballs = crate::smoke::metaballs(&fluid, lo, hi);
+            if plain.metaballs.is_empty() && plain.resolution.is_none() {
+                plain.resolution = Some([1, 1, 1]);
+            }
+            volume(field, &plain, base)
+        }
+        crate::smoke::Render::Density => {
+            if v.resolution.is_some() {
+                bail!(invalid(
+                    &format!("{field}.resolution"),
+                    "none with render = \"density\" (the fluid's cells are the grid)",
+                    "a value"
+                ));
+            }
+            plain.resolution = Some(s.cells);
+            let (mut record, balls, _) = volume(field, &plain, base)?;
+            record.nx = s.cells[0];
+            record.ny = s.cells[1];
+            record.nz = s.cells[2];
+            Ok((record, balls, Some(grid::Grid { cells: s.cells, values: fluid.smoke.clone() })))
+        }
+    }
+}
+
 /// Cells a quarter of the smallest ball's radius wide (the trilinear
 /// interpolation of the field function then errs by under 1 % of a ball's
 /// peak), coarsened evenly to at most `MAX_DEFAULT_CELLS`.
@@ -552,7 +610,10 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
     let mut automaton_volume = 0;
     for (i, v) in list.iter().enumerate() {
         let field = format!("volume[{i}]");
-        let (mut record, own, file) = volume(&field, v, base)?;
+        let (mut record, own, file) = match &v.smoke {
+            Some(s) => smoke_volume(&field, v, s, data, base)?,
+            None => volume(&field, v, base)?,
+        };
         if let Some(a) = &v.automaton {
             if automaton_volume != 0 {
                 bail!(invalid(&format!("{field}.automaton"), "one automaton per scene", "a second"));

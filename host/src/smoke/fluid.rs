@@ -1,0 +1,570 @@
+//! The fluid solver's driver (kernels: `shader-crate/src/smoke/`): the
+//! staggered grid's arrays, one step as the sequence of per-element
+//! functions, the pressure projection's preconditioned conjugate gradients
+//! with their dot products, and the puffs moved through the field.
+
+use glam::{UVec3, Vec3};
+use indicatif::ProgressBar;
+use slicelight_shaders::smoke::*;
+use slicelight_shaders::volumes::automaton::random;
+
+use crate::cpu::for_each_invocation;
+
+/// Red-black Gauss-Seidel sweeps before and after the coarse correction.
+const SMOOTHING_SWEEPS: u32 = 2;
+/// Symmetric sweep pairs on the coarsest level (a few cells a side).
+const COARSE_SWEEPS: u32 = 16;
+
+/// One multigrid level: its cells, which are fluid, and its work arrays.
+#[derive(Debug, Clone)]
+struct Level {
+    n: UVec3,
+    fluid: Vec<u32>,
+    x: Vec<f32>,
+    b: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+impl Level {
+    fn new(n: UVec3, fluid: Vec<u32>) -> Level {
+        let cells = fluid.len();
+        Level { n, fluid, x: vec![0.0; cells], b: vec![0.0; cells], scratch: vec![0.0; cells] }
+    }
+}
+
+/// The pressure Poisson equation's solver: conjugate gradients with a
+/// multigrid V-cycle as the preconditioner (MGPCG, as McAdams, Sifakis and
+/// Teran 2010; here with piecewise-constant transfers).
+#[derive(Debug, Clone)]
+pub struct Poisson {
+    walls: u32,
+    levels: Vec<Level>,
+    /// No open face and so no fixed pressure: `A` is singular (constants),
+    /// and the right side and the search directions are kept mean-free.
+    singular: bool,
+}
+
+/// What one projection did.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Solve {
+    pub iterations: u32,
+    /// `max |r| / (h max |u|)` when it stopped: the divergence left,
+    /// `max |div u| h / max |u|`.
+    pub relative_divergence: f64,
+    pub converged: bool,
+}
+
+fn gs_sweep(level: &mut Level, walls: u32, colour: u32) {
+    let Level { n, fluid, x, b, scratch } = level;
+    let n = *n;
+    for_each_invocation(scratch, 0, &ProgressBar::hidden(), |i, out| {
+        *out = gauss_seidel(n, walls, fluid, b, x, i, colour)
+    });
+    std::mem::swap(x, scratch);
+}
+
+impl Poisson {
+    pub fn new(n: UVec3, walls: u32, fluid: Vec<u32>) -> Poisson {
+        let singular = walls == 63;
+        let mut levels = vec![Level::new(n, fluid)];
+        loop {
+            let fine = levels.last().expect("one level");
+            if fine.n.max_element() <= 4 || levels.len() >= 12 {
+                break;
+            }
+            let coarse = coarser(fine.n);
+            let count = (coarse.x * coarse.y * coarse.z) as usize;
+            let mut flags = vec![0u32; count];
+            let fine_n = fine.n;
+            for_each_invocation(&mut flags, 0, &ProgressBar::hidden(), |i, f| {
+                *f = coarse_fluid(fine_n, &fine.fluid, i)
+            });
+            levels.push(Level::new(coarse, flags));
+        }
+        Poisson { walls, levels, singular }
+    }
+
+    pub fn levels(&self) -> usize {
+        self.levels.len()
+    }
+
+    fn fluid(&self) -> &[u32] {
+        &self.levels[0].fluid
+    }
+
+    /// Removes the mean over the fluid cells (the singular case's null space).
+    fn remove_mean(&self, v: &mut [f32]) {
+        if !self.singular {
+            return;
+        }
+        let fluid = self.fluid();
+        let (sum, count) =
+            v.iter().zip(fluid).filter(|(_, f)| **f != 0).fold((0.0f64, 0u64), |(s, c), (x, _)| (s + *x as f64, c + 1));
+        if count == 0 {
+            return;
+        }
+        let mean = (sum / count as f64) as f32;
+        for (x, f) in v.iter_mut().zip(fluid) {
+            if *f != 0 {
+                *x -= mean;
+            }
+        }
+    }
+
+    /// The V-cycle from level `l`: `levels[l].x` approximates
+    /// `A^-1 levels[l].b`, starting from 0; symmetric (the post-smoothing
+    /// sweeps the colours in the reverse order), as conjugate gradients need.
+    fn v_cycle(&mut self, l: usize) {
+        let walls = self.walls;
+        self.levels[l].x.fill(0.0);
+        if l + 1 == self.levels.len() {
+            for _ in 0..COARSE_SWEEPS {
+                gs_sweep(&mut self.levels[l], walls, 0);
+                gs_sweep(&mut self.levels[l], walls, 1);
+            }
+            for _ in 0..COARSE_SWEEPS {
+                gs_sweep(&mut self.levels[l], walls, 1);
+                gs_sweep(&mut self.levels[l], walls, 0);
+            }
+            return;
+        }
+        for _ in 0..SMOOTHING_SWEEPS {
+            gs_sweep(&mut self.levels[l], walls, 0);
+            gs_sweep(&mut self.levels[l], walls, 1);
+        }
+        {
+            let Level { n, fluid, x, b, scratch } = &mut self.levels[l];
+            let n = *n;
+            for_each_invocation(scratch, 0, &ProgressBar::hidden(), |i, r| {
+                *r = b[i as usize] - apply_poisson(n, walls, fluid, x, i)
+            });
+        }
+        let (fine, coarse) = self.levels.split_at_mut(l + 1);
+        let (fine, coarse) = (&fine[l], &mut coarse[0]);
+        let fine_n = fine.n;
+        for_each_invocation(&mut coarse.b, 0, &ProgressBar::hidden(), |i, b| *b = restrict(fine_n, &fine.scratch, i));
+        self.v_cycle(l + 1);
+        let (fine, coarse) = self.levels.split_at_mut(l + 1);
+        let (fine, coarse) = (&mut fine[l], &coarse[0]);
+        let Level { n, fluid, x, scratch, .. } = fine;
+        let n = *n;
+        for_each_invocation(scratch, 0, &ProgressBar::hidden(), |i, out| *out = prolong(n, fluid, x, &coarse.x, i));
+        std::mem::swap(x, scratch);
+        for _ in 0..SMOOTHING_SWEEPS {
+            gs_sweep(&mut self.levels[l], walls, 1);
+            gs_sweep(&mut self.levels[l], walls, 0);
+        }
+    }
+
+    /// `M^-1 r`: one V-cycle.
+    fn precondition(&mut self, r: &[f32]) -> Vec<f32> {
+        self.levels[0].b.copy_from_slice(r);
+        self.v_cycle(0);
+        let mut z = self.levels[0].x.clone();
+        self.remove_mean(&mut z);
+        z
+    }
+
+    fn apply(&self, x: &[f32], out: &mut [f32]) {
+        let (n, walls, fluid) = (self.levels[0].n, self.walls, self.fluid());
+        for_each_invocation(out, 0, &ProgressBar::hidden(), |i, o| *o = apply_poisson(n, walls, fluid, x, i));
+    }
+
+    /// Solves `A phi = b` from the guess in `phi`, until `max |r| <= stop`
+    /// or `max_iterations`; `scale` converts `max |r|` to the reported
+    /// relative divergence.
+    pub fn solve(&mut self, b: &[f32], phi: &mut [f32], stop: f64, scale: f64, max_iterations: u32) -> Solve {
+        let cells = b.len();
+        let mut b = b.to_vec();
+        self.remove_mean(&mut b);
+        let mut ap = vec![0.0f32; cells];
+        self.apply(phi, &mut ap);
+        let mut r: Vec<f32> = b.iter().zip(&ap).map(|(b, a)| b - a).collect();
+        self.remove_mean(&mut r);
+        let max_abs = |v: &[f32]| v.iter().fold(0.0f64, |m, x| m.max(x.abs() as f64));
+        let dot = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum::<f64>();
+        let mut residual = max_abs(&r);
+        if residual <= stop {
+            return Solve { iterations: 0, relative_divergence: residual * scale, converged: true };
+        }
+        let mut z = self.precondition(&r);
+        let mut p = z.clone();
+        let mut rz = dot(&r, &z);
+        for k in 1..=max_iterations {
+            self.apply(&p, &mut ap);
+            let pap = dot(&p, &ap);
+            if pap <= 0.0 || !pap.is_finite() {
+                return Solve { iterations: k, relative_divergence: residual * scale, converged: false };
+            }
+            let alpha = (rz / pap) as f32;
+            for i in 0..cells {
+                phi[i] += alpha * p[i];
+                r[i] -= alpha * ap[i];
+            }
+            residual = max_abs(&r);
+            if residual <= stop {
+                return Solve { iterations: k, relative_divergence: residual * scale, converged: true };
+            }
+            z = self.precondition(&r);
+            let rz_next = dot(&r, &z);
+            let beta = (rz_next / rz) as f32;
+            rz = rz_next;
+            for i in 0..cells {
+                p[i] = z[i] + beta * p[i];
+            }
+        }
+        Solve { iterations: max_iterations, relative_divergence: residual * scale, converged: false }
+    }
+}
+
+/// How the quantities are advected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Advection {
+    /// Stam's semi-Lagrangian step.
+    SemiLagrangian,
+    /// MacCormack's correction of it (second order where the field is smooth).
+    #[default]
+    Maccormack,
+}
+
+/// A source's cells and what it holds them at.
+#[derive(Debug, Clone)]
+pub struct SourceCells {
+    /// Cells (flat) whose centres are inside the source's sphere.
+    pub cells: Vec<u32>,
+    /// Faces per velocity component inside the sphere.
+    pub faces: [Vec<u32>; 3],
+    pub temperature: f32,
+    pub density: f32,
+    pub velocity: Vec3,
+}
+
+/// A puff: a metaball carried by the flow (world metres), grown and faded
+/// with its age.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Puff {
+    pub position: Vec3,
+    pub age: f32,
+    /// Radius (m) and density at emission.
+    pub radius: f32,
+    pub density: f32,
+}
+
+/// How puffs are emitted, grown and faded.
+#[derive(Debug, Clone)]
+pub struct PuffRules {
+    /// Per source: position (m), jitter radius (m), puffs per second, the
+    /// puff's radius and density at emission.
+    pub sources: Vec<(Vec3, f32, f32, f32, f32)>,
+    /// Radius growth (m/s) and the e-folding time of the density (s).
+    pub growth: f32,
+    pub lifetime: f32,
+}
+
+impl PuffRules {
+    /// A puff's radius and density at its age: the radius grows linearly,
+    /// the density falls as the cube of the radius (the puff's smoke is
+    /// conserved as it spreads) times `exp(-age / lifetime)` (it thins out).
+    pub fn shape(&self, puff: &Puff) -> (f32, f32) {
+        let r = puff.radius + self.growth * puff.age;
+        let spread = (puff.radius / r).powi(3);
+        (r, puff.density * spread * (-puff.age / self.lifetime).exp())
+    }
+}
+
+/// One step's measurements.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StepStats {
+    pub solve: Solve,
+    /// Seconds in advection, in forces and diffusion, in the projection.
+    pub advect_seconds: f64,
+    pub forces_seconds: f64,
+    pub project_seconds: f64,
+    /// `max |div u| h / max |u|` measured on the projected field.
+    pub divergence: f64,
+    pub max_speed: f64,
+}
+
+/// The fluid's state on the staggered grid.
+#[derive(Debug, Clone)]
+pub struct Fluid {
+    pub params: FluidParams,
+    /// Box's lower corner (m).
+    pub origin: Vec3,
+    pub advection: Advection,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub w: Vec<f32>,
+    pub temperature: Vec<f32>,
+    pub smoke: Vec<f32>,
+    /// `phi = p dt / rho` (m^2/s) of the last projection (the next one's guess).
+    pub phi: Vec<f32>,
+    pub fluid: Vec<u32>,
+    pub sources: Vec<SourceCells>,
+    pub puffs: Vec<Puff>,
+    pub rules: PuffRules,
+    /// Puffs owed by each source (the fraction carried to the next step).
+    pub owed: Vec<f32>,
+    /// Puffs emitted so far (each one's jitter is hashed from its number).
+    pub emitted: u32,
+    poisson: Poisson,
+    pub tolerance: f64,
+    pub max_iterations: u32,
+    pub last: StepStats,
+}
+
+fn len(e: UVec3) -> usize {
+    (e.x * e.y * e.z) as usize
+}
+
+impl Fluid {
+    /// A fluid at rest at the ambient temperature, with the outside wind
+    /// on every face (then projected, so the first step starts divergence-free).
+    pub fn new(params: FluidParams, origin: Vec3, fluid: Vec<u32>, advection: Advection) -> Fluid {
+        let p = params;
+        let mut u = vec![0.0; len(extent(&p, KIND_U))];
+        let mut v = vec![0.0; len(extent(&p, KIND_V))];
+        let mut w = vec![0.0; len(extent(&p, KIND_W))];
+        let wind = [p.wind_x, p.wind_y, p.wind_z];
+        for (q, kind) in [(&mut u, KIND_U), (&mut v, KIND_V), (&mut w, KIND_W)] {
+            for (i, x) in q.iter_mut().enumerate() {
+                *x = if face_open(&p, kind, i as u32, &fluid) != 0 { wind[kind as usize] } else { 0.0 };
+            }
+        }
+        let cells = p.cells as usize;
+        let poisson = Poisson::new(p.dims(), p.walls, fluid.clone());
+        let mut f = Fluid {
+            params: p,
+            origin,
+            advection,
+            u,
+            v,
+            w,
+            temperature: vec![p.ambient; cells],
+            smoke: vec![0.0; cells],
+            phi: vec![0.0; cells],
+            fluid,
+            sources: Vec::new(),
+            puffs: Vec::new(),
+            rules: PuffRules { sources: Vec::new(), growth: 0.0, lifetime: f32::INFINITY },
+            owed: Vec::new(),
+            emitted: 0,
+            poisson,
+            tolerance: 1e-6,
+            max_iterations: 200,
+            last: StepStats::default(),
+        };
+        if wind != [0.0; 3] {
+            f.last = f.project();
+        }
+        f
+    }
+
+    pub fn levels(&self) -> usize {
+        self.poisson.levels()
+    }
+
+    /// The velocity's arrays.
+    pub fn velocity(&self) -> Velocity<'_> {
+        Velocity { u: &self.u, v: &self.v, w: &self.w }
+    }
+
+    /// World metres to grid cells.
+    pub fn to_cells(&self, x: Vec3) -> Vec3 {
+        (x - self.origin) / self.params.h
+    }
+
+    /// Advects `q` (of `kind`) by the current velocity.
+    fn advected(&self, kind: u32, q: &[f32]) -> Vec<f32> {
+        let p = &self.params;
+        let vel = self.velocity();
+        let mut forward = vec![0.0; q.len()];
+        for_each_invocation(&mut forward, 0, &ProgressBar::hidden(), |i, o| *o = advect(p, kind, i, q, vel, 1.0));
+        if self.advection == Advection::SemiLagrangian {
+            return forward;
+        }
+        let mut back = vec![0.0; q.len()];
+        for_each_invocation(&mut back, 0, &ProgressBar::hidden(), |i, o| *o = advect(p, kind, i, &forward, vel, -1.0));
+        let mut out = vec![0.0; q.len()];
+        for_each_invocation(&mut out, 0, &ProgressBar::hidden(), |i, o| {
+            *o = maccormack(p, kind, i, q, &forward, &back, vel)
+        });
+        out
+    }
+
+    /// Backward-Euler diffusion of `q` with weight `kappa dt / h^2`.
+    fn diffused(&self, kind: u32, b: Vec<f32>, weight: f32, iterations: u32) -> Vec<f32> {
+        let (p, fluid) = (&self.params, &self.fluid);
+        let mut x = b.clone();
+        let mut next = vec![0.0; b.len()];
+        for _ in 0..iterations {
+            for_each_invocation(&mut next, 0, &ProgressBar::hidden(), |i, o| {
+                *o = diffuse(p, kind, i, &b, &x, weight, fluid)
+            });
+            std::mem::swap(&mut x, &mut next);
+        }
+        x
+    }
+
+    /// Makes the velocity divergence-free (the pressure term of eq. 4).
+    pub fn project(&mut self) -> StepStats {
+        let p = self.params;
+        let cells = p.cells as usize;
+        let mut rhs = vec![0.0f32; cells];
+        let (vel, fluid) = (self.velocity(), &self.fluid);
+        // A phi = -h D (D = div u h, m/s); the residual r leaves D = -r / h.
+        for_each_invocation(&mut rhs, 0, &ProgressBar::hidden(), |i, b| *b = -p.h * divergence(&p, i, vel, fluid));
+        let speed = self.max_speed().max(1e-30);
+        let stop = self.tolerance * p.h as f64 * speed;
+        let solve = self.poisson.solve(&rhs, &mut self.phi, stop, 1.0 / (p.h as f64 * speed), self.max_iterations);
+        let phi = &self.phi;
+        for (q, kind) in [(&mut self.u, KIND_U), (&mut self.v, KIND_V), (&mut self.w, KIND_W)] {
+            let before = q.clone();
+            for_each_invocation(q, 0, &ProgressBar::hidden(), |i, o| {
+                *o = project_face(&p, kind, i, before[i as usize], phi, fluid)
+            });
+        }
+        StepStats {
+            solve,
+            divergence: self.max_divergence() / self.max_speed().max(1e-30),
+            max_speed: self.max_speed(),
+            ..Default::default()
+        }
+    }
+
+    /// `max |div u| h` over the fluid cells (m/s).
+    pub fn max_divergence(&self) -> f64 {
+        let p = self.params;
+        let mut d = vec![0.0f32; p.cells as usize];
+        for_each_invocation(&mut d, 0, &ProgressBar::hidden(), |i, o| {
+            *o = divergence(&p, i, self.velocity(), &self.fluid)
+        });
+        d.iter().fold(0.0f64, |m, x| m.max(x.abs() as f64))
+    }
+
+    /// The largest face velocity (m/s).
+    pub fn max_speed(&self) -> f64 {
+        [&self.u, &self.v, &self.w].iter().flat_map(|q| q.iter()).fold(0.0f64, |m, x| m.max(x.abs() as f64))
+    }
+
+    /// One step of `dt`: advection, sources, forces, diffusion, projection,
+    /// then the puffs.
+    pub fn step(&mut self) {
+        let clock = std::time::Instant::now();
+        let kinds = [KIND_U, KIND_V, KIND_W, KIND_TEMPERATURE, KIND_SMOKE];
+        let advected: Vec<Vec<f32>> = kinds
+            .iter()
+            .zip([&self.u, &self.v, &self.w, &self.temperature, &self.smoke])
+            .map(|(&k, q)| self.advected(k, q))
+            .collect();
+        let [u, v, w, t, s]: [Vec<f32>; 5] = advected.try_into().expect("five fields");
+        let p = self.params;
+        let advect_seconds = clock.elapsed().as_secs_f64();
+        // Forces (buoyancy from the advected temperature).
+        let mut fields = [u, v, w];
+        for (kind, q) in fields.iter_mut().enumerate() {
+            let before = q.clone();
+            let temperature = &t;
+            for_each_invocation(q, 0, &ProgressBar::hidden(), |i, o| {
+                *o = force_face(&p, kind as u32, i, before[i as usize], temperature)
+            });
+        }
+        let [u, v, w] = fields;
+        self.u = self.diffused(KIND_U, u, p.viscous_weight, p.viscous_iterations);
+        self.v = self.diffused(KIND_V, v, p.viscous_weight, p.viscous_iterations);
+        self.w = self.diffused(KIND_W, w, p.viscous_weight, p.viscous_iterations);
+        let mut t = t;
+        if p.temperature_noise != 0.0 && p.eddy_diffusivity != 0.0 {
+            for (i, x) in t.iter_mut().enumerate() {
+                *x += temperature_eddy(&p, i as u32);
+            }
+        }
+        self.temperature = self.diffused(KIND_TEMPERATURE, t, p.thermal_weight, p.thermal_iterations);
+        self.smoke = s;
+        self.apply_sources();
+        for i in 0..p.cells as usize {
+            if self.fluid[i] == 0 {
+                self.temperature[i] = p.ambient;
+                self.smoke[i] = 0.0;
+            }
+        }
+        let forces_seconds = clock.elapsed().as_secs_f64() - advect_seconds;
+        self.last = self.project();
+        self.last.advect_seconds = advect_seconds;
+        self.last.forces_seconds = forces_seconds;
+        self.last.project_seconds = clock.elapsed().as_secs_f64() - advect_seconds - forces_seconds;
+        self.move_puffs();
+        self.params.step += 1;
+    }
+
+    /// Holds each source's cells at its temperature and density and its
+    /// faces at its velocity.
+    fn apply_sources(&mut self) {
+        for s in &self.sources {
+            for &c in &s.cells {
+                if self.fluid[c as usize] != 0 {
+                    self.temperature[c as usize] = s.temperature;
+                    self.smoke[c as usize] = s.density;
+                }
+            }
+            for (q, (faces, speed)) in
+                [&mut self.u, &mut self.v, &mut self.w].into_iter().zip(s.faces.iter().zip(s.velocity.to_array()))
+            {
+                for &f in faces {
+                    q[f as usize] = speed;
+                }
+            }
+        }
+    }
+
+    /// Moves the puffs `dt` on through the projected field (RK2), ages
+    /// them, drops those that left the box or faded, and emits new ones.
+    fn move_puffs(&mut self) {
+        let p = self.params;
+        let n = p.dims().as_vec3();
+        let vel = Velocity { u: &self.u, v: &self.v, w: &self.w };
+        let origin = self.origin;
+        let rules = &self.rules;
+        self.puffs.retain_mut(|puff| {
+            let x = (puff.position - origin) / p.h;
+            let next = trace(&p, vel, x, -1.0);
+            puff.position = origin + next * p.h;
+            puff.age += p.dt;
+            let inside = next.cmpge(Vec3::ZERO).all() && next.cmple(n).all();
+            inside && rules.shape(puff).1 > 1e-4 * puff.density
+        });
+        for (k, &(centre, jitter, rate, radius, density)) in self.rules.sources.iter().enumerate() {
+            self.owed[k] += rate * p.dt;
+            while self.owed[k] >= 1.0 {
+                self.owed[k] -= 1.0;
+                let e = self.emitted;
+                let offset = Vec3::new(
+                    uniform(e, p.seed, 0) * 2.0 - 1.0,
+                    uniform(e, p.seed, 1) * 2.0 - 1.0,
+                    uniform(e, p.seed, 2) * 2.0 - 1.0,
+                ) * jitter;
+                self.puffs.push(Puff { position: centre + offset, age: 0.0, radius, density });
+                self.emitted += 1;
+            }
+        }
+    }
+
+    /// Total smoke (density times cell volume, m^3).
+    pub fn total_smoke(&self) -> f64 {
+        let v = (self.params.h as f64).powi(3);
+        self.smoke.iter().map(|&s| s as f64).sum::<f64>() * v
+    }
+
+    /// Kinetic energy per unit density (m^5/s^2): half the sum of the
+    /// squared face velocities times the cell volume.
+    pub fn kinetic_energy(&self) -> f64 {
+        let v = (self.params.h as f64).powi(3);
+        0.5 * v * [&self.u, &self.v, &self.w].iter().flat_map(|q| q.iter()).map(|&x| x as f64 * x as f64).sum::<f64>()
+    }
+}
+
+/// A uniform number in [0, 1) for puff `e` and axis `axis`.
+fn uniform(e: u32, seed: u32, axis: u32) -> f32 {
+    (random(e, 0, seed, 0x9f0 + axis) >> 8) as f32 / 16_777_216.0
+}

@@ -1,0 +1,689 @@
+//! Smoke (the survey's section 4, after Yoshida and Nishita, "Modeling of
+//! smoke flow taking obstacles into account", Pacific Graphics 2000): a
+//! fluid on a staggered voxel grid (Fig. 8: each velocity component on the
+//! faces normal to it, temperature, pressure and smoke density at the cell
+//! centres), stepped by operator splitting:
+//!
+//! 1. advection of every quantity through the velocity field, the
+//!    convective terms of eq. 4 and 5 (semi-Lagrangian, Stam 1999, with an
+//!    RK2 back-trace; optionally MacCormack's correction, Selle et al. 2008);
+//! 2. forces: the buoyancy `F_bv` of eq. 4 (Boussinesq, `g (T - T_a) / T_a`,
+//!    m/s^2) on the vertical faces and the random velocity components of
+//!    the Reynolds equations as a random acceleration per face and step;
+//! 3. diffusion, backward Euler by Jacobi iteration (unconditionally
+//!    stable): eq. 4's viscosity `nu + nu_t` on the velocity, eq. 5's
+//!    `alpha` on the temperature, plus eq. 5's eddy term `alpha_t lap T'`
+//!    with the random temperature component `T'` drawn per cell and step;
+//! 4. projection: the pressure term of eq. 4, `u -= grad(phi) / h` with
+//!    `phi = p dt / rho` from the Poisson equation `A phi = -div(u) h^2`
+//!    (`A` the 7-point negative Laplacian times `h^2` over the fluid cells,
+//!    free-slip walls and obstacles as Neumann, open faces as `phi = 0`),
+//!    solved by conjugate gradients preconditioned with a multigrid V-cycle
+//!    (red-black Gauss-Seidel smoothing) until the measured residual is
+//!    small (the host's `smoke` module runs the loop and its dot products).
+//!
+//! Every function here is one invocation's work: one face, one cell, one
+//! coarse cell. Random numbers come from the counter-based hash of
+//! (element, step, seed, stream) the cloud automaton uses, so both backends
+//! draw the same ones. Units: metres, seconds, kelvin; positions inside the
+//! grid in cells (`x / h` from the box's lower corner).
+
+use crate::glam::{UVec3, Vec3};
+use crate::volumes::automaton::random;
+
+/// Quantities, by what they are sampled as.
+pub const KIND_U: u32 = 0;
+pub const KIND_V: u32 = 1;
+pub const KIND_W: u32 = 2;
+pub const KIND_TEMPERATURE: u32 = 3;
+pub const KIND_SMOKE: u32 = 4;
+
+/// Bits of `FluidParams::walls`: which faces of the box are walls (closed,
+/// free-slip); the others are open (the outside air: the wind's velocity,
+/// the ambient temperature, no smoke, `phi = 0`).
+pub const WALL_X_LO: u32 = 1;
+pub const WALL_X_HI: u32 = 2;
+pub const WALL_Y_LO: u32 = 4;
+pub const WALL_Y_HI: u32 = 8;
+pub const WALL_Z_LO: u32 = 16;
+pub const WALL_Z_HI: u32 = 32;
+
+/// Random streams (the hash's fourth argument).
+const STREAM_TURBULENCE: u32 = 0x5e0;
+const STREAM_TEMPERATURE: u32 = 0x5e3;
+
+/// The fluid's parameter block.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct FluidParams {
+    /// Cells along x, y (up), z, and all of them.
+    pub nx: u32,
+    pub ny: u32,
+    pub nz: u32,
+    pub cells: u32,
+    /// Cell edge (m) and time step (s).
+    pub h: f32,
+    pub dt: f32,
+    /// The step being taken (from 0) and the seed of its random numbers.
+    pub step: u32,
+    pub seed: u32,
+    /// `WALL_*` bits.
+    pub walls: u32,
+    /// Gravity (m/s^2) and the ambient temperature (K).
+    pub gravity: f32,
+    pub ambient: f32,
+    /// Amplitude of the random acceleration per face and step (m/s^2).
+    pub turbulence: f32,
+    /// The outside air's velocity (m/s), at open faces.
+    pub wind_x: f32,
+    pub wind_y: f32,
+    pub wind_z: f32,
+    /// Amplitude of the random temperature component `T'` (K) and eq. 5's
+    /// eddy diffusivity `alpha_t` (m^2/s) that carries its Laplacian.
+    pub temperature_noise: f32,
+    pub eddy_diffusivity: f32,
+    /// `(nu + nu_t) dt / h^2` and `alpha dt / h^2`: the implicit diffusion's
+    /// weights, and the Jacobi iterations each gets (0: none).
+    pub viscous_weight: f32,
+    pub thermal_weight: f32,
+    pub viscous_iterations: u32,
+    pub thermal_iterations: u32,
+    pub _pad: u32,
+}
+
+#[cfg(not(target_arch = "spirv"))]
+mod pod {
+    // SAFETY: `repr(C)` of 4-byte scalars, no padding.
+    unsafe impl bytemuck::Zeroable for super::FluidParams {}
+    unsafe impl bytemuck::Pod for super::FluidParams {}
+}
+
+impl FluidParams {
+    pub fn dims(&self) -> UVec3 {
+        UVec3::new(self.nx, self.ny, self.nz)
+    }
+
+    /// The wind's component along `axis`.
+    fn wind(&self, axis: u32) -> f32 {
+        if axis == 0 {
+            self.wind_x
+        } else if axis == 1 {
+            self.wind_y
+        } else {
+            self.wind_z
+        }
+    }
+}
+
+/// The extent of the array holding `kind` (faces: one more along its axis).
+pub fn extent(p: &FluidParams, kind: u32) -> UVec3 {
+    let n = p.dims();
+    if kind == KIND_U {
+        n + UVec3::X
+    } else if kind == KIND_V {
+        n + UVec3::Y
+    } else if kind == KIND_W {
+        n + UVec3::Z
+    } else {
+        n
+    }
+}
+
+/// Element `(i, j, k)` of an array of extent `e`, x fastest.
+pub fn index(e: UVec3, i: u32, j: u32, k: u32) -> usize {
+    (i + e.x * (j + e.y * k)) as usize
+}
+
+/// The coordinates of element `flat` of an array of extent `e`.
+pub fn coords(e: UVec3, flat: u32) -> UVec3 {
+    UVec3::new(flat % e.x, (flat / e.x) % e.y, flat / (e.x * e.y))
+}
+
+/// Where element `(i, j, k)` of `kind` sits, in cells: a face's centre
+/// (`(i, j + 1/2, k + 1/2)` for `u`) or a cell's.
+pub fn position(kind: u32, c: UVec3) -> Vec3 {
+    let x = c.as_vec3();
+    if kind == KIND_U {
+        x + Vec3::new(0.0, 0.5, 0.5)
+    } else if kind == KIND_V {
+        x + Vec3::new(0.5, 0.0, 0.5)
+    } else if kind == KIND_W {
+        x + Vec3::new(0.5, 0.5, 0.0)
+    } else {
+        x + Vec3::splat(0.5)
+    }
+}
+
+/// What `kind` is outside an open face: the wind, the ambient
+/// temperature, no smoke.
+fn outside_value(p: &FluidParams, kind: u32) -> f32 {
+    if kind <= KIND_W {
+        p.wind(kind)
+    } else if kind == KIND_TEMPERATURE {
+        p.ambient
+    } else {
+        0.0
+    }
+}
+
+/// Whether `x` (cells) lies beyond an open face of the box.
+fn beyond_open_face(p: &FluidParams, x: Vec3) -> bool {
+    let n = p.dims().as_vec3();
+    (x.x < 0.0 && p.walls & WALL_X_LO == 0)
+        || (x.x > n.x && p.walls & WALL_X_HI == 0)
+        || (x.y < 0.0 && p.walls & WALL_Y_LO == 0)
+        || (x.y > n.y && p.walls & WALL_Y_HI == 0)
+        || (x.z < 0.0 && p.walls & WALL_Z_LO == 0)
+        || (x.z > n.z && p.walls & WALL_Z_HI == 0)
+}
+
+/// The trilinear interpolation of `q` (an array of `kind`) at `x` (cells):
+/// the outside air's value beyond an open face, else clamped to the box
+/// (walls). Also the least and greatest of the eight values it blends
+/// (MacCormack's limiter).
+pub fn sample_bounded(p: &FluidParams, kind: u32, q: &[f32], x: Vec3) -> (f32, f32, f32) {
+    if beyond_open_face(p, x) {
+        let o = outside_value(p, kind);
+        return (o, o, o);
+    }
+    let e = extent(p, kind);
+    let g = (x - position(kind, UVec3::ZERO)).clamp(Vec3::ZERO, (e - UVec3::ONE).as_vec3());
+    let base = g.floor().as_uvec3().min(e - UVec3::ONE);
+    let f = g - base.as_vec3();
+    let hi = (base + UVec3::ONE).min(e - UVec3::ONE);
+    let q000 = q[index(e, base.x, base.y, base.z)];
+    let q100 = q[index(e, hi.x, base.y, base.z)];
+    let q010 = q[index(e, base.x, hi.y, base.z)];
+    let q110 = q[index(e, hi.x, hi.y, base.z)];
+    let q001 = q[index(e, base.x, base.y, hi.z)];
+    let q101 = q[index(e, hi.x, base.y, hi.z)];
+    let q011 = q[index(e, base.x, hi.y, hi.z)];
+    let q111 = q[index(e, hi.x, hi.y, hi.z)];
+    let a = q000 + (q100 - q000) * f.x;
+    let b = q010 + (q110 - q010) * f.x;
+    let c = q001 + (q101 - q001) * f.x;
+    let d = q011 + (q111 - q011) * f.x;
+    let ab = a + (b - a) * f.y;
+    let cd = c + (d - c) * f.y;
+    let lo = q000.min(q100).min(q010).min(q110).min(q001).min(q101).min(q011).min(q111);
+    let hi_v = q000.max(q100).max(q010).max(q110).max(q001).max(q101).max(q011).max(q111);
+    (ab + (cd - ab) * f.z, lo, hi_v)
+}
+
+/// `sample_bounded`'s value alone.
+pub fn sample(p: &FluidParams, kind: u32, q: &[f32], x: Vec3) -> f32 {
+    sample_bounded(p, kind, q, x).0
+}
+
+/// The velocity's three arrays (m/s on the faces).
+#[derive(Copy, Clone)]
+pub struct Velocity<'a> {
+    pub u: &'a [f32],
+    pub v: &'a [f32],
+    pub w: &'a [f32],
+}
+
+/// The velocity (m/s) at `x` (cells).
+pub fn velocity_at(p: &FluidParams, vel: Velocity, x: Vec3) -> Vec3 {
+    Vec3::new(sample(p, KIND_U, vel.u, x), sample(p, KIND_V, vel.v, x), sample(p, KIND_W, vel.w, x))
+}
+
+/// Where the fluid at `x` (cells) was `dt` ago (`direction` 1) or will be
+/// `dt` on (`direction` -1): the explicit midpoint rule (RK2) through the
+/// velocity field, in cells.
+pub fn trace(p: &FluidParams, vel: Velocity, x: Vec3, direction: f32) -> Vec3 {
+    let s = direction * p.dt / p.h;
+    let v1 = velocity_at(p, vel, x);
+    let mid = x - 0.5 * s * v1;
+    let v2 = velocity_at(p, vel, mid);
+    x - s * v2
+}
+
+/// Semi-Lagrangian advection (Stam 1999), the convective terms of eq. 4
+/// and 5: element `flat` of `q` (an array of `kind`) after the step, the
+/// value found where its fluid came from (`direction` 1; -1: the reverse
+/// step, MacCormack's back-and-forth).
+pub fn advect(p: &FluidParams, kind: u32, flat: u32, q: &[f32], vel: Velocity, direction: f32) -> f32 {
+    let x = position(kind, coords(extent(p, kind), flat));
+    sample(p, kind, q, trace(p, vel, x, direction))
+}
+
+/// MacCormack's correction (Selle, Fedkiw, Kim, Liu and Rossignac 2008):
+/// `forward` (one semi-Lagrangian step of `q`) plus half the error
+/// `q - back` that the reverse step of `forward` (`back`) shows, clamped
+/// to the values the forward step blended, so no new extrema appear.
+pub fn maccormack(
+    p: &FluidParams,
+    kind: u32,
+    flat: u32,
+    q: &[f32],
+    forward: &[f32],
+    back: &[f32],
+    vel: Velocity,
+) -> f32 {
+    let i = flat as usize;
+    let x = position(kind, coords(extent(p, kind), flat));
+    let (_, lo, hi) = sample_bounded(p, kind, q, trace(p, vel, x, 1.0));
+    let corrected = forward[i] + 0.5 * (q[i] - back[i]);
+    if corrected < lo || corrected > hi {
+        forward[i]
+    } else {
+        corrected
+    }
+}
+
+/// A uniform number in [-1, 1) from the hash of (element, step, seed, stream).
+fn signed_uniform(element: u32, step: u32, seed: u32, stream: u32) -> f32 {
+    (random(element, step, seed, stream) >> 8) as f32 * (2.0 / 16_777_216.0) - 1.0
+}
+
+/// A face's velocity after the step's forces (m/s): eq. 4's buoyancy
+/// `F_bv = g (T - T_a) / T_a` on the vertical faces, `T` the mean of the
+/// two cells either side (the one inside at the box's faces), and the
+/// random acceleration `turbulence * U(-1, 1)` of the Reynolds equations'
+/// random components, per face, component and step.
+pub fn force_face(p: &FluidParams, kind: u32, flat: u32, q: f32, temperature: &[f32]) -> f32 {
+    let mut a = p.turbulence * signed_uniform(flat, p.step, p.seed, STREAM_TURBULENCE + kind);
+    if kind == KIND_V {
+        let n = p.dims();
+        let c = coords(extent(p, kind), flat);
+        let below = if c.y > 0 { c.y - 1 } else { 0 };
+        let above = if c.y < n.y { c.y } else { n.y - 1 };
+        let t = 0.5 * (temperature[index(n, c.x, below, c.z)] + temperature[index(n, c.x, above, c.z)]);
+        a += p.gravity * (t - p.ambient) / p.ambient;
+    }
+    q + p.dt * a
+}
+
+/// One Jacobi iteration of backward-Euler diffusion, `(1 - weight lap) x =
+/// b` (`weight = kappa dt / h^2`): element `flat`'s new value from its
+/// neighbours in `x` (insulating at the array's ends: free slip for the
+/// tangential velocity). A closed face's velocity stays 0 (no flow through
+/// a wall or a solid). Each iterate is a weighted mean of `b` and
+/// neighbours, so no weight makes it grow.
+pub fn diffuse(p: &FluidParams, kind: u32, flat: u32, b: &[f32], x: &[f32], weight: f32, fluid: &[u32]) -> f32 {
+    if kind <= KIND_W && face_open(p, kind, flat, fluid) == 0 {
+        return 0.0;
+    }
+    let e = extent(p, kind);
+    let c = coords(e, flat);
+    let mut sum = 0.0;
+    let mut count = 0.0;
+    if c.x > 0 {
+        sum += x[index(e, c.x - 1, c.y, c.z)];
+        count += 1.0;
+    }
+    if c.x + 1 < e.x {
+        sum += x[index(e, c.x + 1, c.y, c.z)];
+        count += 1.0;
+    }
+    if c.y > 0 {
+        sum += x[index(e, c.x, c.y - 1, c.z)];
+        count += 1.0;
+    }
+    if c.y + 1 < e.y {
+        sum += x[index(e, c.x, c.y + 1, c.z)];
+        count += 1.0;
+    }
+    if c.z > 0 {
+        sum += x[index(e, c.x, c.y, c.z - 1)];
+        count += 1.0;
+    }
+    if c.z + 1 < e.z {
+        sum += x[index(e, c.x, c.y, c.z + 1)];
+        count += 1.0;
+    }
+    (b[flat as usize] + weight * sum) / (1.0 + weight * count)
+}
+
+/// Eq. 5's eddy term at cell `flat`: `dt alpha_t lap T'` (K), `T'` the
+/// random temperature component drawn per cell and step, its Laplacian
+/// over the six neighbours inside the box.
+pub fn temperature_eddy(p: &FluidParams, flat: u32) -> f32 {
+    if p.temperature_noise == 0.0 || p.eddy_diffusivity == 0.0 {
+        return 0.0;
+    }
+    let n = p.dims();
+    let c = coords(n, flat);
+    let centre = temperature_component(p, n, c.x, c.y, c.z);
+    let mut lap = 0.0;
+    if c.x > 0 {
+        lap += temperature_component(p, n, c.x - 1, c.y, c.z) - centre;
+    }
+    if c.x + 1 < n.x {
+        lap += temperature_component(p, n, c.x + 1, c.y, c.z) - centre;
+    }
+    if c.y > 0 {
+        lap += temperature_component(p, n, c.x, c.y - 1, c.z) - centre;
+    }
+    if c.y + 1 < n.y {
+        lap += temperature_component(p, n, c.x, c.y + 1, c.z) - centre;
+    }
+    if c.z > 0 {
+        lap += temperature_component(p, n, c.x, c.y, c.z - 1) - centre;
+    }
+    if c.z + 1 < n.z {
+        lap += temperature_component(p, n, c.x, c.y, c.z + 1) - centre;
+    }
+    p.dt * p.eddy_diffusivity * lap / (p.h * p.h)
+}
+
+/// The random temperature component `T'` (K) of cell `(i, j, k)` at this step.
+fn temperature_component(p: &FluidParams, n: UVec3, i: u32, j: u32, k: u32) -> f32 {
+    p.temperature_noise * signed_uniform(index(n, i, j, k) as u32, p.step, p.seed, STREAM_TEMPERATURE)
+}
+
+/// Whether cell `(i, j, k)` (signed: -1 and `n` are outside) of a grid of
+/// `n` cells with flags `fluid` (1 fluid, 0 solid) is fluid (1), solid or
+/// beyond a wall (0), or beyond an open face (2).
+fn neighbour(n: UVec3, walls: u32, fluid: &[u32], i: i32, j: i32, k: i32) -> u32 {
+    let beyond = |c: i32, size: u32, lo_bit: u32, hi_bit: u32| -> u32 {
+        if c < 0 {
+            if walls & lo_bit != 0 {
+                0
+            } else {
+                2
+            }
+        } else if c >= size as i32 {
+            if walls & hi_bit != 0 {
+                0
+            } else {
+                2
+            }
+        } else {
+            1
+        }
+    };
+    let bx = beyond(i, n.x, WALL_X_LO, WALL_X_HI);
+    let by = beyond(j, n.y, WALL_Y_LO, WALL_Y_HI);
+    let bz = beyond(k, n.z, WALL_Z_LO, WALL_Z_HI);
+    if bx != 1 {
+        return bx;
+    }
+    if by != 1 {
+        return by;
+    }
+    if bz != 1 {
+        return bz;
+    }
+    fluid[index(n, i as u32, j as u32, k as u32)]
+}
+
+/// Whether face `flat` of `kind` (a velocity component) lets fluid through:
+/// 0 on a wall or beside a solid cell, 1 between fluid cells or at an open
+/// face of the box.
+pub fn face_open(p: &FluidParams, kind: u32, flat: u32, fluid: &[u32]) -> u32 {
+    let n = p.dims();
+    let c = coords(extent(p, kind), flat);
+    let (i, j, k) = (c.x as i32, c.y as i32, c.z as i32);
+    let (a, b) = if kind == KIND_U {
+        (neighbour(n, p.walls, fluid, i - 1, j, k), neighbour(n, p.walls, fluid, i, j, k))
+    } else if kind == KIND_V {
+        (neighbour(n, p.walls, fluid, i, j - 1, k), neighbour(n, p.walls, fluid, i, j, k))
+    } else {
+        (neighbour(n, p.walls, fluid, i, j, k - 1), neighbour(n, p.walls, fluid, i, j, k))
+    };
+    (a != 0 && b != 0) as u32
+}
+
+/// The divergence of the velocity at cell `flat`, times `h` (m/s): the net
+/// outflow through its six faces. 0 in a solid cell.
+pub fn divergence(p: &FluidParams, flat: u32, vel: Velocity, fluid: &[u32]) -> f32 {
+    if fluid[flat as usize] == 0 {
+        return 0.0;
+    }
+    let c = coords(p.dims(), flat);
+    let eu = extent(p, KIND_U);
+    let ev = extent(p, KIND_V);
+    let ew = extent(p, KIND_W);
+    (vel.u[index(eu, c.x + 1, c.y, c.z)] - vel.u[index(eu, c.x, c.y, c.z)])
+        + (vel.v[index(ev, c.x, c.y + 1, c.z)] - vel.v[index(ev, c.x, c.y, c.z)])
+        + (vel.w[index(ew, c.x, c.y, c.z + 1)] - vel.w[index(ew, c.x, c.y, c.z)])
+}
+
+/// The sum of `x` over a fluid cell's fluid neighbours, and the diagonal
+/// of `A` there: its neighbours that are fluid or beyond an open face
+/// (where `phi = 0`).
+fn neighbour_sum(n: UVec3, walls: u32, fluid: &[u32], x: &[f32], c: UVec3) -> (f32, f32) {
+    let (i, j, k) = (c.x as i32, c.y as i32, c.z as i32);
+    let mut sum = 0.0;
+    let mut diagonal = 0.0;
+    let mut o = 0;
+    while o < 6 {
+        // The six neighbours: -x, +x, -y, +y, -z, +z.
+        let sign = if o & 1 == 0 { -1 } else { 1 };
+        let (di, dj, dk) = if o < 2 {
+            (sign, 0, 0)
+        } else if o < 4 {
+            (0, sign, 0)
+        } else {
+            (0, 0, sign)
+        };
+        let kind = neighbour(n, walls, fluid, i + di, j + dj, k + dk);
+        if kind == 1 {
+            sum += x[index(n, (i + di) as u32, (j + dj) as u32, (k + dk) as u32)];
+        }
+        if kind != 0 {
+            diagonal += 1.0;
+        }
+        o += 1;
+    }
+    (sum, diagonal)
+}
+
+/// `(A x)` at cell `flat` of a grid of `n` cells: `A` is `-h^2` times the
+/// 7-point Laplacian over the fluid cells (Neumann at walls and solids,
+/// `phi = 0` beyond open faces); 0 in solid cells.
+pub fn apply_poisson(n: UVec3, walls: u32, fluid: &[u32], x: &[f32], flat: u32) -> f32 {
+    if fluid[flat as usize] == 0 {
+        return 0.0;
+    }
+    let (sum, diagonal) = neighbour_sum(n, walls, fluid, x, coords(n, flat));
+    diagonal * x[flat as usize] - sum
+}
+
+/// One Gauss-Seidel update of cell `flat` for `A x = b` if its colour
+/// (`(i + j + k) mod 2`) is `colour`; its value unchanged otherwise. Cells
+/// of one colour have neighbours of the other only, so a colour's cells
+/// may be updated in any order (in parallel).
+pub fn gauss_seidel(n: UVec3, walls: u32, fluid: &[u32], b: &[f32], x: &[f32], flat: u32, colour: u32) -> f32 {
+    let c = coords(n, flat);
+    let i = flat as usize;
+    if (c.x + c.y + c.z) & 1 != colour {
+        return x[i];
+    }
+    if fluid[i] == 0 {
+        return 0.0;
+    }
+    let (sum, diagonal) = neighbour_sum(n, walls, fluid, x, c);
+    if diagonal == 0.0 {
+        0.0
+    } else {
+        (b[i] + sum) / diagonal
+    }
+}
+
+/// The cells of the next coarser multigrid level: `ceil(n / 2)` per axis.
+pub fn coarser(n: UVec3) -> UVec3 {
+    (n + UVec3::ONE) / 2
+}
+
+/// A coarse cell is fluid if any of its (up to eight) children is.
+pub fn coarse_fluid(fine: UVec3, fluid: &[u32], flat: u32) -> u32 {
+    let c = coords(coarser(fine), flat) * 2;
+    let mut any = 0;
+    let mut k = c.z;
+    while k < (c.z + 2).min(fine.z) {
+        let mut j = c.y;
+        while j < (c.y + 2).min(fine.y) {
+            let mut i = c.x;
+            while i < (c.x + 2).min(fine.x) {
+                any |= fluid[index(fine, i, j, k)];
+                i += 1;
+            }
+            j += 1;
+        }
+        k += 1;
+    }
+    any
+}
+
+/// The restriction of a fine residual `r` to coarse cell `flat`: half the
+/// sum over its children (the average, times `(2h)^2 / h^2 = 4`, since `A`
+/// carries `h^2`).
+pub fn restrict(fine: UVec3, r: &[f32], flat: u32) -> f32 {
+    let c = coords(coarser(fine), flat) * 2;
+    let mut sum = 0.0;
+    let mut k = c.z;
+    while k < (c.z + 2).min(fine.z) {
+        let mut j = c.y;
+        while j < (c.y + 2).min(fine.y) {
+            let mut i = c.x;
+            while i < (c.x + 2).min(fine.x) {
+                sum += r[index(fine, i, j, k)];
+                i += 1;
+            }
+            j += 1;
+        }
+        k += 1;
+    }
+    0.5 * sum
+}
+
+/// Fine cell `flat`'s value after adding the coarse correction `e` of its
+/// parent (piecewise-constant prolongation, the transpose of `restrict` up
+/// to a constant, so the V-cycle is symmetric); solid cells stay 0.
+pub fn prolong(fine: UVec3, fluid: &[u32], x: &[f32], e: &[f32], flat: u32) -> f32 {
+    let i = flat as usize;
+    if fluid[i] == 0 {
+        return 0.0;
+    }
+    let c = coords(fine, flat) / 2;
+    x[i] + e[index(coarser(fine), c.x, c.y, c.z)]
+}
+
+/// A face's velocity after the projection: `u - (phi_b - phi_a) / h`, the
+/// pressure term of eq. 4 (`phi = p dt / rho`, m^2/s, from `A phi = -h D`,
+/// `D` the cell's `divergence`), `phi = 0` beyond an open face; closed
+/// faces (walls, solids) 0.
+pub fn project_face(p: &FluidParams, kind: u32, flat: u32, q: f32, phi: &[f32], fluid: &[u32]) -> f32 {
+    if face_open(p, kind, flat, fluid) == 0 {
+        return 0.0;
+    }
+    let n = p.dims();
+    let c = coords(extent(p, kind), flat);
+    let axis_size = if kind == KIND_U {
+        n.x
+    } else if kind == KIND_V {
+        n.y
+    } else {
+        n.z
+    };
+    let along = if kind == KIND_U {
+        c.x
+    } else if kind == KIND_V {
+        c.y
+    } else {
+        c.z
+    };
+    let step = if kind == KIND_U {
+        UVec3::X
+    } else if kind == KIND_V {
+        UVec3::Y
+    } else {
+        UVec3::Z
+    };
+    let before = if along > 0 {
+        let b = c - step;
+        phi[index(n, b.x, b.y, b.z)]
+    } else {
+        0.0
+    };
+    let after = if along < axis_size { phi[index(n, c.x, c.y, c.z)] } else { 0.0 };
+    q - (after - before) / p.h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params(n: [u32; 3]) -> FluidParams {
+        FluidParams {
+            nx: n[0],
+            ny: n[1],
+            nz: n[2],
+            cells: n[0] * n[1] * n[2],
+            h: 0.5,
+            dt: 0.1,
+            walls: 63,
+            gravity: 9.81,
+            ambient: 300.0,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn sampling_a_linear_field_is_exact_inside_and_clamped_at_walls() {
+        let p = params([4, 3, 5]);
+        let e = extent(&p, KIND_U);
+        let q: Vec<f32> = (0..e.x * e.y * e.z)
+            .map(|f| {
+                let x = position(KIND_U, coords(e, f));
+                1.0 + 2.0 * x.x - x.y + 0.5 * x.z
+            })
+            .collect();
+        let at = Vec3::new(1.3, 1.7, 2.2);
+        let got = sample(&p, KIND_U, &q, at);
+        assert!((got - (1.0 + 2.6 - 1.7 + 1.1)).abs() < 1e-5, "{got}");
+        // Outside a wall: the value at the nearest point inside.
+        let clamped = sample(&p, KIND_U, &q, Vec3::new(-3.0, 1.7, 2.2));
+        assert!((clamped - (1.0 - 1.7 + 1.1)).abs() < 1e-5, "{clamped}");
+    }
+
+    #[test]
+    fn open_faces_give_the_outside_air() {
+        let mut p = params([4, 4, 4]);
+        p.walls = WALL_Y_LO;
+        p.wind_x = 3.0;
+        let q = vec![0.0; 5 * 4 * 4];
+        assert_eq!(sample(&p, KIND_U, &q, Vec3::new(-0.5, 2.0, 2.0)), 3.0);
+        assert_eq!(sample(&p, KIND_TEMPERATURE, &[1.0; 64], Vec3::new(2.0, 5.0, 2.0)), 300.0);
+        // Below the floor (a wall): clamped, not the outside.
+        assert_eq!(sample(&p, KIND_SMOKE, &[1.0; 64], Vec3::new(2.0, -1.0, 2.0)), 1.0);
+    }
+
+    #[test]
+    fn poisson_operator_is_symmetric_with_solids_and_open_faces() {
+        let mut p = params([3, 4, 2]);
+        p.walls = WALL_Y_LO | WALL_X_HI;
+        let n = p.dims();
+        let cells = p.cells as usize;
+        let mut fluid = vec![1u32; cells];
+        fluid[5] = 0;
+        fluid[13] = 0;
+        let unit = |i: usize| {
+            let mut x = vec![0.0; cells];
+            x[i] = 1.0;
+            x
+        };
+        for a in 0..cells {
+            for b in 0..cells {
+                let ab = apply_poisson(n, p.walls, &fluid, &unit(b), a as u32);
+                let ba = apply_poisson(n, p.walls, &fluid, &unit(a), b as u32);
+                assert_eq!(ab, ba, "A[{a}][{b}]");
+            }
+        }
+    }
+
+    #[test]
+    fn buoyancy_lifts_hot_air_and_sinks_cold() {
+        let p = params([1, 2, 1]);
+        let hot = [600.0, 600.0];
+        let cold = [150.0, 150.0];
+        // The face between the two cells.
+        let up = force_face(&p, KIND_V, 1, 0.0, &hot);
+        let down = force_face(&p, KIND_V, 1, 0.0, &cold);
+        assert!((up - 0.1 * 9.81).abs() < 1e-6, "{up}");
+        assert!((down + 0.1 * 9.81 * 0.5).abs() < 1e-6, "{down}");
+    }
+}

@@ -5,8 +5,9 @@
 
 use glam::{UVec3, Vec3};
 use indicatif::ProgressBar;
-use slicelight::shaders::smoke::{coords, extent, position, KIND_U, KIND_V, KIND_W};
-use slicelight::smoke::{self, Config, Fluid, Settings};
+use slicelight::shaders::smoke::{coords, position};
+use slicelight::smoke::reference::{buoyant_sphere, set_velocity, taylor_green};
+use slicelight::smoke::{self, Advection, Config, Settings};
 
 /// Settings from the body of a `smoke = { ... }` table.
 fn settings(body: &str) -> Settings {
@@ -18,45 +19,12 @@ fn config(body: &str, lo: Vec3, hi: Vec3) -> Config {
     smoke::configure("volume[0]", &settings(body), lo, hi).unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// Sets each velocity component from `f(kind, x)` (x in metres from the
-/// box's corner) at its faces, keeping closed faces at 0.
-fn set_velocity(fluid: &mut Fluid, mut f: impl FnMut(u32, Vec3) -> f32) {
-    let p = fluid.params;
-    for (q, kind) in [(&mut fluid.u, KIND_U), (&mut fluid.v, KIND_V), (&mut fluid.w, KIND_W)] {
-        let e = extent(&p, kind);
-        for (i, x) in q.iter_mut().enumerate() {
-            let open = slicelight::shaders::smoke::face_open(&p, kind, i as u32, &fluid.fluid);
-            *x = if open != 0 { f(kind, position(kind, coords(e, i as u32)) * p.h) } else { 0.0 };
-        }
-    }
-}
-
-/// The effective viscosity of a 2D Taylor-Green vortex (`u = sin x cos y`,
-/// `v = -cos x sin y`) on `[0, pi]^2` with free-slip walls (an exact
-/// solution there: the walls are its symmetry lines) on `n x n` cells:
-/// from the kinetic energy's decay, `E = E0 exp(-4 nu t)`, over `seconds`.
+/// The effective viscosity of the Taylor-Green vortex on `n x n` cells.
 fn taylor_green_viscosity(n: u32, nu: f32, advection: &str, seconds: f32) -> f64 {
-    let pi = std::f32::consts::PI;
-    let dt = 0.25 * pi / n as f32; // CFL 0.25 at the peak speed of 1 m/s
-    let body = format!(
-        "cells = [{n}, {n}, 1]\nwalls = \"closed\"\ngravity = 0.0\nviscosity = {nu}\ndt = {dt}\nadvection = \"{advection}\"\ntolerance = 1e-7"
-    );
-    let c = config(&body, Vec3::ZERO, Vec3::new(pi, pi, pi / n as f32));
-    let mut f = c.start(vec![1; (n * n) as usize]);
-    set_velocity(&mut f, |kind, x| match kind {
-        KIND_U => x.x.sin() * x.y.cos(),
-        KIND_V => -x.x.cos() * x.y.sin(),
-        _ => 0.0,
-    });
-    f.project();
-    let e0 = f.kinetic_energy();
-    let steps = (seconds / dt).round() as u32;
-    for _ in 0..steps {
-        f.step();
-        assert!(f.last.divergence <= 1e-5, "divergence {} after step {}", f.last.divergence, f.params.step);
-    }
-    let e = f.kinetic_energy();
-    -(e / e0).ln() / (4.0 * (steps as f64 * dt as f64))
+    let scheme = if advection == "maccormack" { Advection::Maccormack } else { Advection::SemiLagrangian };
+    let tg = taylor_green(n, nu, scheme, seconds);
+    assert!(tg.divergence <= 1e-5, "divergence {} in the Taylor-Green run", tg.divergence);
+    tg.viscosity
 }
 
 #[test]
@@ -156,25 +124,9 @@ fn a_hot_sphere_starts_to_rise_at_two_thirds_of_its_buoyancy() {
     // of a sphere, so 2 g' / 3 at its centre. One short step (no velocity
     // to advect yet) on a sphere of 8 cells' radius in a box 8 radii wide;
     // 3 % for the voxelised sphere and the walls at 4 radii (measured: 1 %).
-    let n = 64;
-    let c = config(
-        &format!("cells = [{n}, {n}, {n}]\nwalls = \"closed\"\ndt = 0.001\nviscosity = 0.0\ndiffusivity = 0.0"),
-        Vec3::ZERO,
-        Vec3::splat(6.4),
-    );
-    let mut f = c.start(vec![1; (n * n * n) as usize]);
-    let (centre, radius) = (Vec3::splat(3.2), 0.8);
-    let hot = 1.1 * f.params.ambient;
-    for i in 0..f.params.cells {
-        if (position(3, coords(UVec3::splat(n), i)) * f.params.h - centre).length() < radius {
-            f.temperature[i as usize] = hot;
-        }
-    }
-    f.step();
-    let g_prime = f.params.gravity * 0.1;
-    let rise = slicelight::shaders::smoke::sample(&f.params, KIND_V, &f.v, centre / f.params.h) / f.params.dt;
-    println!("acceleration at the centre {rise:.4} m/s^2, 2 g'/3 = {:.4}", 2.0 * g_prime / 3.0);
-    assert!((rise / (2.0 * g_prime / 3.0) - 1.0).abs() < 0.03, "{rise}");
+    let (rise, expected) = buoyant_sphere(64);
+    println!("acceleration at the centre {rise:.4} m/s^2, 2 g'/3 = {expected:.4}");
+    assert!((rise / expected - 1.0).abs() < 0.03, "{rise}");
 }
 
 #[test]

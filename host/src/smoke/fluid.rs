@@ -8,7 +8,7 @@ use indicatif::ProgressBar;
 use slicelight_shaders::smoke::*;
 use slicelight_shaders::volumes::automaton::random;
 
-use crate::cpu::for_each_invocation;
+use crate::cpu::{for_each_invocation, for_each_invocation2};
 
 /// Red-black Gauss-Seidel sweeps before and after the coarse correction.
 const SMOOTHING_SWEEPS: u32 = 2;
@@ -20,15 +20,19 @@ const COARSE_SWEEPS: u32 = 16;
 struct Level {
     n: UVec3,
     fluid: Vec<u32>,
+    /// Per cell, its stencil (`stencil`).
+    stencils: Vec<u32>,
     x: Vec<f32>,
     b: Vec<f32>,
     scratch: Vec<f32>,
 }
 
 impl Level {
-    fn new(n: UVec3, fluid: Vec<u32>) -> Level {
+    fn new(n: UVec3, walls: u32, fluid: Vec<u32>) -> Level {
         let cells = fluid.len();
-        Level { n, fluid, x: vec![0.0; cells], b: vec![0.0; cells], scratch: vec![0.0; cells] }
+        let mut stencils = vec![0u32; cells];
+        for_each_invocation(&mut stencils, 0, &ProgressBar::hidden(), |i, s| *s = stencil(n, walls, &fluid, i));
+        Level { n, fluid, stencils, x: vec![0.0; cells], b: vec![0.0; cells], scratch: vec![0.0; cells] }
     }
 }
 
@@ -37,7 +41,6 @@ impl Level {
 /// Teran 2010; here with piecewise-constant transfers).
 #[derive(Debug, Clone)]
 pub struct Poisson {
-    walls: u32,
     levels: Vec<Level>,
     /// No open face and so no fixed pressure: `A` is singular (constants),
     /// and the right side and the search directions are kept mean-free.
@@ -54,19 +57,17 @@ pub struct Solve {
     pub converged: bool,
 }
 
-fn gs_sweep(level: &mut Level, walls: u32, colour: u32) {
-    let Level { n, fluid, x, b, scratch } = level;
+fn gs_sweep(level: &mut Level, colour: u32) {
+    let Level { n, stencils, x, b, scratch, .. } = level;
     let n = *n;
-    for_each_invocation(scratch, 0, &ProgressBar::hidden(), |i, out| {
-        *out = gauss_seidel(n, walls, fluid, b, x, i, colour)
-    });
+    for_each_invocation(scratch, 0, &ProgressBar::hidden(), |i, out| *out = gauss_seidel(n, stencils, b, x, i, colour));
     std::mem::swap(x, scratch);
 }
 
 impl Poisson {
     pub fn new(n: UVec3, walls: u32, fluid: Vec<u32>) -> Poisson {
         let singular = walls == 63;
-        let mut levels = vec![Level::new(n, fluid)];
+        let mut levels = vec![Level::new(n, walls, fluid)];
         loop {
             let fine = levels.last().expect("one level");
             if fine.n.max_element() <= 4 || levels.len() >= 12 {
@@ -79,9 +80,9 @@ impl Poisson {
             for_each_invocation(&mut flags, 0, &ProgressBar::hidden(), |i, f| {
                 *f = coarse_fluid(fine_n, &fine.fluid, i)
             });
-            levels.push(Level::new(coarse, flags));
+            levels.push(Level::new(coarse, walls, flags));
         }
-        Poisson { walls, levels, singular }
+        Poisson { levels, singular }
     }
 
     pub fn levels(&self) -> usize {
@@ -115,28 +116,27 @@ impl Poisson {
     /// `A^-1 levels[l].b`, starting from 0; symmetric (the post-smoothing
     /// sweeps the colours in the reverse order), as conjugate gradients need.
     fn v_cycle(&mut self, l: usize) {
-        let walls = self.walls;
         self.levels[l].x.fill(0.0);
         if l + 1 == self.levels.len() {
             for _ in 0..COARSE_SWEEPS {
-                gs_sweep(&mut self.levels[l], walls, 0);
-                gs_sweep(&mut self.levels[l], walls, 1);
+                gs_sweep(&mut self.levels[l], 0);
+                gs_sweep(&mut self.levels[l], 1);
             }
             for _ in 0..COARSE_SWEEPS {
-                gs_sweep(&mut self.levels[l], walls, 1);
-                gs_sweep(&mut self.levels[l], walls, 0);
+                gs_sweep(&mut self.levels[l], 1);
+                gs_sweep(&mut self.levels[l], 0);
             }
             return;
         }
         for _ in 0..SMOOTHING_SWEEPS {
-            gs_sweep(&mut self.levels[l], walls, 0);
-            gs_sweep(&mut self.levels[l], walls, 1);
+            gs_sweep(&mut self.levels[l], 0);
+            gs_sweep(&mut self.levels[l], 1);
         }
         {
-            let Level { n, fluid, x, b, scratch } = &mut self.levels[l];
+            let Level { n, stencils, x, b, scratch, .. } = &mut self.levels[l];
             let n = *n;
             for_each_invocation(scratch, 0, &ProgressBar::hidden(), |i, r| {
-                *r = b[i as usize] - apply_poisson(n, walls, fluid, x, i)
+                *r = b[i as usize] - apply_poisson(n, stencils, x, i)
             });
         }
         let (fine, coarse) = self.levels.split_at_mut(l + 1);
@@ -151,8 +151,8 @@ impl Poisson {
         for_each_invocation(scratch, 0, &ProgressBar::hidden(), |i, out| *out = prolong(n, fluid, x, &coarse.x, i));
         std::mem::swap(x, scratch);
         for _ in 0..SMOOTHING_SWEEPS {
-            gs_sweep(&mut self.levels[l], walls, 1);
-            gs_sweep(&mut self.levels[l], walls, 0);
+            gs_sweep(&mut self.levels[l], 1);
+            gs_sweep(&mut self.levels[l], 0);
         }
     }
 
@@ -166,8 +166,8 @@ impl Poisson {
     }
 
     fn apply(&self, x: &[f32], out: &mut [f32]) {
-        let (n, walls, fluid) = (self.levels[0].n, self.walls, self.fluid());
-        for_each_invocation(out, 0, &ProgressBar::hidden(), |i, o| *o = apply_poisson(n, walls, fluid, x, i));
+        let (n, stencils) = (self.levels[0].n, &self.levels[0].stencils);
+        for_each_invocation(out, 0, &ProgressBar::hidden(), |i, o| *o = apply_poisson(n, stencils, x, i));
     }
 
     /// Solves `A phi = b` from the guess in `phi`, until `max |r| <= stop`
@@ -393,6 +393,32 @@ impl Fluid {
         out
     }
 
+    /// Temperature and smoke advected by the current velocity (one back-trace per cell).
+    fn advected_centres(&self) -> (Vec<f32>, Vec<f32>) {
+        let p = &self.params;
+        let vel = self.velocity();
+        let cells = p.cells as usize;
+        let pass = |t: &[f32], s: &[f32], direction: f32| {
+            let (mut a, mut b) = (vec![0.0; cells], vec![0.0; cells]);
+            for_each_invocation2(&mut a, &mut b, 0, &ProgressBar::hidden(), |i, x, y| {
+                (*x, *y) = advect_centres(p, i, t, s, vel, direction)
+            });
+            (a, b)
+        };
+        let (t_forward, s_forward) = pass(&self.temperature, &self.smoke, 1.0);
+        if self.advection == Advection::SemiLagrangian {
+            return (t_forward, s_forward);
+        }
+        let (t_back, s_back) = pass(&t_forward, &s_forward, -1.0);
+        let t = Stages { q: &self.temperature, forward: &t_forward, back: &t_back };
+        let s = Stages { q: &self.smoke, forward: &s_forward, back: &s_back };
+        let (mut a, mut b) = (vec![0.0; cells], vec![0.0; cells]);
+        for_each_invocation2(&mut a, &mut b, 0, &ProgressBar::hidden(), |i, x, y| {
+            (*x, *y) = maccormack_centres(p, i, t, s, vel)
+        });
+        (a, b)
+    }
+
     /// Backward-Euler diffusion of `q` with weight `kappa dt / h^2`.
     fn diffused(&self, kind: u32, b: Vec<f32>, weight: f32, iterations: u32) -> Vec<f32> {
         let (p, fluid) = (&self.params, &self.fluid);
@@ -420,10 +446,8 @@ impl Fluid {
         let solve = self.poisson.solve(&rhs, &mut self.phi, stop, 1.0 / (p.h as f64 * speed), self.max_iterations);
         let phi = &self.phi;
         for (q, kind) in [(&mut self.u, KIND_U), (&mut self.v, KIND_V), (&mut self.w, KIND_W)] {
-            let before = q.clone();
-            for_each_invocation(q, 0, &ProgressBar::hidden(), |i, o| {
-                *o = project_face(&p, kind, i, before[i as usize], phi, fluid)
-            });
+            // In place: each face reads only its own value and phi.
+            for_each_invocation(q, 0, &ProgressBar::hidden(), |i, o| *o = project_face(&p, kind, i, *o, phi, fluid));
         }
         StepStats {
             solve,
@@ -452,22 +476,20 @@ impl Fluid {
     /// then the puffs.
     pub fn step(&mut self) {
         let clock = std::time::Instant::now();
-        let kinds = [KIND_U, KIND_V, KIND_W, KIND_TEMPERATURE, KIND_SMOKE];
-        let advected: Vec<Vec<f32>> = kinds
-            .iter()
-            .zip([&self.u, &self.v, &self.w, &self.temperature, &self.smoke])
-            .map(|(&k, q)| self.advected(k, q))
-            .collect();
-        let [u, v, w, t, s]: [Vec<f32>; 5] = advected.try_into().expect("five fields");
+        let kinds = [KIND_U, KIND_V, KIND_W];
+        let advected: Vec<Vec<f32>> =
+            kinds.iter().zip([&self.u, &self.v, &self.w]).map(|(&k, q)| self.advected(k, q)).collect();
+        let [u, v, w]: [Vec<f32>; 3] = advected.try_into().expect("three components");
+        let (t, s) = self.advected_centres();
         let p = self.params;
         let advect_seconds = clock.elapsed().as_secs_f64();
-        // Forces (buoyancy from the advected temperature).
+        // Forces (buoyancy from the advected temperature), in place: each
+        // face reads only its own value.
         let mut fields = [u, v, w];
         for (kind, q) in fields.iter_mut().enumerate() {
-            let before = q.clone();
             let temperature = &t;
             for_each_invocation(q, 0, &ProgressBar::hidden(), |i, o| {
-                *o = force_face(&p, kind as u32, i, before[i as usize], temperature)
+                *o = force_face(&p, kind as u32, i, *o, temperature)
             });
         }
         let [u, v, w] = fields;

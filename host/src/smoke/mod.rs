@@ -4,7 +4,9 @@
 //! metaballs (or its density grid, `render = "density"`), so the volumes'
 //! renderer, shadows and shafts draw them unchanged.
 
+pub mod bench;
 pub mod fluid;
+pub mod reference;
 
 use anyhow::{bail, Result};
 use glam::{UVec3, Vec3};
@@ -22,7 +24,7 @@ static PASSES: &[&dyn Pass] = &[];
 
 /// The family, as `passes::FAMILIES` registers it: no pass of its own (the
 /// fluid runs on the CPU at load, see `docs/smoke.md`), a bench sweep.
-pub static FAMILY: Family = Family { name: "smoke", passes: PASSES, bench: None };
+pub static FAMILY: Family = Family { name: "smoke", passes: PASSES, bench: Some(&bench::SmokeSweep) };
 
 /// `smoke = { ... }` in a `[[volume]]`: the fluid fills the volume's box.
 #[derive(Debug, Clone, Deserialize)]

@@ -92,7 +92,7 @@ impl crate::bench::Sweep for VolumesSweep {
         &["cloud_cumulus", "cloud_automaton"]
     }
     fn takes(&self, s: &SceneData) -> bool {
-        s.volumes.enabled && !s.sea.enabled && s.glass_vertices.is_empty()
+        s.volumes.enabled && !s.sea.enabled && s.glass_vertices.is_empty() && !crate::smoke::bench::has_smoke(s)
     }
     fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         // The Monte Carlo reference costs ~0.1 s a pixel on a dense cloud:

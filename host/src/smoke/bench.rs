@@ -1,0 +1,227 @@
+//! `slicelight bench` on scenes with a smoke volume: the fluid's time per
+//! step against its accuracy, and the smoke frame's render time against
+//! the renderer's error; a CSV and a PNG plot.
+//!
+//! Three series:
+//! - `taylor-green`: the Taylor-Green vortex (`reference::taylor_green`,
+//!   viscosity 0.02 m^2/s, 1 s) on 32^2, 64^2 and 128^2 cells (128^2 left
+//!   out with `--quick`) for each advection scheme; time per step against
+//!   the effective viscosity's error, % of the given one;
+//! - `step`: a hot plume in a box of 32^3, 64^3 (and 128^3 without
+//!   `--quick`) cells, each scheme: the median time of 5 steps after 5,
+//!   the projection's iterations and the divergence it left (no error
+//!   column: the plume has no closed form);
+//! - `frame`: the scene rendered on each backend (the fluid runs at load,
+//!   on the CPU, and is not in the time): median render time and the RMS
+//!   and largest 8-bit error against the f64 reference (`reference`), at a
+//!   lattice of pixel centres (every second pixel each way at least).
+
+use anyhow::Result;
+use glam::{DVec3, Vec3};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use super::reference::taylor_green;
+use super::{configure, Advection};
+use crate::bench::{time_renders, BenchScene, Options};
+use crate::scene::SceneData;
+
+pub struct Row {
+    pub scene: String,
+    pub backend: &'static str,
+    pub series: &'static str,
+    pub advection: &'static str,
+    /// Cells a side.
+    pub size: u32,
+    pub seconds_per_step: Option<f64>,
+    /// `frame`: the median render time.
+    pub median_seconds: Option<f64>,
+    /// `taylor-green`: |nu_eff - nu| / nu, %; `frame`: RMS % of 255.
+    pub error_percent: Option<f64>,
+    pub max_8bit_percent: Option<f64>,
+    pub iterations: Option<u32>,
+    pub divergence: Option<f64>,
+}
+
+/// The smoke family's sweep: scenes with a smoke volume.
+pub struct SmokeSweep;
+
+/// Whether a scene has a smoke volume.
+pub fn has_smoke(s: &SceneData) -> bool {
+    s.source.file.volume.iter().any(|v| v.smoke.is_some())
+}
+
+impl crate::bench::Sweep for SmokeSweep {
+    fn default_scenes(&self) -> &'static [&'static str] {
+        &["smoke_chimney"]
+    }
+    fn takes(&self, s: &SceneData) -> bool {
+        has_smoke(s) && !s.sea.enabled && s.glass_vertices.is_empty()
+    }
+    fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
+        run(scenes, opts)?;
+        Ok(vec![opts.out_dir.join("smoke_bench.csv"), opts.out_dir.join("smoke_time_vs_error.png")])
+    }
+}
+
+const SCHEMES: [(Advection, &str); 2] =
+    [(Advection::SemiLagrangian, "semi-lagrangian"), (Advection::Maccormack, "maccormack")];
+
+fn fluid_row(series: &'static str, advection: &'static str, size: u32) -> Row {
+    Row {
+        scene: "-".into(),
+        backend: "cpu",
+        series,
+        advection,
+        size,
+        seconds_per_step: None,
+        median_seconds: None,
+        error_percent: None,
+        max_8bit_percent: None,
+        iterations: None,
+        divergence: None,
+    }
+}
+
+/// The median step time, the most iterations and the worst divergence of
+/// a hot plume on `n^3` cells (5 steps timed after 5).
+fn plume(n: u32, advection: &str) -> Result<(f64, u32, f64)> {
+    let size = 0.1 * n as f32;
+    let body = format!(
+        "cells = [{n}, {n}, {n}]\nadvection = \"{advection}\"\nwind = [0.5, 0.0, 0.0]\n[[source]]\nposition = [{c}, {y}, {c}]\nradius = {r}\nrate = 10.0\ntemperature = 600.0\nvelocity = [0.0, 1.0, 0.0]",
+        c = 0.5 * size,
+        y = 0.1 * size,
+        r = 0.08 * size
+    );
+    let s: super::Settings = toml::from_str(&body)?;
+    let c = configure("bench", &s, Vec3::ZERO, Vec3::splat(size))?;
+    let mut f = c.start(vec![1; c.params.cells as usize]);
+    for _ in 0..5 {
+        f.step();
+    }
+    let (mut times, mut iterations, mut divergence) = (Vec::new(), 0, 0.0f64);
+    for _ in 0..5 {
+        let t = std::time::Instant::now();
+        f.step();
+        times.push(t.elapsed().as_secs_f64());
+        iterations = iterations.max(f.last.solve.iterations);
+        divergence = divergence.max(f.last.divergence);
+    }
+    Ok((crate::bench::median(times), iterations, divergence))
+}
+
+/// Runs the sweep and writes `smoke_bench.csv` and `smoke_time_vs_error.png`.
+pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
+    let Options { backends, repeats, quick, out_dir, .. } = opts;
+    let (repeats, quick, stride) = (*repeats, *quick, opts.stride.max(2));
+    let mut rows = Vec::new();
+    let nu = 0.02;
+    let sizes: &[u32] = if quick { &[32, 64] } else { &[32, 64, 128] };
+    for &(scheme, name) in &SCHEMES {
+        for &n in sizes {
+            let tg = taylor_green(n, nu, scheme, 1.0);
+            let mut row = fluid_row("taylor-green", name, n);
+            row.seconds_per_step = Some(tg.seconds_per_step);
+            row.error_percent = Some(100.0 * (tg.viscosity - nu as f64).abs() / nu as f64);
+            row.divergence = Some(tg.divergence);
+            eprintln!(
+                "taylor-green {name:>15} {n:>4}^2 {:>9.5} s/step  nu_eff {:.5} ({:.2} % off)",
+                tg.seconds_per_step,
+                tg.viscosity,
+                row.error_percent.unwrap_or(0.0)
+            );
+            rows.push(row);
+        }
+        for &n in if quick { &[32u32, 64][..] } else { &[32, 64, 128][..] } {
+            let (seconds, iterations, divergence) = plume(n, name)?;
+            let mut row = fluid_row("step", name, n);
+            row.seconds_per_step = Some(seconds);
+            row.iterations = Some(iterations);
+            row.divergence = Some(divergence);
+            eprintln!(
+                "plume        {name:>15} {n:>4}^3 {seconds:>9.5} s/step  {iterations} iterations, divergence {divergence:.1e}"
+            );
+            rows.push(row);
+        }
+    }
+    for BenchScene { path, name, data } in scenes {
+        anyhow::ensure!(has_smoke(data), "{}: no smoke volume to benchmark", path.display());
+        let pixels = crate::bench::pixel_lattice(data, stride);
+        let t = std::time::Instant::now();
+        let (reference, _) = crate::reference::render_converged_at(data, &pixels, 2e-4);
+        eprintln!("{name}: reference at {} pixels, {:.1} s", pixels.len(), t.elapsed().as_secs_f64());
+        for backend in backends {
+            let timed = time_renders(data, backend, repeats, &[])?;
+            let img = &timed.last.image;
+            let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
+            let diff = crate::metrics::difference(&at, &reference, data.exposure);
+            eprintln!(
+                "{name:>14} {:>4} frame {:>8.4} s  rms {:.3}%  max {:.2}%",
+                backend.name(),
+                timed.total_seconds,
+                diff.rms_8bit_percent,
+                diff.max_8bit_percent
+            );
+            rows.push(Row {
+                scene: name.clone(),
+                backend: backend.name(),
+                series: "frame",
+                advection: "-",
+                size: data.width(),
+                seconds_per_step: None,
+                median_seconds: Some(timed.total_seconds),
+                error_percent: Some(diff.rms_8bit_percent),
+                max_8bit_percent: Some(diff.max_8bit_percent),
+                iterations: None,
+                divergence: None,
+            });
+        }
+    }
+    write_csv(&out_dir.join("smoke_bench.csv"), &rows)?;
+    plot(&out_dir.join("smoke_time_vs_error.png"), &rows)?;
+    Ok(rows)
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
+    let mut out = Vec::new();
+    writeln!(
+        out,
+        "scene,backend,series,advection,size,seconds_per_step,median_seconds,error_percent,max_8bit_percent,iterations,divergence"
+    )?;
+    let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6e}"));
+    for r in rows {
+        writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{}",
+            r.scene,
+            r.backend,
+            r.series,
+            r.advection,
+            r.size,
+            opt(r.seconds_per_step),
+            opt(r.median_seconds),
+            opt(r.error_percent),
+            opt(r.max_8bit_percent),
+            r.iterations.map_or(String::new(), |i| i.to_string()),
+            opt(r.divergence)
+        )?;
+    }
+    crate::output::write_atomically(path, &out)
+}
+
+/// The Taylor-Green series: time per step against the viscosity's error,
+/// one line per advection scheme.
+fn plot(path: &Path, rows: &[Row]) -> Result<()> {
+    let tg: Vec<&Row> = rows.iter().filter(|r| r.series == "taylor-green").collect();
+    let series = crate::bench::series_of(
+        &tg,
+        |r| format!("Taylor-Green, {}", r.advection),
+        |r| (r.seconds_per_step.unwrap_or(0.0), r.error_percent.unwrap_or(0.0)),
+    );
+    let labels = crate::bench::LogLogPlot {
+        caption: "Smoke: fluid step time against the effective viscosity's error (32^2 to 128^2 cells)",
+        x_desc: "median time per step, s",
+        y_desc: "|nu_eff - nu| / nu, %",
+    };
+    crate::bench::plot_log_log(path, &labels, &series, 1e-3)
+}

@@ -720,3 +720,20 @@ fn pixels_by_box(data: &SceneData, crossing: bool) -> Vec<u32> {
         })
         .collect()
 }
+
+#[test]
+fn the_automaton_steps_with_the_scene_time() {
+    // `steps_per_second` adds steps with time (a time-lapse); without it
+    // the clouds are the same at every instant. A negative rate is refused.
+    let body = "cells = [8, 4, 8]\nsteps = 10\nsteps_per_second = 4.0\nellipsoids = []";
+    let s: slicelight::volumes::automaton::Settings = toml::from_str(body).unwrap();
+    let (lo, hi) = (glam::Vec3::ZERO, glam::Vec3::splat(8.0));
+    let at = |t: f64| slicelight::volumes::automaton::configure_at("volume[0]", 0, &s, lo, hi, t).unwrap().steps;
+    assert_eq!((at(0.0), at(2.5), at(10.0)), (10, 20, 50));
+    let mut still = s.clone();
+    still.steps_per_second = None;
+    assert_eq!(slicelight::volumes::automaton::configure_at("v", 0, &still, lo, hi, 10.0).unwrap().steps, 10);
+    still.steps_per_second = Some(-1.0);
+    let err = slicelight::volumes::automaton::configure_at("volume[0]", 0, &still, lo, hi, 1.0).unwrap_err();
+    assert!(err.to_string().starts_with("volume[0].automaton.steps_per_second"), "{err}");
+}

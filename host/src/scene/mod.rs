@@ -355,7 +355,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
             if common.projection == PROJECTION_FISHEYE {
                 bail!(invalid("camera.projection", "a pinhole camera over a sea", "fisheye"));
             }
-            crate::sea::configure(s, &sky, &common, base)?
+            crate::sea::configure(s, &sky, &common, base, time)?
         }
         None => Default::default(),
     };

@@ -458,12 +458,14 @@ pub fn choose_directions(p: &SeaParams) -> (u32, Vec<(u32, f32)>) {
 }
 
 /// Validates `[sea]` against the sky's sun and the camera's height, and
-/// returns the sea's setup; the error names the field under `sea.`.
+/// returns the sea's setup at the scene's `time` (s: the waves' phases);
+/// the error names the field under `sea.`.
 pub fn configure(
     s: &Settings,
     sky: &crate::sky::Setup,
     common: &CommonParams,
     base: &std::path::Path,
+    time: f64,
 ) -> Result<Setup> {
     let camera_y = common.camera_position.y;
     if !sky.enabled {
@@ -532,7 +534,7 @@ pub fn configure(
     let (waves_kind, waves, wave_resolution, wave_size) = match &s.waves {
         Waves::Flat => (WAVES_FLAT, vec![Vec4::new(0.0, 1.0, 0.0, 0.0)], 1, 1.0),
         Waves::Spectrum(spectrum) => {
-            let normals = spectrum.normal_map()?;
+            let normals = spectrum.normal_map(time)?;
             (WAVES_NORMAL_MAP, normals, spectrum.resolution, spectrum.size_m)
         }
     };

@@ -1,6 +1,9 @@
 //! Wind waves for the sea's surface: a statistical spectrum on an FFT grid
-//! (Tessendorf, "Simulating Ocean Water", the paper's ref. 22), frozen at one
-//! instant, turned into a tiling map of surface normals.
+//! (Tessendorf, "Simulating Ocean Water", the paper's ref. 22) at one
+//! instant `t`, turned into a tiling map of surface normals. Each mode's
+//! phase advances by the deep-water dispersion relation, `h(k, t) = h(k)
+//! exp(-i w(k) t)` with `w^2 = g k`: the waves travel downwind, each at
+//! its own phase speed `w / k`.
 //!
 //! The spectrum is JONSWAP (Hasselmann et al. 1973), which knows the fetch:
 //! `S(w) = alpha g^2 w^-5 exp(-5/4 (w_p/w)^4) gamma^r` (m^2 s), with
@@ -99,8 +102,9 @@ impl Spectrum {
         self.jonswap(w) * spread * (GRAVITY / (2.0 * w)) / k
     }
 
-    /// The tile's unit surface normals (y up), row `z` by column `x`, `resolution^2`.
-    pub fn normal_map(&self) -> Result<Vec<Vec4>> {
+    /// The tile's unit surface normals (y up) at time `t` (s), row `z` by
+    /// column `x`, `resolution^2`.
+    pub fn normal_map(&self, t: f64) -> Result<Vec<Vec4>> {
         self.validate()?;
         let n = self.resolution as usize;
         let dk = 2.0 * std::f64::consts::PI / self.size_m as f64;
@@ -113,7 +117,9 @@ impl Spectrum {
                 let (kx, kz) = (signed(i) * dk, signed(j) * dk);
                 let xr: f64 = StandardNormal.sample(&mut rng);
                 let xi: f64 = StandardNormal.sample(&mut rng);
-                let h = Complex::new(xr, xi) * (self.psi(kx, kz) * dk * dk).sqrt();
+                let k = (kx * kx + kz * kz).sqrt();
+                let phase = Complex::from_polar(1.0, -(GRAVITY * k).sqrt() * t);
+                let h = Complex::new(xr, xi) * (self.psi(kx, kz) * dk * dk).sqrt() * phase;
                 sx[j * n + i] = Complex::new(0.0, kx) * h;
                 sz[j * n + i] = Complex::new(0.0, kz) * h;
             }
@@ -171,7 +177,7 @@ mod tests {
         let mut previous = 0.0;
         for wind in [3.0f32, 7.0, 12.0] {
             let s = sea(wind);
-            let normals = s.normal_map().unwrap();
+            let normals = s.normal_map(0.0).unwrap();
             let mss = normals.iter().map(|n| (n.x * n.x + n.z * n.z) / (n.y * n.y)).sum::<f32>() as f64
                 / normals.len() as f64;
             let n = s.resolution as i64;
@@ -191,8 +197,20 @@ mod tests {
     }
 
     #[test]
+    fn waves_move_with_time_and_keep_their_statistics() {
+        // Only downwind modes carry energy (no mode meets its opposite), so
+        // the tile's mean square slope is the same at every instant (the
+        // sum of each mode's |amplitude|^2 / 2) while the map itself moves.
+        let s = sea(7.0);
+        let mss = |m: &[Vec4]| m.iter().map(|n| ((n.x * n.x + n.z * n.z) / (n.y * n.y)) as f64).sum::<f64>();
+        let (a, b) = (s.normal_map(0.0).unwrap(), s.normal_map(2.5).unwrap());
+        assert_ne!(a, b);
+        assert!((mss(&a) / mss(&b) - 1.0).abs() < 1e-4, "{} {}", mss(&a), mss(&b));
+    }
+
+    #[test]
     fn the_map_is_reproducible_and_unit() {
-        let (a, b) = (sea(7.0).normal_map().unwrap(), sea(7.0).normal_map().unwrap());
+        let (a, b) = (sea(7.0).normal_map(0.0).unwrap(), sea(7.0).normal_map(0.0).unwrap());
         assert_eq!(a, b);
         assert!(a.iter().all(|n| (n.truncate().length() - 1.0).abs() < 1e-5 && n.y > 0.0));
     }
@@ -201,7 +219,7 @@ mod tests {
     fn bad_settings_name_the_field() {
         let mut s = sea(7.0);
         s.resolution = 100;
-        let e = s.normal_map().unwrap_err().to_string();
+        let e = s.normal_map(0.0).unwrap_err().to_string();
         assert!(e.contains("sea.waves.resolution"), "{e}");
     }
 }

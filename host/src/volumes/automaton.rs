@@ -22,8 +22,11 @@ use crate::scene::{invalid, validate, SceneData};
 pub struct Settings {
     /// Cells along x, y (up), z over the volume's box.
     pub cells: [u32; 3],
-    /// Steps run per frame (from a clear sky).
+    /// Steps run per frame (from a clear sky) at the scene's time 0.
     pub steps: u32,
+    /// Steps per second of scene time (an animation's clouds evolve:
+    /// `steps + round(steps_per_second * t)` at time `t`); default 0.
+    pub steps_per_second: Option<f32>,
     #[serde(default)]
     pub seed: u32,
     /// Half-width (cells) of the smoothing cube; default 1 (3x3x3).
@@ -126,6 +129,19 @@ fn probability(field: &str, p: f32) -> Result<f32> {
         bail!(invalid(field, "a probability in [0, 1]", p));
     }
     Ok(p)
+}
+
+/// Validates `s` for the volume `index` with box `[lo, hi]` at the scene's
+/// `time` (s) and builds the automaton's parameters and probabilities.
+pub fn configure_at(field: &str, index: usize, s: &Settings, lo: Vec3, hi: Vec3, time: f64) -> Result<Setup> {
+    let rate = s.steps_per_second.unwrap_or(0.0);
+    if !(rate.is_finite() && (0.0..=1000.0).contains(&rate)) {
+        bail!(invalid(&format!("{field}.automaton.steps_per_second"), "a rate in [0, 1000] steps per second", rate));
+    }
+    let extra = (rate as f64 * time).round();
+    let mut s = s.clone();
+    s.steps = (s.steps as f64 + extra).min(MAX_STEPS as f64) as u32;
+    configure(field, index, &s, lo, hi)
 }
 
 /// Validates `s` for the volume `index` with box `[lo, hi]` and builds the

@@ -618,7 +618,8 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
             if automaton_volume != 0 {
                 bail!(invalid(&format!("{field}.automaton"), "one automaton per scene", "a second"));
             }
-            cloud_automaton = automaton::configure(&field, i, a, record.min.truncate(), record.max.truncate())?;
+            cloud_automaton =
+                automaton::configure_at(&field, i, a, record.min.truncate(), record.max.truncate(), data.time)?;
             automaton_volume = i as u32 + 1;
         }
         record.density_offset =

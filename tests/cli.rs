@@ -548,3 +548,36 @@ fn frames_render_an_animation_that_moves_and_resume_skips_what_exists() {
     assert_rejected(&bad, &["x.png", "frame-number field"]);
     assert!(!bad.out("x.png").exists());
 }
+
+#[test]
+fn keyframes_move_the_camera_and_objects_between_frames() {
+    // Frame 1 at 2 fps is t = 0.5, halfway between the keyframes: the same
+    // image as a still scene with the halfway values written out.
+    let still = |centre: &str, camera: &str| {
+        format!(
+            "[camera]\nposition = {camera}\nlook_at = [0.0, 1.0, 0.0]\nvfov_deg = 50.0\nresolution = [48, 32]\n\
+             [[directional_light]]\ndirection = [0.3, -1.0, -0.2]\nirradiance = [3.0, 3.0, 3.0]\n\
+             [[object]]\ntype = \"sphere\"\ncenter = {centre}\nradius = 1.0\n\
+             [[object]]\ntype = \"quad\"\ncenter = [0.0, 0.0, 0.0]\nu = [14.0, 0.0, 0.0]\nv = [0.0, 0.0, 14.0]\n"
+        )
+    };
+    let animated = still("[-2.0, 1.0, 0.0]", "[0.0, 2.0, 9.0]")
+        + "[[keyframe]]\nat = 0.0\n\"object[0].center\" = [-2.0, 1.0, 0.0]\n\"camera.position\" = [0.0, 2.0, 9.0]\n\
+           [[keyframe]]\nat = 1.0\n\"object[0].center\" = [2.0, 1.0, 0.0]\n\"camera.position\" = [2.0, 4.0, 7.0]\n";
+    let run = run_in(
+        scene_dir(&animated),
+        &["render", "scene.toml", "-o", "f%d.png", "--frames", "0..2", "--fps", "2", "--backend", "cpu"],
+    );
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let half = run_in(
+        scene_dir(&still("[0.0, 1.0, 0.0]", "[1.0, 3.0, 8.0]")),
+        &["render", "scene.toml", "-o", "out.png", "--backend", "cpu"],
+    );
+    assert_eq!(half.code, 0, "{}", half.stderr);
+    let frame = std::fs::read(run.out("f1.png")).unwrap();
+    assert_eq!(frame, std::fs::read(half.out("out.png")).unwrap(), "frame 1 is not the halfway scene");
+    assert_ne!(frame, std::fs::read(run.out("f0.png")).unwrap());
+    // A keyframe naming a field the file lacks: the error names it.
+    let bad = render(&(still("[0.0, 1.0, 0.0]", "[1.0, 3.0, 8.0]") + "[[keyframe]]\nat = 0.0\n\"camera.fov\" = 3.0\n"));
+    assert_rejected(&bad, &["scene.toml", "camera.fov"]);
+}

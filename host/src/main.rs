@@ -417,7 +417,7 @@ fn render_command(args: RenderArgs) -> Result<()> {
             None => base.clone(),
             Some(f) => {
                 let t = base.time + *f as f64 / fps;
-                base.reconfigure(|file| file.time.seconds = t).map_err(|e| anyhow!("{}: {e}", scene.display()))?
+                base.at_time(t).map_err(|e| anyhow!("{}: {e}", scene.display()))?
             }
         };
         shafts.apply(&mut data)?;

@@ -14,6 +14,7 @@ use slicelight_shaders::types::{
 use std::path::Path;
 
 pub mod geometry;
+pub mod keyframes;
 pub mod lights;
 pub mod schema;
 pub mod validate;
@@ -80,7 +81,12 @@ pub struct SceneData {
 pub struct Source {
     pub file: SceneFile,
     pub base: std::path::PathBuf,
+    /// With `[[keyframe]]`s: the file's TOML without them, and the
+    /// keyframes (`keyframes::take`), from which `at_time` builds an instant.
+    pub animated: Option<(toml::Table, Keyframes)>,
 }
+
+pub use keyframes::Keyframes;
 
 impl SceneData {
     /// The scene with its file's settings edited by `edit`, built and
@@ -92,6 +98,15 @@ impl SceneData {
         let mut file = self.source.file.clone();
         edit(&mut file);
         build(&file, &self.source.base)
+    }
+
+    /// The scene at time `t` (s): its `[time] seconds` set to `t` and, with
+    /// `[[keyframe]]`s, every animated field at its value then.
+    pub fn at_time(&self, t: f64) -> Result<SceneData> {
+        match &self.source.animated {
+            None => self.reconfigure(|f| f.time.seconds = t),
+            Some((raw, keys)) => from_table(raw, keys, &self.source.base, Some(t)),
+        }
     }
 
     /// Whether light `i` is one of a line light's points (the references
@@ -212,9 +227,38 @@ impl SceneData {
 pub fn load(path: &Path) -> Result<SceneData> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the scene file", path.display()))?;
-    let file: SceneFile = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
     let base = path.parent().unwrap_or(Path::new("."));
+    let mut raw: toml::Table = text.parse().map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    let keys = keyframes::take(&mut raw).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    if !keys.is_empty() {
+        return from_table(&raw, &keys, base, None).map_err(|e| anyhow!("{}: {}", path.display(), e));
+    }
+    // Without keyframes, read from the text: serde's errors then give lines.
+    let file: SceneFile = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
     build(&file, base).map_err(|e| anyhow!("{}: {}", path.display(), e))
+}
+
+/// The scene of an animated file (`raw` without its keyframes `keys`) at
+/// `time` (s; default the file's `[time] seconds`).
+fn from_table(raw: &toml::Table, keys: &Keyframes, base: &Path, time: Option<f64>) -> Result<SceneData> {
+    let mut table = raw.clone();
+    if let Some(t) = time {
+        let clock = table.entry("time").or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        let toml::Value::Table(clock) = clock else { bail!("time: expected a table") };
+        clock.insert("seconds".into(), toml::Value::Float(t));
+    }
+    let t = match table.get("time").and_then(|c| c.get("seconds")) {
+        Some(toml::Value::Float(f)) => *f,
+        Some(toml::Value::Integer(n)) => *n as f64,
+        Some(other) => bail!(invalid("time.seconds", "a time in seconds", other)),
+        None => 0.0,
+    };
+    keyframes::apply(&mut table, keys, t)?;
+    let file: SceneFile = toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| anyhow!("{e}"))?;
+    let mut data = build(&file, base)?;
+    data.source =
+        std::sync::Arc::new(Source { file, base: base.to_path_buf(), animated: Some((raw.clone(), keys.clone())) });
+    Ok(data)
 }
 
 /// The camera's part of the common block.
@@ -421,7 +465,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         desert,
         requested_passes: Vec::new(),
         time,
-        source: std::sync::Arc::new(Source { file: file.clone(), base: base.to_path_buf() }),
+        source: std::sync::Arc::new(Source { file: file.clone(), base: base.to_path_buf(), animated: None }),
     };
     data.lay_out_shadow_maps()?;
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;

@@ -39,6 +39,10 @@ pub struct SceneFile {
     /// The instant shown (`[time]`); an animation's frames count from it.
     #[serde(default)]
     pub time: Time,
+    /// `[[keyframe]]`s are taken out before the file is read into this
+    /// (`scene::keyframes`); the key is listed so its absence is no error.
+    #[serde(default, skip_deserializing)]
+    pub keyframe: (),
 }
 
 /// `[time]`: the scene's clock.

@@ -581,3 +581,33 @@ fn keyframes_move_the_camera_and_objects_between_frames() {
     let bad = render(&(still("[0.0, 1.0, 0.0]", "[1.0, 3.0, 8.0]") + "[[keyframe]]\nat = 0.0\n\"camera.fov\" = 3.0\n"));
     assert_rejected(&bad, &["scene.toml", "camera.fov"]);
 }
+
+#[test]
+fn a_later_process_continues_the_smoke_from_the_cached_state() {
+    // Frames 0..2 write the simulation's state to the cache folder; frame 2
+    // in a new process starts from it, and equals frame 2 rendered with
+    // no cache at all (the steps are deterministic).
+    let dir = scene_dir(SMOKE);
+    let cache = dir.path().join("cache");
+    let render_with = |cache_dir: &std::ffi::OsStr, frames: &str, out: &str| -> String {
+        let out = Command::new(env!("CARGO_BIN_EXE_slicelight"))
+            .args(["render", "scene.toml", "-o", out, "--frames", frames, "--fps", "5", "--backend", "cpu"])
+            .env("SLICELIGHT_CACHE_DIR", cache_dir)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stderr}");
+        stderr
+    };
+    let first = render_with(cache.as_os_str(), "0..2", "a%d.png");
+    assert!(!first.contains("cached state"), "{first}");
+    let states: Vec<_> = std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(!states.is_empty() && states.len() <= 4, "{states:?}");
+    // The scene's 0.5 s and frame 1's 0.2 s are step 7 of 0.1 s.
+    let second = render_with(cache.as_os_str(), "2..3", "b%d.png");
+    assert!(second.contains("continuing from the state cached at step 7"), "{second}");
+    render_with(std::ffi::OsStr::new("off"), "2..3", "c%d.png");
+    let b = std::fs::read(dir.path().join("b2.png")).unwrap();
+    assert_eq!(b, std::fs::read(dir.path().join("c2.png")).unwrap());
+}

@@ -359,6 +359,7 @@ fn render_command(args: RenderArgs) -> Result<()> {
         fps,
         resume,
     } = args;
+    slicelight::output::QUIET.store(quiet, std::sync::atomic::Ordering::Relaxed);
     for name in &passes {
         if slicelight::passes::by_name(name).is_none() {
             let known: Vec<_> = slicelight::passes::PASSES.iter().map(|p| p.name()).collect();

@@ -129,3 +129,32 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     tmp.persist(path).map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
     Ok(())
 }
+
+/// Where results worth keeping between runs go (the caustics' light
+/// transport tables, the smoke's simulation states): `SLICELIGHT_CACHE_DIR`
+/// (`off`: no cache), else `$XDG_CACHE_HOME/slicelight/tables`, else
+/// `~/.cache/slicelight/tables`.
+pub fn cache_directory() -> Option<std::path::PathBuf> {
+    use std::path::PathBuf;
+    match std::env::var_os("SLICELIGHT_CACHE_DIR") {
+        Some(d) if d == "off" => None,
+        Some(d) => Some(PathBuf::from(d)),
+        None => {
+            let base = std::env::var_os("XDG_CACHE_HOME")
+                .map(PathBuf::from)
+                .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+            Some(base.join("slicelight").join("tables"))
+        }
+    }
+}
+
+/// Whether the command line asked for no messages but errors (`--quiet`):
+/// notes from deep inside a render (a cached state used) respect it.
+pub static QUIET: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Prints a note on stderr unless `QUIET`.
+pub fn note(text: &str) {
+    if !QUIET.load(std::sync::atomic::Ordering::Relaxed) {
+        eprintln!("{text}");
+    }
+}

@@ -283,19 +283,9 @@ pub mod cache {
     const VERSION: u32 = 8;
     const HEADER: usize = 8 + 4 + 16 + 8;
 
-    /// `SLICELIGHT_CACHE_DIR` (`off`: no cache), else
-    /// `$XDG_CACHE_HOME/slicelight/tables`, else `~/.cache/slicelight/tables`.
+    /// The cache folder (`output::cache_directory`).
     pub fn directory() -> Option<PathBuf> {
-        match std::env::var_os("SLICELIGHT_CACHE_DIR") {
-            Some(d) if d == "off" => None,
-            Some(d) => Some(PathBuf::from(d)),
-            None => {
-                let base = std::env::var_os("XDG_CACHE_HOME")
-                    .map(PathBuf::from)
-                    .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
-                Some(base.join("slicelight").join("tables"))
-            }
-        }
+        crate::output::cache_directory()
     }
 
     /// The key of the table of the glass object whose vertices are `verts`

@@ -5,6 +5,7 @@
 //! renderer, shadows and shafts draw them unchanged.
 
 pub mod bench;
+pub mod cache;
 pub mod fluid;
 pub mod reference;
 
@@ -378,11 +379,14 @@ pub fn voxelise(scene: &SceneData, p: &FluidParams, origin: Vec3) -> Vec<u32> {
 /// (deterministic), so the state at a step does not depend on the path.
 static KEPT: Mutex<Vec<(String, Fluid)>> = Mutex::new(Vec::new());
 
-/// The fluid of `config` simulated to `seconds` (its steps rounded), from a
-/// kept state at or before it if there is one. `progress` counts steps.
+/// The fluid of `config` simulated to `seconds` (its steps rounded), from
+/// the latest state at or before it that this process keeps or the disk
+/// cache holds (`cache`), if any; the state reached is kept and, if any
+/// step was taken, written to the cache. `progress` counts steps.
 pub fn simulate(config: &Config, fluid_cells: Vec<u32>, seconds: f64, progress: &indicatif::ProgressBar) -> Fluid {
     let key =
         format!("{:?}{:?}{:?}{:?}{:?}", config.params, config.origin, config.advection, config.sources, fluid_cells);
+    let hash = cache::key_hash(&key);
     let steps = config.steps_to(seconds);
     let mut start = None;
     if let Ok(mut kept) = KEPT.lock() {
@@ -390,14 +394,29 @@ pub fn simulate(config: &Config, fluid_cells: Vec<u32>, seconds: f64, progress: 
             start = Some(kept.swap_remove(k).1);
         }
     }
+    let dir = crate::output::cache_directory();
+    let kept_step = start.as_ref().map(|f: &Fluid| f.params.step as u64);
+    if let Some(dir) = &dir {
+        if let Some(f) = cache::load(dir, hash, steps, config, &fluid_cells) {
+            if kept_step.is_none_or(|k| (f.params.step as u64) > k) {
+                crate::output::note(&format!("smoke: continuing from the state cached at step {}", f.params.step));
+                start = Some(f);
+            }
+        }
+    }
     let mut fluid = start.unwrap_or_else(|| config.start(fluid_cells));
+    let first = fluid.params.step as u64;
     progress.set_length(steps);
-    progress.set_position(fluid.params.step as u64);
+    progress.set_position(first);
     while (fluid.params.step as u64) < steps {
         fluid.step();
         progress.inc(1);
     }
     progress.finish_and_clear();
+    if let (Some(dir), true) = (&dir, steps > first) {
+        // A cache that cannot be written costs time later, not correctness.
+        let _ = cache::save(dir, hash, &fluid);
+    }
     if let Ok(mut kept) = KEPT.lock() {
         kept.retain(|(k, _)| *k != key);
         kept.push((key, fluid.clone()));

@@ -611,3 +611,86 @@ fn a_later_process_continues_the_smoke_from_the_cached_state() {
     let b = std::fs::read(dir.path().join("b2.png")).unwrap();
     assert_eq!(b, std::fs::read(dir.path().join("c2.png")).unwrap());
 }
+
+/// Runs slicelight in `dir` (which the caller keeps): exit code and stderr.
+fn run_at(dir: &Path, args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_slicelight")).args(args).current_dir(dir).output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+#[test]
+fn devices_fifos_and_folders_are_refused_as_inputs_before_any_read() {
+    // /dev/zero as a mesh would be read without end, a FIFO would block
+    // forever: both refused at once, naming the field; so is a folder.
+    let dir = scene_dir("");
+    let fifo = dir.path().join("pipe.obj");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    for file in ["/dev/zero", "pipe.obj", "."] {
+        let scene = format!("{GOOD}\n[[object]]\ntype = \"mesh\"\nfile = \"{file}\"\n");
+        std::fs::write(dir.path().join("scene.toml"), scene).unwrap();
+        let t = std::time::Instant::now();
+        let (code, stderr) = run_at(dir.path(), &["render", "scene.toml", "-o", "out.png", "--backend", "cpu"]);
+        assert_ne!(code, 0, "{file}: {stderr}");
+        assert!(stderr.contains("object[1].file") && stderr.contains("expected a regular file"), "{file}: {stderr}");
+        assert!(t.elapsed().as_secs() < 20, "{file}: took {:?}", t.elapsed());
+        assert!(!dir.path().join("out.png").exists());
+    }
+    // A FIFO as the scene file itself.
+    let (code, stderr) = run_at(dir.path(), &["render", "pipe.obj", "-o", "out.png", "--backend", "cpu"]);
+    assert_ne!(code, 0);
+    assert!(stderr.contains("pipe.obj") && stderr.contains("expected a regular file"), "{stderr}");
+}
+
+#[test]
+fn unwritable_folders_and_folder_outputs_are_refused_before_the_render() {
+    // /proc cannot be written even by root; a folder named like an image
+    // is not a file to write. Both fail before any work, naming the path.
+    for out in ["/proc/out.png", "made.png"] {
+        let dir = scene_dir(GOOD);
+        std::fs::create_dir(dir.path().join("made.png")).unwrap();
+        let (code, stderr) = run_at(dir.path(), &["render", "scene.toml", "-o", out, "--backend", "cpu"]);
+        assert_ne!(code, 0, "{out}: {stderr}");
+        assert!(stderr.contains(out), "{out}: {stderr}");
+        assert!(stderr.contains("cannot write in the folder") || stderr.contains("got a folder"), "{stderr}");
+        assert!(!stderr.contains("backend:"), "{out}: the render started: {stderr}");
+    }
+}
+
+#[test]
+fn a_closed_pipe_on_stdout_ends_compare_quietly() {
+    // `compare a b | head -0`: the reader is gone; no panic, exit 0.
+    let dir = scene_dir(GOOD);
+    let (code, stderr) = run_at(dir.path(), &["render", "scene.toml", "-o", "a.png", "--backend", "cpu"]);
+    assert_eq!(code, 0, "{stderr}");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_slicelight"))
+        .args(["compare", "a.png", "a.png"])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+}
+
+#[test]
+fn an_empty_cache_folder_variable_does_not_write_into_the_working_folder() {
+    let dir = scene_dir(SMOKE);
+    let home = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_slicelight"))
+        .args(["render", "scene.toml", "-o", "out.png", "--backend", "cpu"])
+        .env("SLICELIGHT_CACHE_DIR", "")
+        .env("XDG_CACHE_HOME", home.path())
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let names: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    assert!(names.iter().all(|n| !n.starts_with("smoke-")), "{names:?}");
+    // The state went to the default place instead.
+    assert!(home.path().join("slicelight/tables").read_dir().unwrap().next().is_some());
+}

@@ -304,3 +304,47 @@ fn a_state_saved_to_disk_continues_bit_for_bit() {
     std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
     assert!(smoke::cache::load(dir.path(), hash, 15, &c, &cells).is_none());
 }
+
+#[test]
+fn render_density_puts_the_fluids_smoke_field_in_the_volume() {
+    // `render = "density"`: the volume's grid is the fluid's smoke density
+    // at the cell centres, the same numbers the simulation holds.
+    let scene = r#"
+[camera]
+position = [1.0, 1.0, 5.0]
+look_at = [1.0, 1.0, 0.0]
+vfov_deg = 45.0
+resolution = [8, 6]
+
+[[volume]]
+min = [0.0, 0.0, -1.0]
+max = [2.0, 2.0, 1.0]
+sigma_s = [3.0, 3.0, 3.0]
+sigma_t = [4.0, 4.0, 4.0]
+
+[volume.smoke]
+cells = [8, 8, 8]
+seconds = 0.5
+dt = 0.1
+render = "density"
+
+[[volume.smoke.source]]
+position = [1.0, 0.3, 0.0]
+radius = 0.3
+rate = 10.0
+temperature = 500.0
+"#;
+    let file: slicelight::scene::SceneFile = toml::from_str(scene).unwrap();
+    let data = slicelight::scene::build(&file, std::path::Path::new(".")).unwrap();
+    let v = &data.volumes.volumes[0];
+    let grid = data.volumes.file_grid(v).expect("a grid volume");
+    let s = file.volume[0].smoke.clone().unwrap();
+    let c = smoke::configure("v", &s, Vec3::from(file.volume[0].min), Vec3::from(file.volume[0].max)).unwrap();
+    let mut f = c.start(vec![1; 512]);
+    for _ in 0..5 {
+        f.step();
+    }
+    assert_eq!((v.nx, v.ny, v.nz), (8, 8, 8));
+    assert_eq!(grid, &f.smoke[..]);
+    assert!(grid.iter().any(|&d| d > 0.1), "no smoke in the grid");
+}

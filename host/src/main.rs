@@ -253,6 +253,20 @@ fn ensure_runtime_dir() {
     }
 }
 
+/// Prints a line on stdout; a closed pipe (`| head -1`) ends the program
+/// quietly with success, as the reader has what it wanted.
+fn say(line: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = writeln!(out, "{line}").and_then(|_| out.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("slicelight: error: stdout: {e}");
+        std::process::exit(1);
+    }
+}
+
 fn main() {
     ensure_runtime_dir();
     if let Err(e) = run(Cli::parse()) {
@@ -525,7 +539,7 @@ fn terrain_command(args: TerrainArgs) -> Result<()> {
     check_distinct(&[args.output.as_path()], &[(&args.scene, "the scene")])?;
     let data = scene::load(&args.scene)?;
     for (path, note) in slicelight::desert::write_fields(&data.desert, &args.output)? {
-        println!("wrote {}{note}", path.display());
+        say(&format!("wrote {}{note}", path.display()));
     }
     Ok(())
 }
@@ -554,11 +568,10 @@ fn compare_command(args: CompareArgs) -> Result<()> {
         return Err(anyhow!("{} is {w}x{h} but {} is {rw}x{rh}", image.display(), reference.display()));
     }
     let d = metrics::difference(&a, &b, exposure);
-    println!("rms_relative     {:.4e}", d.rms_relative);
-    println!("max_relative     {:.4e}", d.max_relative);
-    println!("rms_8bit_percent {:.4}", d.rms_8bit_percent);
-    println!("max_8bit_percent {:.4}", d.max_8bit_percent);
-    println!("energy_ratio     {:.4}", d.energy_ratio);
+    say(&format!(
+        "rms_relative     {:.4e}\nmax_relative     {:.4e}\nrms_8bit_percent {:.4}\nmax_8bit_percent {:.4}\nenergy_ratio     {:.4}",
+        d.rms_relative, d.max_relative, d.rms_8bit_percent, d.max_8bit_percent, d.energy_ratio
+    ));
     if let Some(path) = diff {
         let largest = a.iter().zip(&b).map(|(x, y)| (*x - *y).abs().max_element()).fold(0.0, f64::max).max(1e-300);
         let pixels: Vec<Vec4> =
@@ -607,12 +620,25 @@ fn check_outputs_dir(path: &Path) -> Result<()> {
     if !dir.is_dir() {
         return Err(anyhow!("{}: the folder {} does not exist", path.display(), dir.display()));
     }
-    Ok(())
+    if path.is_dir() {
+        return Err(anyhow!("{}: expected a file to write, got a folder", path.display()));
+    }
+    // Writable: create and remove a probe file (permissions alone do not
+    // tell: root, read-only mounts, /proc).
+    let probe = dir.join(format!(".slicelight-probe-{}", std::process::id()));
+    match std::fs::OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(anyhow!("{}: cannot write in the folder {}: {e}", path.display(), dir.display())),
+    }
 }
 
 /// Reads an image as linear rgb: EXR as stored, PNG with its sRGB transfer undone.
 fn read_linear(path: &Path) -> Result<(u32, u32, Vec<DVec3>)> {
     let format = output::format_of(path)?;
+    output::regular_file("the image", path, output::MAX_IMAGE_BYTES)?;
     let img = image::open(path).with_context(|| format!("{}: cannot read the image", path.display()))?.to_rgb32f();
     let decode = |v: f32| {
         if format == output::Format::Png {

@@ -138,8 +138,9 @@ pub fn cache_directory() -> Option<std::path::PathBuf> {
     use std::path::PathBuf;
     match std::env::var_os("SLICELIGHT_CACHE_DIR") {
         Some(d) if d == "off" => None,
-        Some(d) => Some(PathBuf::from(d)),
-        None => {
+        // An empty value is unset (not the working folder).
+        Some(d) if !d.is_empty() => Some(PathBuf::from(d)),
+        _ => {
             let base = std::env::var_os("XDG_CACHE_HOME")
                 .map(PathBuf::from)
                 .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
@@ -157,4 +158,30 @@ pub fn note(text: &str) {
     if !QUIET.load(std::sync::atomic::Ordering::Relaxed) {
         eprintln!("{text}");
     }
+}
+
+/// Most bytes of a scene file.
+pub const MAX_SCENE_BYTES: u64 = 64 << 20;
+/// Most bytes of an input image (light maps, heights, sea bottoms, `compare`).
+pub const MAX_IMAGE_BYTES: u64 = 1 << 30;
+/// Most bytes of a mesh, a metaball list or a density grid.
+pub const MAX_DATA_BYTES: u64 = 4 << 30;
+
+/// Checks, before reading it, that `path` is a regular file (not a folder,
+/// a device such as /dev/zero, a FIFO or a socket, which could be read
+/// without end or block forever) of at most `limit` bytes; the error names
+/// `field` and the path.
+pub fn regular_file(field: &str, path: &std::path::Path, limit: u64) -> anyhow::Result<u64> {
+    let meta = std::fs::metadata(path).map_err(|e| anyhow::anyhow!("{field}: cannot read {}: {e}", path.display()))?;
+    if !meta.is_file() {
+        anyhow::bail!(
+            "{field}: {}: expected a regular file, got a {}",
+            path.display(),
+            if meta.is_dir() { "folder" } else { "device, FIFO or socket" }
+        );
+    }
+    if meta.len() > limit {
+        anyhow::bail!("{field}: {}: expected at most {limit} bytes, got {}", path.display(), meta.len());
+    }
+    Ok(meta.len())
 }

@@ -354,6 +354,7 @@ pub mod cache {
 
     /// A cache file's bytes, if it is sound and has `key` and a payload of `len` bytes.
     fn read(path: &Path, key: &[u8; 16], len: usize) -> Option<Vec<u8>> {
+        crate::output::regular_file("cache", path, (HEADER + len + 8) as u64).ok()?;
         let bytes = std::fs::read(path).ok()?;
         let (count, size) = (len, 1);
         let sound = bytes.len() == HEADER + count * size + 8

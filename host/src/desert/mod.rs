@@ -414,6 +414,7 @@ fn read_heights(field: &str, base: &Path, h: &HeightsFile) -> Result<Field> {
         bail!(invalid(&format!("{field}.scale"), "a positive number of metres per unit", h.scale));
     }
     let path = base.join(&h.file);
+    crate::output::regular_file(&format!("{field}.file"), &path, crate::output::MAX_IMAGE_BYTES)?;
     let img = image::open(&path)
         .map_err(|e| anyhow!("{field}.file: cannot read the height image '{}': {e}", path.display()))?;
     let (w, hgt) = (img.width(), img.height());

@@ -178,7 +178,10 @@ fn shape_key(obj: &Object, base: &Path) -> u128 {
         Object::TrefoilKnot(k) => format!("knot {:?} {:?} {:?}", k.scale, k.tube_radius, k.segments),
         Object::Lathe(l) => format!("lathe {:?} {:?} {:?} {:?}", l.axis, l.profile, l.segments, l.sharp_deg),
         Object::Mesh(m) => {
-            let bytes = std::fs::read(base.join(&m.file)).unwrap_or_default();
+            // Unreadable or not a regular file: `load_mesh` reports it.
+            let path = base.join(&m.file);
+            let regular = crate::output::regular_file("mesh", &path, crate::output::MAX_DATA_BYTES).is_ok();
+            let bytes = if regular { std::fs::read(&path).unwrap_or_default() } else { Vec::new() };
             format!("mesh {:x} {:?}", twox_hash::XxHash3_128::oneshot(&bytes), m.scale)
         }
     };
@@ -500,6 +503,7 @@ fn lathe(field: &str, l: &LatheObject) -> Result<IndexedMesh> {
 
 fn load_mesh(field: &str, base: &Path, m: &MeshObject) -> Result<IndexedMesh> {
     let path = base.join(&m.file);
+    crate::output::regular_file(&format!("{field}.file"), &path, crate::output::MAX_DATA_BYTES)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (models, _) = tobj::load_obj(&path, &options)
         .map_err(|e| anyhow!("{field}.file: cannot read mesh '{}': {e}", path.display()))?;

@@ -226,6 +226,7 @@ fn light_frame(field: &str, z: Vec3, up: Option<[f32; 3]>) -> Result<(Vec3, Vec3
 /// Decodes an image into linear-light texels (sRGB transfer undone).
 fn load_light_map(field: &str, base: &Path, file: &Path) -> Result<(u32, u32, Vec<Vec4>)> {
     let path = base.join(file);
+    crate::output::regular_file(field, &path, crate::output::MAX_IMAGE_BYTES)?;
     let img = image::open(&path).map_err(|e| anyhow!("{field}: cannot read light map '{}': {e}", path.display()))?;
     let img = img.to_rgb32f();
     let texels = img

@@ -291,6 +291,7 @@ impl Bottom {
             Bottom::Image { path, size_m, center_m, shallow_m, deep_m } => {
                 let (shallow, deep) = depth_range(*shallow_m, *deep_m)?;
                 let file = base.join(path);
+                crate::output::regular_file("sea.bottom.path", &file, crate::output::MAX_IMAGE_BYTES)?;
                 let img = image::open(&file)
                     .map_err(|e| anyhow::anyhow!("sea.bottom.path: cannot read '{}': {e}", file.display()))?
                     .to_luma32f();

@@ -85,6 +85,7 @@ pub fn save(dir: &Path, hash: u64, fluid: &Fluid) -> Result<PathBuf> {
 /// Reads a state written by `save` into a fluid started from `config` on
 /// `cells` (what the file does not hold: the grid, the sources, the rules).
 fn read(path: &Path, hash: u64, config: &Config, cells: &[u32]) -> Result<Fluid> {
+    crate::output::regular_file("smoke state", path, crate::output::MAX_DATA_BYTES)?;
     let bytes = std::fs::read(path)?;
     let mut at = 0usize;
     let mut take = |n: usize| -> Result<&[u8]> {

@@ -23,6 +23,7 @@ pub struct Grid {
 
 /// Reads and checks a `.vol` file; `field` names the scene field in errors.
 pub fn read_vol(field: &str, path: &Path) -> Result<Grid> {
+    crate::output::regular_file(field, path, crate::output::MAX_DATA_BYTES)?;
     let bytes = std::fs::read(path).with_context(|| format!("{field}: cannot read {}", path.display()))?;
     let fail = |what: String| anyhow::anyhow!("{field}: {}: {what}", path.display());
     if bytes.len() < HEADER || &bytes[0..3] != b"VOL" {

@@ -273,6 +273,7 @@ impl Setup {
 /// Reads a metaball file: five numbers a line.
 fn read_metaballs(field: &str, base: &Path, file: &str) -> Result<Vec<[f32; 5]>> {
     let path = base.join(file);
+    crate::output::regular_file(field, &path, crate::output::MAX_DATA_BYTES)?;
     let text = std::fs::read_to_string(&path).with_context(|| format!("{field}: cannot read {}", path.display()))?;
     let mut balls = Vec::new();
     for (n, line) in text.lines().enumerate() {

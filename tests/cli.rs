@@ -694,3 +694,34 @@ fn an_empty_cache_folder_variable_does_not_write_into_the_working_folder() {
     // The state went to the default place instead.
     assert!(home.path().join("slicelight/tables").read_dir().unwrap().next().is_some());
 }
+
+#[test]
+fn values_past_what_f32_kernels_carry_are_refused_and_the_limits_render_finite() {
+    // Issue 22's overflows: a planet of 3e38 m, a spotlight of 1e38 W/sr, a
+    // box across +-3e38 m, a field of view of 1e-30 degrees. Each is refused
+    // naming the field.
+    let sky = "\n[sky]\nsun_zenith_deg = 40.0\n[sky.atmosphere]\n";
+    for (scene, field) in [
+        (format!("{GOOD}{sky}ground_radius_m = 3.0e38\ntop_radius_m = 3.3e38\n"), "sky.atmosphere.ground_radius_m"),
+        (format!("{GOOD}{sky}ground_radius_m = 1.0e20\ntop_radius_m = 1.01e20\n"), "sky.atmosphere.ground_radius_m"),
+        (format!("{GOOD}{sky}top_radius_m = 6360001.0\n"), "sky.atmosphere.top_radius_m"),
+        (GOOD.replace("intensity = [10.0, 10.0, 10.0]", "intensity = [1e38, 1.0, 1.0]"), "spotlight[0].intensity"),
+        (
+            format!("{GOOD}\n[[object]]\ntype = \"box\"\nmin = [-3e38, -1.0, -1.0]\nmax = [3e38, 1.0, 1.0]\n"),
+            "object[1].min",
+        ),
+        (GOOD.replace("vfov_deg = 45.0", "vfov_deg = 1e-30"), "camera.vfov_deg"),
+    ] {
+        let run = render(&scene);
+        assert_rejected(&run, &["scene.toml", field]);
+    }
+    // At the limits themselves the image is finite: a 1e12 W/sr spotlight
+    // in the fog, a sphere 1e7 m away, the sun at 1e12 W/m^2.
+    let bright = GOOD.replace("intensity = [10.0, 10.0, 10.0]", "intensity = [1e12, 1e12, 1e12]")
+        + "\n[[object]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, -1e7]\nradius = 1000.0\n"
+        + "\n[sky]\nsun_zenith_deg = 40.0\nsun_irradiance = [1e12, 1e12, 1e12]\nlight_scene = false\n";
+    let run = render(&bright);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let exr = image::open(run.out("out.exr")).unwrap().to_rgb32f();
+    assert!(exr.pixels().all(|p| p.0.iter().all(|c| c.is_finite())), "a pixel not finite at the limits");
+}

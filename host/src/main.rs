@@ -285,16 +285,25 @@ fn check_outputs(outputs: &[PathBuf]) -> Result<()> {
     Ok(())
 }
 
+/// Writes the image to every output and `extra` files (the stats), all or
+/// none (`output::write_all`).
 fn write_outputs(
     outputs: &[PathBuf],
     pixels: &[Vec4],
     layers: &[(&str, &[Vec4])],
     data: &scene::SceneData,
     quiet: bool,
+    extra: &[(&Path, Vec<u8>)],
 ) -> Result<()> {
+    let mut files = Vec::with_capacity(outputs.len() + extra.len());
     for o in outputs {
-        output::write_layered(o, pixels, layers, data.width(), data.height(), data.exposure)?;
-        if !quiet {
+        files.push((o.as_path(), output::encode(o, pixels, layers, data.width(), data.height(), data.exposure)?));
+    }
+    files.extend(extra.iter().map(|(p, b)| (*p, b.clone())));
+    let list: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
+    output::write_all(&list)?;
+    if !quiet {
+        for (o, _) in &files {
             eprintln!("wrote {}", o.display());
         }
     }
@@ -452,11 +461,11 @@ fn render_command(args: RenderArgs) -> Result<()> {
         if !quiet && frame.is_none() {
             print_summary(stats_of, verbose || st.is_some());
         }
-        write_outputs(outs, &rendered.image, &rendered.layer_slices(), &data, quiet || frame.is_some())?;
-        if let Some(path) = st {
-            let json = serde_json::to_vec_pretty(stats_of)?;
-            output::write_atomically(path, &json)?;
-        }
+        let json = match st {
+            Some(path) => vec![(path.as_path(), serde_json::to_vec_pretty(stats_of)?)],
+            None => Vec::new(),
+        };
+        write_outputs(outs, &rendered.image, &rendered.layer_slices(), &data, quiet || frame.is_some(), &json)?;
         done += 1;
         if let (Some(f), false) = (frame, quiet) {
             let per_frame = clock.elapsed().as_secs_f64() / done as f64;
@@ -512,7 +521,7 @@ fn reference_command(args: ReferenceArgs) -> Result<()> {
         );
     }
     let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
-    write_outputs(&output, &pixels, &[], &data, false)
+    write_outputs(&output, &pixels, &[], &data, false, &[])
 }
 
 fn bench_command(args: BenchArgs) -> Result<()> {

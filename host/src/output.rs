@@ -67,10 +67,22 @@ pub fn write_layered(
     height: u32,
     exposure: f32,
 ) -> Result<()> {
+    let bytes = encode(path, pixels, layers, width, height, exposure)?;
+    write_atomically(path, &bytes)
+}
+
+/// The bytes `write_layered` writes to `path` (its format by its extension).
+pub fn encode(
+    path: &Path,
+    pixels: &[Vec4],
+    layers: &[(&str, &[Vec4])],
+    width: u32,
+    height: u32,
+    exposure: f32,
+) -> Result<Vec<u8>> {
     if format_of(path)? == Format::Exr && !layers.is_empty() {
-        let bytes =
-            layered_exr(pixels, layers, width, height).with_context(|| format!("{}: cannot encode", path.display()))?;
-        return write_atomically(path, &bytes);
+        return layered_exr(pixels, layers, width, height)
+            .with_context(|| format!("{}: cannot encode", path.display()));
     }
     let format = format_of(path)?;
     let mut bytes = std::io::Cursor::new(Vec::new());
@@ -84,7 +96,36 @@ pub fn write_layered(
             img.write_to(&mut bytes, ImageFormat::OpenExr)?
         }
     }
-    write_atomically(path, bytes.get_ref())
+    Ok(bytes.into_inner())
+}
+
+/// Writes every `(path, bytes)` or none: each goes to a temporary file in
+/// its folder first, and only when all are written whole are they renamed
+/// over their paths (a full disk or an unwritable folder for the last one
+/// leaves every earlier path as it was).
+pub fn write_all(files: &[(&Path, &[u8])]) -> Result<()> {
+    let mut staged = Vec::with_capacity(files.len());
+    for (path, bytes) in files {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let mut tmp = tempfile::Builder::new()
+            .prefix(".slicelight-tmp-")
+            .tempfile_in(dir)
+            .with_context(|| format!("{}: cannot create a file in {}", path.display(), dir.display()))?;
+        tmp.write_all(bytes).with_context(|| format!("{}: write failed", path.display()))?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
+        }
+        staged.push((tmp, *path));
+    }
+    for (tmp, path) in staged {
+        tmp.persist(path).map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
+    }
+    Ok(())
 }
 
 fn layered_exr(pixels: &[Vec4], layers: &[(&str, &[Vec4])], width: u32, height: u32) -> Result<Vec<u8>> {
@@ -184,4 +225,28 @@ pub fn regular_file(field: &str, path: &std::path::Path, limit: u64) -> anyhow::
         anyhow::bail!("{field}: {}: expected at most {limit} bytes, got {}", path.display(), meta.len());
     }
     Ok(meta.len())
+}
+
+#[cfg(test)]
+mod write_tests {
+    use super::*;
+
+    #[test]
+    fn a_failing_output_leaves_every_other_output_as_it_was() {
+        // The second file cannot be created (/proc takes no new files, even
+        // from root): the first keeps its old bytes, no temporary is left.
+        let dir = tempfile::tempdir().unwrap();
+        let ok = dir.path().join("ok.png");
+        std::fs::write(&ok, b"old").unwrap();
+        let bad = Path::new("/proc/slicelight-test.png");
+        let err = write_all(&[(ok.as_path(), b"new"), (bad, b"new")]).unwrap_err();
+        assert!(err.to_string().contains("/proc/slicelight-test.png"), "{err}");
+        assert_eq!(std::fs::read(&ok).unwrap(), b"old");
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(left.len(), 1, "{left:?}");
+        // And when all can be written, all are.
+        let other = dir.path().join("b.exr");
+        write_all(&[(ok.as_path(), b"new"), (other.as_path(), b"two")]).unwrap();
+        assert_eq!((std::fs::read(&ok).unwrap(), std::fs::read(&other).unwrap()), (b"new".to_vec(), b"two".to_vec()));
+    }
 }

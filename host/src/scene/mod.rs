@@ -276,8 +276,10 @@ fn camera(cam: &Camera) -> Result<CommonParams> {
     }
     let fisheye = cam.projection == Projection::Fisheye;
     let vfov = match (cam.vfov_deg, fisheye) {
-        (Some(v), false) if v > 0.0 && v < 180.0 => v,
-        (Some(v), false) => bail!(invalid("camera.vfov_deg", "an angle in (0, 180) degrees", v)),
+        // A thousandth of a degree is a 1000 mm lens's field on 17 um:
+        // narrower views lose the pixel positions to f32 rounding.
+        (Some(v), false) if (1e-3..180.0).contains(&v) => v,
+        (Some(v), false) => bail!(invalid("camera.vfov_deg", "an angle in [0.001, 180) degrees", v)),
         (None, false) => {
             bail!("camera.vfov_deg: missing; a pinhole camera needs its vertical field of view in degrees")
         }

@@ -30,11 +30,23 @@ pub fn positive(field: &str, v: f32) -> Result<f32> {
     Ok(v)
 }
 
+/// The largest coordinate or vector component a scene may give (m, or the
+/// field's unit): 10 000 km, past any scene's extent (the planet's radius
+/// is the sky's own field), and small enough that squares and sums of
+/// coordinates stay far inside f32's range (3.4e38) in every kernel.
+pub const MAX_COORDINATE: f32 = 1e7;
+
+/// The largest light intensity (W/sr), irradiance (W/m^2) or coefficient
+/// (1/m) a scene may give: 1e12, a thousand times a stadium floodlight's
+/// intensity, so that intensity times coefficient times path length
+/// (1e12 * 1e4 /m * 1e7 m) stays inside f32's range.
+pub const MAX_MAGNITUDE: f32 = 1e12;
+
 pub fn finite3(field: &str, v: [f32; 3]) -> Result<Vec3> {
-    if v.iter().all(|x| x.is_finite()) {
+    if v.iter().all(|x| x.is_finite() && x.abs() <= MAX_COORDINATE) {
         Ok(Vec3::from(v))
     } else {
-        Err(invalid(field, "three finite numbers", v))
+        Err(invalid(field, "three finite numbers within +-1e7 (MAX_COORDINATE)", v))
     }
 }
 
@@ -48,10 +60,10 @@ pub fn unit3(field: &str, v: [f32; 3]) -> Result<Vec3> {
 }
 
 pub fn non_negative3(field: &str, v: [f32; 3]) -> Result<Vec3> {
-    if v.iter().all(|x| x.is_finite() && *x >= 0.0) {
+    if v.iter().all(|x| x.is_finite() && *x >= 0.0 && *x <= MAX_MAGNITUDE) {
         Ok(Vec3::from(v))
     } else {
-        Err(invalid(field, "three finite non-negative numbers", v))
+        Err(invalid(field, "three non-negative numbers up to 1e12 (MAX_MAGNITUDE)", v))
     }
 }
 

@@ -313,10 +313,20 @@ pub fn configure(s: &Settings) -> Result<Setup> {
     table_size("sky.transmittance_table", s.transmittance_table, false)?;
     table_size("sky.sky_view_table", s.sky_view_table, true)?;
     let a = &s.atmosphere;
-    let ground = positive("sky.atmosphere.ground_radius_m", a.ground_radius_m)?;
-    let top = positive("sky.atmosphere.top_radius_m", a.top_radius_m)?;
-    if top <= ground {
-        bail!(invalid("sky.atmosphere.top_radius_m", "a radius above ground_radius_m", top));
+    // Planets from a small moon's 1e5 m to a gas giant's 1e8 m; an
+    // atmosphere 1 km to 1e7 m deep: f32 then resolves metres of altitude
+    // and r^2 stays far from overflow.
+    let ground = a.ground_radius_m;
+    if !(ground.is_finite() && (1e5..=1e8).contains(&ground)) {
+        bail!(invalid("sky.atmosphere.ground_radius_m", "a planet's radius in [1e5, 1e8] m", ground));
+    }
+    let top = a.top_radius_m;
+    if !(top.is_finite() && top - ground >= 1e3 && top - ground <= 1e7) {
+        bail!(invalid(
+            "sky.atmosphere.top_radius_m",
+            "a radius 1e3 to 1e7 m above ground_radius_m (the atmosphere's depth)",
+            top
+        ));
     }
     let rayleigh = validate::non_negative3("sky.atmosphere.rayleigh_scattering", a.rayleigh_scattering)?;
     let rayleigh_h = positive("sky.atmosphere.rayleigh_scale_height_m", a.rayleigh_scale_height_m)?;

@@ -725,3 +725,28 @@ fn values_past_what_f32_kernels_carry_are_refused_and_the_limits_render_finite()
     let exr = image::open(run.out("out.exr")).unwrap().to_rgb32f();
     assert!(exr.pixels().all(|p| p.0.iter().all(|c| c.is_finite())), "a pixel not finite at the limits");
 }
+
+#[test]
+fn a_render_over_the_memory_budget_is_refused_at_once_with_the_figure() {
+    // The target: a scene needing about 5 GiB (8192 x 8192 pixels
+    // on the CPU backend) under a 4 GiB --max-memory is refused before any
+    // allocation, in well under a second, naming the resolution and bytes;
+    // under 64 GiB it renders... not here (it would take minutes): the
+    // small scene renders under a 1 GiB budget instead.
+    let big = GOOD.replace("resolution = [48, 32]", "resolution = [8192, 8192]");
+    let dir = scene_dir(&big);
+    let t = std::time::Instant::now();
+    let (code, stderr) =
+        run_at(dir.path(), &["render", "scene.toml", "-o", "out.png", "--backend", "cpu", "--max-memory", "4G"]);
+    let seconds = t.elapsed().as_secs_f64();
+    assert_ne!(code, 0);
+    for needle in ["GiB", "camera.resolution 8192x8192", "--max-memory budget of 4.00 GiB"] {
+        assert!(stderr.contains(needle), "lacks {needle:?}: {stderr}");
+    }
+    assert!(seconds < 1.0, "{seconds} s");
+    assert!(!dir.path().join("out.png").exists());
+    let dir = scene_dir(GOOD);
+    let (code, stderr) =
+        run_at(dir.path(), &["render", "scene.toml", "-o", "out.png", "--backend", "cpu", "--max-memory", "1G"]);
+    assert_eq!(code, 0, "{stderr}");
+}

@@ -94,6 +94,34 @@ struct RenderArgs {
     /// stopped, or a range shared with another machine, goes on).
     #[arg(long, requires = "frames")]
     resume: bool,
+    /// The most memory the render may hold (bytes, or with K, M, G): a
+    /// scene that needs more is refused before anything is allocated.
+    /// Default: the memory the system has available.
+    #[arg(long, value_parser = parse_bytes)]
+    max_memory: Option<u64>,
+}
+
+/// `4G`, `512M`, `64K` or a byte count.
+fn parse_bytes(s: &str) -> std::result::Result<u64, String> {
+    let t = s.trim();
+    let (digits, unit) = match t.char_indices().find(|(_, c)| !c.is_ascii_digit() && *c != '.') {
+        Some((i, _)) => (&t[..i], t[i..].trim().to_ascii_uppercase()),
+        None => (t, String::new()),
+    };
+    let n: f64 = digits.parse().map_err(|_| format!("expected a size such as 4G or 512M, got {s:?}"))?;
+    let scale = match unit.trim_end_matches('B').trim_end_matches('I') {
+        "" => 1u64,
+        "K" => 1 << 10,
+        "M" => 1 << 20,
+        "G" => 1 << 30,
+        "T" => 1 << 40,
+        _ => return Err(format!("expected a size such as 4G or 512M, got {s:?}")),
+    };
+    let bytes = n * scale as f64;
+    if !(bytes >= 1.0 && bytes < u64::MAX as f64) {
+        return Err(format!("expected a positive size, got {s:?}"));
+    }
+    Ok(bytes as u64)
 }
 
 /// `A..B`: frames A up to B, B excluded.
@@ -381,7 +409,11 @@ fn render_command(args: RenderArgs) -> Result<()> {
         frames,
         fps,
         resume,
+        max_memory,
     } = args;
+    if let Some(bytes) = max_memory {
+        slicelight::render::MEMORY_BUDGET.store(bytes, std::sync::atomic::Ordering::Relaxed);
+    }
     slicelight::output::QUIET.store(quiet, std::sync::atomic::Ordering::Relaxed);
     for name in &passes {
         if slicelight::passes::by_name(name).is_none() {

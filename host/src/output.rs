@@ -211,9 +211,10 @@ pub const MAX_DATA_BYTES: u64 = 4 << 30;
 /// Checks, before reading it, that `path` is a regular file (not a folder,
 /// a device such as /dev/zero, a FIFO or a socket, which could be read
 /// without end or block forever) of at most `limit` bytes; the error names
-/// `field` and the path.
+/// `field` and the path. A path that cannot be looked at (missing) passes:
+/// the read that follows reports it in its own words.
 pub fn regular_file(field: &str, path: &std::path::Path, limit: u64) -> anyhow::Result<u64> {
-    let meta = std::fs::metadata(path).map_err(|e| anyhow::anyhow!("{field}: cannot read {}: {e}", path.display()))?;
+    let Ok(meta) = std::fs::metadata(path) else { return Ok(0) };
     if !meta.is_file() {
         anyhow::bail!(
             "{field}: {}: expected a regular file, got a {}",

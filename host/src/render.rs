@@ -140,6 +140,74 @@ fn plans(data: &SceneData) -> Vec<(&'static dyn Pass, Plan)> {
     PASSES.iter().map(|&p| (p, p.plan(data))).collect()
 }
 
+/// The memory budget of a render in bytes (`--max-memory`); 0: the
+/// memory the system has available when the render starts.
+pub static MEMORY_BUDGET: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// The system's available memory (`MemAvailable` of /proc/meminfo), if known.
+pub fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// What a render of `data` will hold at once, in bytes, by what drives it:
+/// each resource the running passes bind (per-pixel ones for the whole
+/// image on the CPU backend, a band on a device), and the image and its
+/// layers kept for the outputs.
+pub fn memory_needed(data: &SceneData, backend: &Backend) -> Vec<(String, u64)> {
+    let plans = plans(data);
+    let running: Vec<&dyn Pass> = plans.iter().filter(|(_, p)| p.runs).map(|(p, _)| *p).collect();
+    let pixels = match backend {
+        Backend::Cpu => data.pixel_count() as u64,
+        Backend::Gpu(ctx) => ctx.band_pixels(data) as u64,
+    };
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::new();
+    for pass in &running {
+        for r in pass.reads().iter().chain(pass.writes()) {
+            if !seen.insert(r.binding) {
+                continue;
+            }
+            let bytes = match r.kind {
+                ResourceKind::Scene(f) => f(data).len() as u64,
+                ResourceKind::Frame(f) => f(data),
+                ResourceKind::PerPixel { blank } => blank().len() as u64 * pixels,
+            };
+            out.push((r.name.to_string(), bytes));
+        }
+    }
+    let layers = running.iter().filter(|p| p.radiance_layer().is_some()).count() as u64;
+    out.push(("the image and its layers".into(), 16 * data.pixel_count() as u64 * (layers + 1)));
+    out
+}
+
+/// Refuses a render over the budget (`MEMORY_BUDGET`, else the available
+/// memory) before anything is allocated, naming what needs the most.
+fn check_memory(data: &SceneData, backend: &Backend) -> Result<()> {
+    let set = MEMORY_BUDGET.load(std::sync::atomic::Ordering::Relaxed);
+    let Some(budget) = (if set > 0 { Some(set) } else { available_memory() }) else { return Ok(()) };
+    let mut needs = memory_needed(data, backend);
+    let total: u64 = needs.iter().map(|(_, b)| b).sum();
+    if total <= budget {
+        return Ok(());
+    }
+    needs.sort_by_key(|n| std::cmp::Reverse(n.1));
+    let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+    let top: Vec<String> = needs.iter().take(3).map(|(n, b)| format!("{n} {:.2} GiB", gib(*b))).collect();
+    anyhow::bail!(
+        "the render needs {:.2} GiB ({}; camera.resolution {}x{} and samples_per_pixel {} drive the per-pixel ones), over the {} of {:.2} GiB",
+        gib(total),
+        top.join(", "),
+        data.width(),
+        data.height(),
+        data.samples_per_pixel(),
+        if set > 0 { "--max-memory budget" } else { "memory available" },
+        gib(budget)
+    )
+}
+
 fn invocations(pass: &dyn Pass, plan: &Plan, data: &SceneData) -> u64 {
     match (plan.runs, pass.dispatch()) {
         (false, _) => 0,
@@ -414,6 +482,7 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
 
 /// Renders a scene, keeping each pass's radiance layer.
 pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<Rendered> {
+    check_memory(data, backend)?;
     let plans = plans(data);
     let stats: Vec<PassStats> = plans.iter().map(|(p, plan)| stats_of(*p, plan, data)).collect();
     let running: Vec<Running> = plans

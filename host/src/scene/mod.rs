@@ -225,10 +225,8 @@ impl SceneData {
 /// Reads, validates and converts a scene file. Relative paths inside it are
 /// taken relative to the file's folder.
 pub fn load(path: &Path) -> Result<SceneData> {
-    if path.exists() {
-        crate::output::regular_file("the scene file", path, crate::output::MAX_SCENE_BYTES)
-            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    }
+    crate::output::regular_file("the scene file", path, crate::output::MAX_SCENE_BYTES)
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let text =
         std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the scene file", path.display()))?;
     let base = path.parent().unwrap_or(Path::new("."));

@@ -380,15 +380,21 @@ impl Fluid {
         let p = &self.params;
         let vel = self.velocity();
         let mut forward = vec![0.0; q.len()];
-        for_each_invocation(&mut forward, 0, &ProgressBar::hidden(), |i, o| *o = advect(p, kind, i, q, vel, 1.0));
         if self.advection == Advection::SemiLagrangian {
+            for_each_invocation(&mut forward, 0, &ProgressBar::hidden(), |i, o| *o = advect(p, kind, i, q, vel, 1.0));
             return forward;
         }
+        // MacCormack: the forward step's departure points are kept for the
+        // limiter (one trace fewer per element than `maccormack`); the
+        // forward step samples there, as `advect` does.
+        let mut from = vec![glam::Vec3::ZERO; q.len()];
+        for_each_invocation(&mut from, 0, &ProgressBar::hidden(), |i, o| *o = departure(p, kind, i, vel));
+        for_each_invocation(&mut forward, 0, &ProgressBar::hidden(), |i, o| *o = sample(p, kind, q, from[i as usize]));
         let mut back = vec![0.0; q.len()];
         for_each_invocation(&mut back, 0, &ProgressBar::hidden(), |i, o| *o = advect(p, kind, i, &forward, vel, -1.0));
         let mut out = vec![0.0; q.len()];
         for_each_invocation(&mut out, 0, &ProgressBar::hidden(), |i, o| {
-            *o = maccormack(p, kind, i, q, &forward, &back, vel)
+            *o = maccormack_from(p, kind, i, q, &forward, &back, from[i as usize])
         });
         out
     }
@@ -405,16 +411,23 @@ impl Fluid {
             });
             (a, b)
         };
-        let (t_forward, s_forward) = pass(&self.temperature, &self.smoke, 1.0);
         if self.advection == Advection::SemiLagrangian {
-            return (t_forward, s_forward);
+            return pass(&self.temperature, &self.smoke, 1.0);
         }
+        // MacCormack, the departure points kept for the limiter.
+        let mut from = vec![glam::Vec3::ZERO; cells];
+        for_each_invocation(&mut from, 0, &ProgressBar::hidden(), |i, o| *o = departure(p, KIND_TEMPERATURE, i, vel));
+        let (mut t_forward, mut s_forward) = (vec![0.0; cells], vec![0.0; cells]);
+        for_each_invocation2(&mut t_forward, &mut s_forward, 0, &ProgressBar::hidden(), |i, x, y| {
+            let b = from[i as usize];
+            (*x, *y) = (sample(p, KIND_TEMPERATURE, &self.temperature, b), sample(p, KIND_SMOKE, &self.smoke, b))
+        });
         let (t_back, s_back) = pass(&t_forward, &s_forward, -1.0);
         let t = Stages { q: &self.temperature, forward: &t_forward, back: &t_back };
         let s = Stages { q: &self.smoke, forward: &s_forward, back: &s_back };
         let (mut a, mut b) = (vec![0.0; cells], vec![0.0; cells]);
         for_each_invocation2(&mut a, &mut b, 0, &ProgressBar::hidden(), |i, x, y| {
-            (*x, *y) = maccormack_centres(p, i, t, s, vel)
+            (*x, *y) = maccormack_centres_from(p, i, t, s, from[i as usize])
         });
         (a, b)
     }

@@ -261,10 +261,28 @@ pub fn maccormack(
     back: &[f32],
     vel: Velocity,
 ) -> f32 {
+    maccormack_from(p, kind, flat, q, forward, back, departure(p, kind, flat, vel))
+}
+
+/// Where the fluid at element `flat` of `kind` was `dt` ago (cells): the
+/// point `advect` samples (the host keeps it for MacCormack's limiter
+/// rather than tracing twice).
+pub fn departure(p: &FluidParams, kind: u32, flat: u32, vel: Velocity) -> Vec3 {
+    trace(p, vel, position(kind, coords(extent(p, kind), flat)), 1.0)
+}
+
+/// `maccormack` with the forward step's departure point `from` given.
+pub fn maccormack_from(
+    p: &FluidParams,
+    kind: u32,
+    flat: u32,
+    q: &[f32],
+    forward: &[f32],
+    back: &[f32],
+    from: Vec3,
+) -> f32 {
     let i = flat as usize;
-    let x = position(kind, coords(extent(p, kind), flat));
-    let bounds = sample_bounded(p, kind, q, trace(p, vel, x, 1.0));
-    limited(forward[i] + 0.5 * (q[i] - back[i]), forward[i], bounds)
+    limited(forward[i] + 0.5 * (q[i] - back[i]), forward[i], sample_bounded(p, kind, q, from))
 }
 
 /// `advect` of the two cell-centred quantities, temperature and smoke,
@@ -286,9 +304,12 @@ pub struct Stages<'a> {
 
 /// `maccormack` of temperature and smoke at cell `flat` (one back-trace).
 pub fn maccormack_centres(p: &FluidParams, flat: u32, t: Stages, s: Stages, vel: Velocity) -> (f32, f32) {
+    maccormack_centres_from(p, flat, t, s, departure(p, KIND_TEMPERATURE, flat, vel))
+}
+
+/// `maccormack_centres` with the forward step's departure point `b` given.
+pub fn maccormack_centres_from(p: &FluidParams, flat: u32, t: Stages, s: Stages, b: Vec3) -> (f32, f32) {
     let i = flat as usize;
-    let x = position(KIND_TEMPERATURE, coords(p.dims(), flat));
-    let b = trace(p, vel, x, 1.0);
     (
         limited(t.forward[i] + 0.5 * (t.q[i] - t.back[i]), t.forward[i], sample_bounded(p, KIND_TEMPERATURE, t.q, b)),
         limited(s.forward[i] + 0.5 * (s.q[i] - s.back[i]), s.forward[i], sample_bounded(p, KIND_SMOKE, s.q, b)),

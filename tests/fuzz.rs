@@ -1,0 +1,120 @@
+//! A mutation fuzzer over the shipped scenes (issue 22): every number in
+//! every scene file, one at a time, replaced by values at and past the
+//! edges (0, -1, tiny, huge, NaN, infinity, the integer limits); each
+//! mutated scene is parsed, validated and built. Loading must return a
+//! scene or an error naming a field, never panic.
+//!
+//! Scenes whose build runs a simulation (smoke, dunes) or meshes large
+//! objects are skipped when one build takes over `SLOW` (the fuzzer is
+//! about validation, and their settings have their own stress tests).
+//! `cargo test --release --test fuzz -- --nocapture` prints the executions.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::Path;
+use std::time::{Duration, Instant};
+use toml::Value;
+
+const SLOW: Duration = Duration::from_millis(300);
+
+/// The values a number is replaced by.
+fn replacements(v: &Value) -> Vec<Value> {
+    match v {
+        Value::Integer(_) => {
+            [0i64, -1, 1, 1 << 31, (1 << 32) - 1, 1 << 40, -(1 << 31)].iter().map(|&i| Value::Integer(i)).collect()
+        }
+        Value::Float(_) => [0.0, -1.0, 1e-30, -1e-30, 1e30, 3e38, -3e38, f64::NAN, f64::INFINITY, f64::NEG_INFINITY]
+            .iter()
+            .map(|&f| Value::Float(f))
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// Paths (as index chains) to every number in `v`.
+fn numbers(v: &Value, path: &mut Vec<PathPart>, out: &mut Vec<Vec<PathPart>>) {
+    match v {
+        Value::Integer(_) | Value::Float(_) => out.push(path.clone()),
+        Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                path.push(PathPart::Index(i));
+                numbers(x, path, out);
+                path.pop();
+            }
+        }
+        Value::Table(t) => {
+            for (k, x) in t {
+                path.push(PathPart::Key(k.clone()));
+                numbers(x, path, out);
+                path.pop();
+            }
+        }
+        _ => {}
+    }
+}
+
+#[derive(Clone, Debug)]
+enum PathPart {
+    Key(String),
+    Index(usize),
+}
+
+fn at<'a>(v: &'a mut Value, path: &[PathPart]) -> &'a mut Value {
+    path.iter().fold(v, |v, p| match p {
+        PathPart::Key(k) => &mut v[k.as_str()],
+        PathPart::Index(i) => &mut v[*i],
+    })
+}
+
+fn build(value: &Value, base: &Path) -> std::thread::Result<Result<(), String>> {
+    catch_unwind(AssertUnwindSafe(|| {
+        let file: slicelight::scene::SceneFile = match value.clone().try_into() {
+            Ok(f) => f,
+            Err(e) => return Err(format!("{e}")),
+        };
+        slicelight::scene::build(&file, base).map(|_| ()).map_err(|e| format!("{e:#}"))
+    }))
+}
+
+#[test]
+fn mutated_scene_files_load_or_fail_with_an_error_never_a_panic() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let mut paths: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    paths.sort();
+    // Panics are expected to be caught here; keep their messages quiet.
+    std::panic::set_hook(Box::new(|_| {}));
+    let (mut executions, mut refused, mut panics) = (0u64, 0u64, Vec::new());
+    for path in &paths {
+        let text = std::fs::read_to_string(path).unwrap();
+        let original: Value = toml::from_str(&text).unwrap();
+        let t = Instant::now();
+        let ok = build(&original, &dir);
+        if t.elapsed() > SLOW || !matches!(ok, Ok(Ok(()))) {
+            println!("{}: skipped ({:?}, {:?})", path.display(), t.elapsed(), ok.map(|r| r.is_ok()));
+            continue;
+        }
+        let mut paths_to_numbers = Vec::new();
+        numbers(&original, &mut Vec::new(), &mut paths_to_numbers);
+        for p in &paths_to_numbers {
+            for r in replacements(at(&mut original.clone(), p)) {
+                let mut v = original.clone();
+                *at(&mut v, p) = r.clone();
+                let t = Instant::now();
+                match build(&v, &dir) {
+                    Ok(Ok(())) => {}
+                    Ok(Err(_)) => refused += 1,
+                    Err(_) => panics.push(format!("{} {p:?} = {r}", path.display())),
+                }
+                executions += 1;
+                assert!(t.elapsed() < Duration::from_secs(30), "{} {p:?} = {r}: {:?}", path.display(), t.elapsed());
+            }
+        }
+    }
+    let _ = std::panic::take_hook();
+    println!("{executions} mutated scenes built, {refused} refused with an error, {} panics", panics.len());
+    assert!(executions > 1000, "{executions}");
+    assert!(panics.is_empty(), "{} panics:\n{}", panics.len(), panics.join("\n"));
+}

@@ -118,3 +118,88 @@ fn mutated_scene_files_load_or_fail_with_an_error_never_a_panic() {
     assert!(executions > 1000, "{executions}");
     assert!(panics.is_empty(), "{} panics:\n{}", panics.len(), panics.join("\n"));
 }
+
+/// Seconds the rendering fuzzer runs (its coverage is printed); the
+/// environment's `SLICELIGHT_FUZZ_SECONDS` runs it longer.
+fn render_budget() -> Duration {
+    let s = std::env::var("SLICELIGHT_FUZZ_SECONDS").ok().and_then(|s| s.parse().ok()).unwrap_or(60);
+    Duration::from_secs(s)
+}
+
+#[test]
+fn mutated_scenes_that_load_render_finite() {
+    // The same mutations on every scene made 8 x 6 pixels, taken in a fixed
+    // shuffled order for `render_budget()`: every scene that loads renders
+    // (CPU backend) without a panic or an error and with finite pixels.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let mut paths: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    paths.sort();
+    std::panic::set_hook(Box::new(|_| {}));
+    let mut cases = Vec::new();
+    for path in &paths {
+        let text = std::fs::read_to_string(path).unwrap();
+        let mut original: Value = toml::from_str(&text).unwrap();
+        original["camera"]["resolution"] = Value::Array(vec![Value::Integer(8), Value::Integer(6)]);
+        let t = Instant::now();
+        if !matches!(build(&original, &dir), Ok(Ok(()))) || t.elapsed() > SLOW {
+            continue;
+        }
+        let mut paths_to_numbers = Vec::new();
+        numbers(&original, &mut Vec::new(), &mut paths_to_numbers);
+        for p in paths_to_numbers {
+            for r in replacements(at(&mut original.clone(), &p)) {
+                cases.push((path.clone(), original.clone(), p.clone(), r));
+            }
+        }
+    }
+    // A fixed shuffle (an LCG), so every run covers the same cases first.
+    let mut state = 0x2545_f491u64;
+    for i in (1..cases.len()).rev() {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        cases.swap(i, (state >> 33) as usize % (i + 1));
+    }
+    let backend = slicelight::render::Backend::Cpu;
+    let (mut tried, mut rendered, mut bad) = (0u64, 0u64, Vec::new());
+    let clock = Instant::now();
+    // `SLICELIGHT_FUZZ_SKIP=N` starts after the first N cases (a longer
+    // exploration in pieces).
+    let skip = std::env::var("SLICELIGHT_FUZZ_SKIP").ok().and_then(|s| s.parse().ok()).unwrap_or(0);
+    for (path, original, p, r) in cases.iter().skip(skip) {
+        if clock.elapsed() > render_budget() {
+            break;
+        }
+        tried += 1;
+        let mut v = original.clone();
+        *at(&mut v, p) = r.clone();
+        let outcome = catch_unwind(AssertUnwindSafe(|| {
+            let file: slicelight::scene::SceneFile = v.clone().try_into().ok()?;
+            let data = slicelight::scene::build(&file, &dir).ok()?;
+            Some(slicelight::render::render_layers(&data, &backend, false).map(|r| r.image))
+        }));
+        let name = format!("{} {p:?} = {r}", path.display());
+        match outcome {
+            Err(_) => bad.push(format!("{name}: panic")),
+            Ok(None) => {}
+            Ok(Some(Err(e))) => bad.push(format!("{name}: render error {e:#}")),
+            Ok(Some(Ok(image))) => {
+                rendered += 1;
+                if !image.iter().all(|p| p.truncate().is_finite()) {
+                    bad.push(format!("{name}: a pixel not finite"));
+                }
+            }
+        }
+    }
+    let _ = std::panic::take_hook();
+    println!(
+        "{tried} of {} mutations tried in {:?}, {rendered} rendered; {} bad",
+        cases.len(),
+        clock.elapsed(),
+        bad.len()
+    );
+    assert!(rendered > 100, "{rendered}");
+    assert!(bad.is_empty(), "{} bad:\n{}", bad.len(), bad.join("\n"));
+}

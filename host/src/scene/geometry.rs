@@ -90,8 +90,8 @@ pub fn build(objects: &[Object], base: &Path) -> Result<Objects> {
         let mesh = match obj {
             Object::Sphere(s) => {
                 let c = finite3(&format!("{field}.center"), s.center)?;
-                if !(s.radius.is_finite() && s.radius > 0.0) {
-                    bail!(invalid(&format!("{field}.radius"), "a positive number of metres", s.radius));
+                if !(s.radius.is_finite() && s.radius > 0.0 && s.radius <= crate::scene::validate::MAX_COORDINATE) {
+                    bail!(invalid(&format!("{field}.radius"), "a positive number of metres up to 1e7", s.radius));
                 }
                 if !glass {
                     if s.segments.is_some() {
@@ -348,8 +348,9 @@ fn box_mesh(lo: Vec3, hi: Vec3) -> IndexedMesh {
 fn torus(field: &str, t: &TorusObject) -> Result<IndexedMesh> {
     let c = finite3(&format!("{field}.center"), t.center)?;
     let axis = unit3(&format!("{field}.axis"), t.axis)?;
-    if !(t.major_radius.is_finite() && t.major_radius > 0.0) {
-        bail!(invalid(&format!("{field}.major_radius"), "a positive number of metres", t.major_radius));
+    if !(t.major_radius.is_finite() && t.major_radius > 0.0 && t.major_radius <= crate::scene::validate::MAX_COORDINATE)
+    {
+        bail!(invalid(&format!("{field}.major_radius"), "a positive number of metres up to 1e7", t.major_radius));
     }
     if !(t.minor_radius.is_finite() && t.minor_radius > 0.0 && t.minor_radius < t.major_radius) {
         bail!(invalid(
@@ -374,7 +375,7 @@ fn torus(field: &str, t: &TorusObject) -> Result<IndexedMesh> {
 
 fn trefoil_knot(field: &str, k: &TrefoilKnotObject) -> Result<IndexedMesh> {
     let c = finite3(&format!("{field}.center"), k.center)?;
-    if !(k.scale.is_finite() && k.scale > 0.0) {
+    if !(k.scale.is_finite() && k.scale > 0.0 && k.scale <= crate::scene::validate::MAX_COORDINATE) {
         bail!(invalid(&format!("{field}.scale"), "a positive number of metres", k.scale));
     }
     // The strands pass within about 0.9 scale of each other.
@@ -508,7 +509,7 @@ fn load_mesh(field: &str, base: &Path, m: &MeshObject) -> Result<IndexedMesh> {
     let (models, _) = tobj::load_obj(&path, &options)
         .map_err(|e| anyhow!("{field}.file: cannot read mesh '{}': {e}", path.display()))?;
     let translate = finite3(&format!("{field}.translate"), m.translate)?;
-    if !(m.scale.is_finite() && m.scale > 0.0) {
+    if !(m.scale.is_finite() && m.scale > 0.0 && m.scale <= crate::scene::validate::MAX_COORDINATE) {
         return Err(invalid(&format!("{field}.scale"), "a positive number", m.scale));
     }
     let mut mesh = IndexedMesh::default();

@@ -22,10 +22,10 @@ pub fn invalid(field: &str, expected: &str, got: impl std::fmt::Debug) -> anyhow
     anyhow!("{field}: expected {expected}, got {got:?}")
 }
 
-/// A positive finite number.
+/// A positive number up to `MAX_COORDINATE` (lengths, scales).
 pub fn positive(field: &str, v: f32) -> Result<f32> {
-    if !(v.is_finite() && v > 0.0) {
-        return Err(invalid(field, "a positive number", v));
+    if !(v.is_finite() && v > 0.0 && v <= MAX_COORDINATE) {
+        return Err(invalid(field, "a positive number up to 1e7", v));
     }
     Ok(v)
 }

@@ -267,12 +267,25 @@ impl Setup {
     }
 }
 
-/// A non-negative finite scalar (the aerosols' coefficients).
+/// The largest coefficient of the atmosphere, 1/m: fog with a visibility
+/// of 3 m (clear air's are about 1e-5); the tables' optical depths then
+/// stay finite over the atmosphere's depth.
+const MAX_COEFFICIENT: f32 = 1.0;
+
+/// An atmosphere's coefficient (1/m): non-negative, up to `MAX_COEFFICIENT`.
 fn non_negative(field: &str, v: f32) -> Result<f32> {
-    if !(v.is_finite() && v >= 0.0) {
-        bail!(invalid(field, "a non-negative number", v));
+    if !(v.is_finite() && (0.0..=MAX_COEFFICIENT).contains(&v)) {
+        bail!(invalid(field, "a coefficient in [0, 1] per metre", v));
     }
     Ok(v)
+}
+
+/// Three atmosphere coefficients (1/m), each as `non_negative`.
+fn coefficients(field: &str, v: [f32; 3]) -> Result<Vec3> {
+    if !v.iter().all(|x| x.is_finite() && (0.0..=MAX_COEFFICIENT).contains(x)) {
+        bail!(invalid(field, "three coefficients in [0, 1] per metre", v));
+    }
+    Ok(Vec3::from(v))
 }
 
 fn table_size(field: &str, size: [u32; 2], even_rows: bool) -> Result<()> {
@@ -328,7 +341,7 @@ pub fn configure(s: &Settings) -> Result<Setup> {
             top
         ));
     }
-    let rayleigh = validate::non_negative3("sky.atmosphere.rayleigh_scattering", a.rayleigh_scattering)?;
+    let rayleigh = coefficients("sky.atmosphere.rayleigh_scattering", a.rayleigh_scattering)?;
     let rayleigh_h = positive("sky.atmosphere.rayleigh_scale_height_m", a.rayleigh_scale_height_m)?;
     let (mie, mie_phase) = match &a.mie {
         None => (Vec4::new(0.0, 0.0, 1200.0, 0.0), MIE_HENYEY_GREENSTEIN),
@@ -352,7 +365,7 @@ pub fn configure(s: &Settings) -> Result<Setup> {
     let (ozone, ozone_center, ozone_half) = match &a.ozone {
         None => (Vec3::ZERO, 0.0, 0.0),
         Some(o) => {
-            let abs = validate::non_negative3("sky.atmosphere.ozone.absorption", o.absorption)?;
+            let abs = coefficients("sky.atmosphere.ozone.absorption", o.absorption)?;
             if !o.center_m.is_finite() {
                 bail!(invalid("sky.atmosphere.ozone.center_m", "a finite height in m", o.center_m));
             }

@@ -351,8 +351,10 @@ fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMet
             bail!(invalid(&name, "a centre inside the volume's box", b));
         }
         validate::positive(&format!("{name} radius"), b[3])?;
-        if !(b[4].is_finite() && b[4] >= 0.0) {
-            bail!(invalid(&format!("{name} q"), "a non-negative density", b[4]));
+        // Density multiplies the coefficients (up to 1e12 /m): 1e6 keeps
+        // their products and the optical depths finite in f32.
+        if !(b[4].is_finite() && (0.0..=1e6).contains(&b[4])) {
+            bail!(invalid(&format!("{name} q"), "a density in [0, 1e6]", b[4]));
         }
         balls.push(GpuMetaball { center_radius: c.extend(b[3]), q: Vec4::new(b[4], 0.0, 0.0, 0.0) });
     }

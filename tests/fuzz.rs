@@ -4,9 +4,10 @@
 //! mutated scene is parsed, validated and built. Loading must return a
 //! scene or an error naming a field, never panic.
 //!
-//! Scenes whose build runs a simulation (smoke, dunes) or meshes large
-//! objects are skipped when one build takes over `SLOW` (the fuzzer is
-//! about validation, and their settings have their own stress tests).
+//! Scenes whose build runs a simulation (smoke, dunes) are skipped (a
+//! mutated setting means a new simulation; their settings have their own
+//! stress tests in `tests/smoke.rs` and `tests/desert.rs`), and so is any
+//! scene whose build takes over `SLOW`: the fuzzer is about validation.
 //! `cargo test --release --test fuzz -- --nocapture` prints the executions.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -65,6 +66,16 @@ fn at<'a>(v: &'a mut Value, path: &[PathPart]) -> &'a mut Value {
     })
 }
 
+/// Whether a scene runs a simulation as it loads (smoke or dunes): a
+/// cache may make its first build fast, but every mutation of its
+/// settings would simulate again.
+fn simulates(v: &Value) -> bool {
+    let any = |list: &str, key: &str| {
+        v.get(list).and_then(|l| l.as_array()).is_some_and(|a| a.iter().any(|x| x.get(key).is_some()))
+    };
+    any("volume", "smoke") || any("terrain", "dunes")
+}
+
 fn build(value: &Value, base: &Path) -> std::thread::Result<Result<(), String>> {
     catch_unwind(AssertUnwindSafe(|| {
         let file: slicelight::scene::SceneFile = match value.clone().try_into() {
@@ -92,7 +103,7 @@ fn mutated_scene_files_load_or_fail_with_an_error_never_a_panic() {
         let original: Value = toml::from_str(&text).unwrap();
         let t = Instant::now();
         let ok = build(&original, &dir);
-        if t.elapsed() > SLOW || !matches!(ok, Ok(Ok(()))) {
+        if simulates(&original) || t.elapsed() > SLOW || !matches!(ok, Ok(Ok(()))) {
             println!("{}: skipped ({:?}, {:?})", path.display(), t.elapsed(), ok.map(|r| r.is_ok()));
             continue;
         }
@@ -145,7 +156,7 @@ fn mutated_scenes_that_load_render_finite() {
         let mut original: Value = toml::from_str(&text).unwrap();
         original["camera"]["resolution"] = Value::Array(vec![Value::Integer(8), Value::Integer(6)]);
         let t = Instant::now();
-        if !matches!(build(&original, &dir), Ok(Ok(()))) || t.elapsed() > SLOW {
+        if simulates(&original) || !matches!(build(&original, &dir), Ok(Ok(()))) || t.elapsed() > SLOW {
             continue;
         }
         let mut paths_to_numbers = Vec::new();

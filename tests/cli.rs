@@ -750,3 +750,30 @@ fn a_render_over_the_memory_budget_is_refused_at_once_with_the_figure() {
         run_at(dir.path(), &["render", "scene.toml", "-o", "out.png", "--backend", "cpu", "--max-memory", "1G"]);
     assert_eq!(code, 0, "{stderr}");
 }
+
+#[test]
+fn a_spotlight_that_reaches_nothing_is_named_in_a_warning() {
+    // Clear air, the spotlight turned to the sky: the image is black where
+    // its light would be, and the render says why instead of nothing.
+    let clear = GOOD.replace("sigma_s = [0.05, 0.05, 0.05]", "sigma_s = [0.0, 0.0, 0.0]");
+    let up = clear.replace("direction = [0.0, -1.0, 0.0]", "direction = [0.0, 1.0, 0.0]");
+    let run = render(&up);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(run.stderr.contains("warning") && run.stderr.contains("spotlight[0] reaches nothing"), "{}", run.stderr);
+    // Pointed at the sphere, or in a scattering medium: no warning.
+    for scene in [clear.as_str(), GOOD] {
+        let run = render(scene);
+        assert_eq!(run.code, 0, "{}", run.stderr);
+        assert!(!run.stderr.contains("reaches nothing"), "{}", run.stderr);
+    }
+    // No shipped scene's spotlight is reported.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap_or_default();
+        if path.extension().is_some_and(|e| e == "toml") && text.contains("[[spotlight]]") {
+            let data = slicelight::scene::load(&path).unwrap();
+            assert!(data.spotlights_reaching_nothing().is_empty(), "{}", path.display());
+        }
+    }
+}

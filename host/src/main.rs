@@ -457,6 +457,12 @@ fn render_command(args: RenderArgs) -> Result<()> {
     if !quiet {
         eprintln!("backend: {} on {}", backend.name(), backend.device());
     }
+    for light in base.spotlights_reaching_nothing() {
+        output::note(&format!(
+            "warning: {}: {light} reaches nothing (no surface or volume in its cone, no scattering medium): it adds no light",
+            scene.display()
+        ));
+    }
     let show = !quiet && std::io::stderr().is_terminal();
     let total = jobs.len();
     let clock = Instant::now();

@@ -109,6 +109,43 @@ impl SceneData {
         }
     }
 
+    /// The spotlights whose light reaches nothing (`spotlight[k]`): no
+    /// scattering medium for their shafts, and none of 1 024 rays spread
+    /// over the cone (Fibonacci directions, uniform in solid angle) meets
+    /// a surface or a volume's box. Such a light adds nothing to the image
+    /// (pointed away from the scene, or inside a closed object); the render
+    /// warns rather than leave it silently black.
+    pub fn spotlights_reaching_nothing(&self) -> Vec<String> {
+        use slicelight_shaders::geometry::{ray_hits_box, trace_nearest, NO_HIT};
+        if self.common.sigma_s.truncate().max_element() > 0.0 {
+            return Vec::new();
+        }
+        let geometry = self.geometry();
+        let boxes: Vec<(Vec3, Vec3)> =
+            self.volumes.volumes.iter().map(|v| (v.min.truncate(), v.max.truncate())).collect();
+        let mut out = Vec::new();
+        for (k, s) in self.source.file.spotlight.iter().enumerate() {
+            let (apex, axis) = (Vec3::from(s.position), Vec3::from(s.direction).normalize_or_zero());
+            let cos_cut = s.cutoff_deg.to_radians().cos();
+            let (a, b) = axis.any_orthonormal_pair();
+            let rays = 1024;
+            let reaches = (0..rays).any(|i| {
+                // Directions uniform in solid angle over the cone.
+                let cos = 1.0 - (1.0 - cos_cut) * (i as f32 + 0.5) / rays as f32;
+                let sin = (1.0 - cos * cos).max(0.0).sqrt();
+                let phi = i as f32 * 2.399_963;
+                let dir = (axis * cos + (a * phi.cos() + b * phi.sin()) * sin).normalize();
+                let inv = dir.recip();
+                trace_nearest(apex, dir, 1e-4, f32::MAX, &geometry).distance != NO_HIT
+                    || boxes.iter().any(|(lo, hi)| ray_hits_box(apex, inv, *lo, *hi, 0.0, f32::MAX))
+            });
+            if !reaches {
+                out.push(format!("spotlight[{k}]"));
+            }
+        }
+        out
+    }
+
     /// Whether light `i` is one of a line light's points (the references
     /// light the line itself instead).
     pub fn is_line_point(&self, i: usize) -> bool {

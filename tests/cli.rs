@@ -488,37 +488,8 @@ fn outputs_never_overwrite_inputs_and_bad_ranges_are_refused() {
     }
 }
 
-const SMOKE: &str = r#"
-[camera]
-position = [1.0, 1.0, 5.0]
-look_at = [1.0, 1.0, 0.0]
-vfov_deg = 45.0
-resolution = [40, 30]
-
-[[directional_light]]
-direction = [0.3, -1.0, -0.2]
-irradiance = [3.0, 3.0, 3.0]
-
-[[volume]]
-min = [0.0, 0.0, -1.0]
-max = [2.0, 2.0, 1.0]
-sigma_s = [3.0, 3.0, 3.0]
-sigma_t = [4.0, 4.0, 4.0]
-resolution = [20, 20, 20]
-
-[volume.smoke]
-cells = [8, 8, 8]
-seconds = 0.5
-dt = 0.1
-wind = [0.5, 0.0, 0.0]
-
-[[volume.smoke.source]]
-position = [0.5, 0.3, 0.0]
-radius = 0.3
-rate = 10.0
-temperature = 500.0
-velocity = [0.0, 1.0, 0.0]
-"#;
+/// A small smoke animation, shared with `scripts/test-slurm.sh`.
+const SMOKE: &str = include_str!("data/smoke_small.toml");
 
 #[test]
 fn frames_render_an_animation_that_moves_and_resume_skips_what_exists() {

@@ -11,7 +11,7 @@
 //! `cargo test --release --test fuzz -- --nocapture` prints the executions.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use toml::Value;
 
@@ -86,42 +86,68 @@ fn build(value: &Value, base: &Path) -> std::thread::Result<Result<(), String>> 
     }))
 }
 
-#[test]
-fn mutated_scene_files_load_or_fail_with_an_error_never_a_panic() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    let mut paths: Vec<_> = std::fs::read_dir(&dir)
+/// The shipped scenes the fuzzers mutate, each edited by `edit` first:
+/// those that build, in under `SLOW`, without a simulation (the others are
+/// named on stdout with why).
+fn fuzzable_scenes(dir: &Path, edit: impl Fn(&mut Value)) -> Vec<(PathBuf, Value)> {
+    let mut paths: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
     paths.sort();
-    // Panics are expected to be caught here; keep their messages quiet.
-    std::panic::set_hook(Box::new(|_| {}));
-    let (mut executions, mut refused, mut panics) = (0u64, 0u64, Vec::new());
-    for path in &paths {
-        let text = std::fs::read_to_string(path).unwrap();
-        let original: Value = toml::from_str(&text).unwrap();
+    let mut out = Vec::new();
+    for path in paths {
+        let mut scene: Value = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        edit(&mut scene);
         let t = Instant::now();
-        let ok = build(&original, &dir);
-        if simulates(&original) || t.elapsed() > SLOW || !matches!(ok, Ok(Ok(()))) {
+        let ok = build(&scene, dir);
+        if simulates(&scene) || t.elapsed() > SLOW || !matches!(ok, Ok(Ok(()))) {
             println!("{}: skipped ({:?}, {:?})", path.display(), t.elapsed(), ok.map(|r| r.is_ok()));
             continue;
         }
-        let mut paths_to_numbers = Vec::new();
-        numbers(&original, &mut Vec::new(), &mut paths_to_numbers);
-        for p in &paths_to_numbers {
-            for r in replacements(at(&mut original.clone(), p)) {
-                let mut v = original.clone();
-                *at(&mut v, p) = r.clone();
-                let t = Instant::now();
-                match build(&v, &dir) {
-                    Ok(Ok(())) => {}
-                    Ok(Err(_)) => refused += 1,
-                    Err(_) => panics.push(format!("{} {p:?} = {r}", path.display())),
-                }
-                executions += 1;
-                assert!(t.elapsed() < Duration::from_secs(30), "{} {p:?} = {r}: {:?}", path.display(), t.elapsed());
+        out.push((path, scene));
+    }
+    out
+}
+
+/// Every single-number mutation of `scene`: the path to a number and the
+/// value that replaces it.
+fn mutations(scene: &Value) -> Vec<(Vec<PathPart>, Value)> {
+    let mut paths_to_numbers = Vec::new();
+    numbers(scene, &mut Vec::new(), &mut paths_to_numbers);
+    let mut out = Vec::new();
+    for p in paths_to_numbers {
+        for r in replacements(at(&mut scene.clone(), &p)) {
+            out.push((p.clone(), r));
+        }
+    }
+    out
+}
+
+/// `scene` with the number at `path` replaced by `value`.
+fn mutated(scene: &Value, path: &[PathPart], value: &Value) -> Value {
+    let mut v = scene.clone();
+    *at(&mut v, path) = value.clone();
+    v
+}
+
+#[test]
+fn mutated_scene_files_load_or_fail_with_an_error_never_a_panic() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    // Panics are expected to be caught here; keep their messages quiet.
+    std::panic::set_hook(Box::new(|_| {}));
+    let (mut executions, mut refused, mut panics) = (0u64, 0u64, Vec::new());
+    for (path, original) in fuzzable_scenes(&dir, |_| {}) {
+        for (p, r) in mutations(&original) {
+            let t = Instant::now();
+            match build(&mutated(&original, &p, &r), &dir) {
+                Ok(Ok(())) => {}
+                Ok(Err(_)) => refused += 1,
+                Err(_) => panics.push(format!("{} {p:?} = {r}", path.display())),
             }
+            executions += 1;
+            assert!(t.elapsed() < Duration::from_secs(30), "{} {p:?} = {r}: {:?}", path.display(), t.elapsed());
         }
     }
     let _ = std::panic::take_hook();
@@ -143,29 +169,14 @@ fn mutated_scenes_that_load_render_finite() {
     // shuffled order for `render_budget()`: every scene that loads renders
     // (CPU backend) without a panic or an error and with finite pixels.
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
-    let mut paths: Vec<_> = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    paths.sort();
     std::panic::set_hook(Box::new(|_| {}));
+    let small = |scene: &mut Value| {
+        scene["camera"]["resolution"] = Value::Array(vec![Value::Integer(8), Value::Integer(6)]);
+    };
+    let scenes = fuzzable_scenes(&dir, small);
     let mut cases = Vec::new();
-    for path in &paths {
-        let text = std::fs::read_to_string(path).unwrap();
-        let mut original: Value = toml::from_str(&text).unwrap();
-        original["camera"]["resolution"] = Value::Array(vec![Value::Integer(8), Value::Integer(6)]);
-        let t = Instant::now();
-        if simulates(&original) || !matches!(build(&original, &dir), Ok(Ok(()))) || t.elapsed() > SLOW {
-            continue;
-        }
-        let mut paths_to_numbers = Vec::new();
-        numbers(&original, &mut Vec::new(), &mut paths_to_numbers);
-        for p in paths_to_numbers {
-            for r in replacements(at(&mut original.clone(), &p)) {
-                cases.push((path.clone(), original.clone(), p.clone(), r));
-            }
-        }
+    for (k, (_, original)) in scenes.iter().enumerate() {
+        cases.extend(mutations(original).into_iter().map(|(p, r)| (k, p, r)));
     }
     // A fixed shuffle (an LCG), so every run covers the same cases first.
     let mut state = 0x2545_f491u64;
@@ -179,13 +190,13 @@ fn mutated_scenes_that_load_render_finite() {
     // `SLICELIGHT_FUZZ_SKIP=N` starts after the first N cases (a longer
     // exploration in pieces).
     let skip = std::env::var("SLICELIGHT_FUZZ_SKIP").ok().and_then(|s| s.parse().ok()).unwrap_or(0);
-    for (path, original, p, r) in cases.iter().skip(skip) {
+    for (k, p, r) in cases.iter().skip(skip) {
+        let (path, original) = &scenes[*k];
         if clock.elapsed() > render_budget() {
             break;
         }
         tried += 1;
-        let mut v = original.clone();
-        *at(&mut v, p) = r.clone();
+        let v = mutated(original, p, r);
         let outcome = catch_unwind(AssertUnwindSafe(|| {
             let file: slicelight::scene::SceneFile = v.clone().try_into().ok()?;
             let data = slicelight::scene::build(&file, &dir).ok()?;

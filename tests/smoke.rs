@@ -6,7 +6,7 @@
 use glam::{UVec3, Vec3};
 use indicatif::ProgressBar;
 use slicelight::shaders::smoke::{coords, position};
-use slicelight::smoke::reference::{buoyant_sphere, set_velocity, taylor_green};
+use slicelight::smoke::reference::{buoyant_sphere, taylor_green};
 use slicelight::smoke::{self, Advection, Config, Settings};
 
 /// Settings from the body of a `smoke = { ... }` table.
@@ -62,7 +62,7 @@ fn projection_leaves_no_divergence_around_an_obstacle_with_open_faces() {
     }
     let mut f = c.start(cells);
     let mut state = 12345u32;
-    set_velocity(&mut f, |_, _| {
+    f.set_velocity(|_, _| {
         state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
         (state >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
     });

@@ -152,12 +152,11 @@ pub fn available_memory() -> Option<u64> {
     Some(kib * 1024)
 }
 
-/// What a render of `data` will hold at once, in bytes, by what drives it:
-/// each resource the running passes bind (per-pixel ones for the whole
-/// image on the CPU backend, a band on a device), and the image and its
-/// layers kept for the outputs.
-pub fn memory_needed(data: &SceneData, backend: &Backend) -> Vec<(String, u64)> {
-    let plans = plans(data);
+/// What a render of `data` with the pass `plans` will hold at once, in
+/// bytes, by what drives it: each resource the running passes bind
+/// (per-pixel ones for the whole image on the CPU backend, a band on a
+/// device), and the image and its layers kept for the outputs.
+fn memory_needed(data: &SceneData, backend: &Backend, plans: &[(&'static dyn Pass, Plan)]) -> Vec<(String, u64)> {
     let running: Vec<&dyn Pass> = plans.iter().filter(|(_, p)| p.runs).map(|(p, _)| *p).collect();
     let pixels = match backend {
         Backend::Cpu => data.pixel_count() as u64,
@@ -185,10 +184,10 @@ pub fn memory_needed(data: &SceneData, backend: &Backend) -> Vec<(String, u64)> 
 
 /// Refuses a render over the budget (`MEMORY_BUDGET`, else the available
 /// memory) before anything is allocated, naming what needs the most.
-fn check_memory(data: &SceneData, backend: &Backend) -> Result<()> {
+fn check_memory(data: &SceneData, backend: &Backend, plans: &[(&'static dyn Pass, Plan)]) -> Result<()> {
     let set = MEMORY_BUDGET.load(std::sync::atomic::Ordering::Relaxed);
     let Some(budget) = (if set > 0 { Some(set) } else { available_memory() }) else { return Ok(()) };
-    let mut needs = memory_needed(data, backend);
+    let mut needs = memory_needed(data, backend, plans);
     let total: u64 = needs.iter().map(|(_, b)| b).sum();
     if total <= budget {
         return Ok(());
@@ -482,8 +481,8 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
 
 /// Renders a scene, keeping each pass's radiance layer.
 pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<Rendered> {
-    check_memory(data, backend)?;
     let plans = plans(data);
+    check_memory(data, backend, &plans)?;
     let stats: Vec<PassStats> = plans.iter().map(|(p, plan)| stats_of(*p, plan, data)).collect();
     let running: Vec<Running> = plans
         .iter()

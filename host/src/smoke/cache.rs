@@ -25,8 +25,12 @@ const VERSION: u32 = 1;
 /// other code is never read back.
 pub fn key_hash(key: &str) -> u64 {
     let digest = include_str!("../../spirv/slicelight_shaders.digest");
-    let text = format!("{VERSION}|{digest}|{key}");
-    text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+    bytes_hash(format!("{VERSION}|{digest}|{key}").as_bytes())
+}
+
+/// FNV-1a over `bytes`: stable across runs and builds.
+pub fn bytes_hash(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
 }
 
 fn file_name(hash: u64, step: u32) -> String {

@@ -85,10 +85,6 @@ impl Poisson {
         Poisson { levels, singular }
     }
 
-    pub fn levels(&self) -> usize {
-        self.levels.len()
-    }
-
     fn fluid(&self) -> &[u32] {
         &self.levels[0].fluid
     }
@@ -323,24 +319,16 @@ impl Fluid {
     /// on every face (then projected, so the first step starts divergence-free).
     pub fn new(params: FluidParams, origin: Vec3, fluid: Vec<u32>, advection: Advection) -> Fluid {
         let p = params;
-        let mut u = vec![0.0; len(extent(&p, KIND_U))];
-        let mut v = vec![0.0; len(extent(&p, KIND_V))];
-        let mut w = vec![0.0; len(extent(&p, KIND_W))];
         let wind = [p.wind_x, p.wind_y, p.wind_z];
-        for (q, kind) in [(&mut u, KIND_U), (&mut v, KIND_V), (&mut w, KIND_W)] {
-            for (i, x) in q.iter_mut().enumerate() {
-                *x = if face_open(&p, kind, i as u32, &fluid) != 0 { wind[kind as usize] } else { 0.0 };
-            }
-        }
         let cells = p.cells as usize;
         let poisson = Poisson::new(p.dims(), p.walls, fluid.clone());
         let mut f = Fluid {
             params: p,
             origin,
             advection,
-            u,
-            v,
-            w,
+            u: vec![0.0; len(extent(&p, KIND_U))],
+            v: vec![0.0; len(extent(&p, KIND_V))],
+            w: vec![0.0; len(extent(&p, KIND_W))],
             temperature: vec![p.ambient; cells],
             smoke: vec![0.0; cells],
             phi: vec![0.0; cells],
@@ -356,13 +344,24 @@ impl Fluid {
             last: StepStats::default(),
         };
         if wind != [0.0; 3] {
+            f.set_velocity(|kind, _| wind[kind as usize]);
             f.last = f.project();
         }
         f
     }
 
-    pub fn levels(&self) -> usize {
-        self.poisson.levels()
+    /// Sets each velocity component from `f(kind, x)` (x in metres from
+    /// the box's corner) at its faces, keeping closed faces (walls,
+    /// solids) at 0.
+    pub fn set_velocity(&mut self, mut f: impl FnMut(u32, Vec3) -> f32) {
+        let p = self.params;
+        for (q, kind) in [(&mut self.u, KIND_U), (&mut self.v, KIND_V), (&mut self.w, KIND_W)] {
+            let e = extent(&p, kind);
+            for (i, x) in q.iter_mut().enumerate() {
+                let open = face_open(&p, kind, i as u32, &self.fluid);
+                *x = if open != 0 { f(kind, position(kind, coords(e, i as u32)) * p.h) } else { 0.0 };
+            }
+        }
     }
 
     /// The velocity's arrays.
@@ -385,7 +384,7 @@ impl Fluid {
             return forward;
         }
         // MacCormack: the forward step's departure points are kept for the
-        // limiter (one trace fewer per element than `maccormack`); the
+        // limiter (one trace fewer per element than tracing again); the
         // forward step samples there, as `advect` does.
         let mut from = vec![glam::Vec3::ZERO; q.len()];
         for_each_invocation(&mut from, 0, &ProgressBar::hidden(), |i, o| *o = departure(p, kind, i, vel));

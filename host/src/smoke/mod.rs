@@ -384,8 +384,20 @@ static KEPT: Mutex<Vec<(String, Fluid)>> = Mutex::new(Vec::new());
 /// cache holds (`cache`), if any; the state reached is kept and, if any
 /// step was taken, written to the cache. `progress` counts steps.
 pub fn simulate(config: &Config, fluid_cells: Vec<u32>, seconds: f64, progress: &indicatif::ProgressBar) -> Fluid {
-    let key =
-        format!("{:?}{:?}{:?}{:?}{:?}", config.params, config.origin, config.advection, config.sources, fluid_cells);
+    // Everything a step's result depends on: the parameters, the sources,
+    // the puffs' rules, the solver's stop, and the solid cells (hashed:
+    // millions of flags need not be formatted).
+    let key = format!(
+        "{:?}{:?}{:?}{:?}{:?}{:?}{:?}{:016x}",
+        config.params,
+        config.origin,
+        config.advection,
+        config.sources,
+        config.rules,
+        config.tolerance,
+        config.max_iterations,
+        cache::bytes_hash(bytemuck::cast_slice(&fluid_cells))
+    );
     let hash = cache::key_hash(&key);
     let steps = config.steps_to(seconds);
     let mut start = None;

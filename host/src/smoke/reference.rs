@@ -4,22 +4,9 @@
 //! measure against them.
 
 use glam::{UVec3, Vec3};
-use slicelight_shaders::smoke::{coords, extent, face_open, position, KIND_TEMPERATURE, KIND_U, KIND_V};
+use slicelight_shaders::smoke::{coords, position, KIND_TEMPERATURE, KIND_U, KIND_V};
 
-use super::{configure, Advection, Fluid, Settings};
-
-/// Sets each velocity component from `f(kind, x)` (x in metres from the
-/// box's corner) at its faces, keeping closed faces at 0.
-pub fn set_velocity(fluid: &mut Fluid, mut f: impl FnMut(u32, Vec3) -> f32) {
-    let p = fluid.params;
-    for (q, kind) in [(&mut fluid.u, 0), (&mut fluid.v, 1), (&mut fluid.w, 2)] {
-        let e = extent(&p, kind);
-        for (i, x) in q.iter_mut().enumerate() {
-            let open = face_open(&p, kind, i as u32, &fluid.fluid);
-            *x = if open != 0 { f(kind, position(kind, coords(e, i as u32)) * p.h) } else { 0.0 };
-        }
-    }
-}
+use super::{configure, Advection, Settings};
 
 fn settings(body: &str) -> Settings {
     toml::from_str(body).expect("a valid smoke table")
@@ -53,7 +40,7 @@ pub fn taylor_green(n: u32, nu: f32, advection: Advection, seconds: f32) -> Tayl
     let c = configure("taylor-green", &settings(&body), Vec3::ZERO, Vec3::new(pi, pi, pi / n as f32))
         .expect("a valid Taylor-Green setup");
     let mut f = c.start(vec![1; (n * n) as usize]);
-    set_velocity(&mut f, |kind, x| match kind {
+    f.set_velocity(|kind, x| match kind {
         KIND_U => x.x.sin() * x.y.cos(),
         KIND_V => -x.x.cos() * x.y.sin(),
         _ => 0.0,

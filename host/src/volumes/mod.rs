@@ -324,11 +324,7 @@ fn phase(field: &str, p: VolumePhase) -> Result<(u32, f32, f32, f32)> {
 /// One volume, validated: its kernel record (offsets not yet set), balls,
 /// and the grid's resolution.
 fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMetaball>, Option<grid::Grid>)> {
-    let lo = validate::finite3(&format!("{field}.min"), v.min)?;
-    let hi = validate::finite3(&format!("{field}.max"), v.max)?;
-    if !hi.cmpgt(lo).all() {
-        bail!(invalid(&format!("{field}.max"), "a corner above min in every axis (a box with volume)", v.max));
-    }
+    let (lo, hi) = box_of(field, v)?;
     let sigma_s = validate::non_negative3(&format!("{field}.sigma_s"), v.sigma_s)?;
     let sigma_t = validate::non_negative3(&format!("{field}.sigma_t"), v.sigma_t)?;
     if sigma_s.cmpgt(sigma_t).any() {
@@ -419,6 +415,16 @@ fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMet
     Ok((record, balls, file))
 }
 
+/// A volume's box, checked: its corners `min` and `max` (m).
+fn box_of(field: &str, v: &Volume) -> Result<(Vec3, Vec3)> {
+    let lo = validate::finite3(&format!("{field}.min"), v.min)?;
+    let hi = validate::finite3(&format!("{field}.max"), v.max)?;
+    if !hi.cmpgt(lo).all() {
+        bail!(invalid(&format!("{field}.max"), "a corner above min in every axis (a box with volume)", v.max));
+    }
+    Ok((lo, hi))
+}
+
 /// A smoke volume: the fluid simulated to the scene's time, its puffs
 /// the volume's metaballs (`render = "puffs"`) or its density field the
 /// grid (`"density"`).
@@ -433,11 +439,7 @@ fn smoke_volume(
     if others.iter().any(|o| *o) {
         bail!(invalid(&format!("{field}.smoke"), "smoke alone (no metaballs, automaton or grid besides it)", "both"));
     }
-    let lo = validate::finite3(&format!("{field}.min"), v.min)?;
-    let hi = validate::finite3(&format!("{field}.max"), v.max)?;
-    if !hi.cmpgt(lo).all() {
-        bail!(invalid(&format!("{field}.max"), "a corner above min in every axis (a box with volume)", v.max));
-    }
+    let (lo, hi) = box_of(field, v)?;
     let config = crate::smoke::configure(field, s, lo, hi)?;
     let cells = if config.obstacles {
         crate::smoke::voxelise(data, &config.params, lo)

@@ -248,30 +248,18 @@ pub fn advect(p: &FluidParams, kind: u32, flat: u32, q: &[f32], vel: Velocity, d
     sample(p, kind, q, trace(p, vel, x, direction))
 }
 
-/// MacCormack's correction (Selle, Fedkiw, Kim, Liu and Rossignac 2008):
-/// `forward` (one semi-Lagrangian step of `q`) plus half the error
-/// `q - back` that the reverse step of `forward` (`back`) shows, clamped
-/// to the values the forward step blended, so no new extrema appear.
-pub fn maccormack(
-    p: &FluidParams,
-    kind: u32,
-    flat: u32,
-    q: &[f32],
-    forward: &[f32],
-    back: &[f32],
-    vel: Velocity,
-) -> f32 {
-    maccormack_from(p, kind, flat, q, forward, back, departure(p, kind, flat, vel))
-}
-
 /// Where the fluid at element `flat` of `kind` was `dt` ago (cells): the
-/// point `advect` samples (the host keeps it for MacCormack's limiter
-/// rather than tracing twice).
+/// point `advect` samples (kept for MacCormack's limiter rather than
+/// traced twice).
 pub fn departure(p: &FluidParams, kind: u32, flat: u32, vel: Velocity) -> Vec3 {
     trace(p, vel, position(kind, coords(extent(p, kind), flat)), 1.0)
 }
 
-/// `maccormack` with the forward step's departure point `from` given.
+/// MacCormack's correction (Selle, Fedkiw, Kim, Liu and Rossignac 2008) of
+/// element `flat`: `forward` (one semi-Lagrangian step of `q`) plus half
+/// the error `q - back` that the reverse step of `forward` (`back`) shows,
+/// clamped to the values the forward step blended at its departure point
+/// `from` (`departure`), so no new extrema appear.
 pub fn maccormack_from(
     p: &FluidParams,
     kind: u32,
@@ -302,17 +290,12 @@ pub struct Stages<'a> {
     pub back: &'a [f32],
 }
 
-/// `maccormack` of temperature and smoke at cell `flat` (one back-trace).
-pub fn maccormack_centres(p: &FluidParams, flat: u32, t: Stages, s: Stages, vel: Velocity) -> (f32, f32) {
-    maccormack_centres_from(p, flat, t, s, departure(p, KIND_TEMPERATURE, flat, vel))
-}
-
-/// `maccormack_centres` with the forward step's departure point `b` given.
+/// `maccormack_from` of temperature and smoke at cell `flat`, which share
+/// their departure point `b`.
 pub fn maccormack_centres_from(p: &FluidParams, flat: u32, t: Stages, s: Stages, b: Vec3) -> (f32, f32) {
-    let i = flat as usize;
     (
-        limited(t.forward[i] + 0.5 * (t.q[i] - t.back[i]), t.forward[i], sample_bounded(p, KIND_TEMPERATURE, t.q, b)),
-        limited(s.forward[i] + 0.5 * (s.q[i] - s.back[i]), s.forward[i], sample_bounded(p, KIND_SMOKE, s.q, b)),
+        maccormack_from(p, KIND_TEMPERATURE, flat, t.q, t.forward, t.back, b),
+        maccormack_from(p, KIND_SMOKE, flat, s.q, s.forward, s.back, b),
     )
 }
 
@@ -596,22 +579,31 @@ pub fn coarser(n: UVec3) -> UVec3 {
     (n + UVec3::ONE) / 2
 }
 
+/// The index of child `n` (0..8: x, then y, then z offsets of 0 or 1) of
+/// coarse cell `flat` on the fine grid of `fine` cells, or `NO_CHILD` where
+/// an odd fine size leaves the coarse cell without it.
+pub fn child(fine: UVec3, flat: u32, n: u32) -> u32 {
+    let c = coords(coarser(fine), flat) * 2 + UVec3::new(n & 1, (n >> 1) & 1, n >> 2);
+    if c.x < fine.x && c.y < fine.y && c.z < fine.z {
+        index(fine, c.x, c.y, c.z) as u32
+    } else {
+        NO_CHILD
+    }
+}
+
+/// See `child`.
+pub const NO_CHILD: u32 = u32::MAX;
+
 /// A coarse cell is fluid if any of its (up to eight) children is.
 pub fn coarse_fluid(fine: UVec3, fluid: &[u32], flat: u32) -> u32 {
-    let c = coords(coarser(fine), flat) * 2;
     let mut any = 0;
-    let mut k = c.z;
-    while k < (c.z + 2).min(fine.z) {
-        let mut j = c.y;
-        while j < (c.y + 2).min(fine.y) {
-            let mut i = c.x;
-            while i < (c.x + 2).min(fine.x) {
-                any |= fluid[index(fine, i, j, k)];
-                i += 1;
-            }
-            j += 1;
+    let mut n = 0;
+    while n < 8 {
+        let c = child(fine, flat, n);
+        if c != NO_CHILD {
+            any |= fluid[c as usize];
         }
-        k += 1;
+        n += 1;
     }
     any
 }
@@ -620,20 +612,14 @@ pub fn coarse_fluid(fine: UVec3, fluid: &[u32], flat: u32) -> u32 {
 /// sum over its children (the average, times `(2h)^2 / h^2 = 4`, since `A`
 /// carries `h^2`).
 pub fn restrict(fine: UVec3, r: &[f32], flat: u32) -> f32 {
-    let c = coords(coarser(fine), flat) * 2;
     let mut sum = 0.0;
-    let mut k = c.z;
-    while k < (c.z + 2).min(fine.z) {
-        let mut j = c.y;
-        while j < (c.y + 2).min(fine.y) {
-            let mut i = c.x;
-            while i < (c.x + 2).min(fine.x) {
-                sum += r[index(fine, i, j, k)];
-                i += 1;
-            }
-            j += 1;
+    let mut n = 0;
+    while n < 8 {
+        let c = child(fine, flat, n);
+        if c != NO_CHILD {
+            sum += r[c as usize];
         }
-        k += 1;
+        n += 1;
     }
     0.5 * sum
 }

@@ -2,8 +2,9 @@
 # Installs what slicelight needs and a fresh machine lacks: the pinned Rust-GPU
 # nightly (from rust-toolchain.toml) and, on Debian/Ubuntu, a Vulkan loader
 # with lavapipe (Mesa's Vulkan device on the CPU) so the GPU backend and the
-# GPU-vs-CPU tests run without a GPU, and the DejaVu fonts for the benchmark's
-# plots. Safe to run again: it skips what is there.
+# GPU-vs-CPU tests run without a GPU, the DejaVu fonts for the benchmark's
+# plots, and the X11 libraries and tools of the viewer and its tests (Xvfb,
+# xdotool, xwd). Safe to run again: it skips what is there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -25,6 +26,12 @@ missing=()
 have_vulkan || missing+=(mesa-vulkan-drivers libvulkan1)
 # The font of `slicelight bench`'s plot labels.
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || missing+=(fonts-dejavu-core)
+# `slicelight view`'s window (X11, loaded at run time) and its tests: an X
+# server without a screen (Xvfb), real key and mouse events (xdotool) and
+# window screenshots (xwd, in x11-apps).
+for pkg in libx11-6 libx11-xcb1 libxcursor1 libxrandr2 libxi6 libxkbcommon-x11-0 xvfb xdotool x11-apps; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
 if [ ${#missing[@]} -gt 0 ]; then
     if command -v apt-get >/dev/null 2>&1; then
         echo "setup: installing ${missing[*]}" >&2

@@ -28,6 +28,7 @@ pub mod output;
 pub mod reference;
 pub mod render;
 pub mod scene;
+pub mod view;
 
 // The families.
 pub mod caustics;

@@ -29,9 +29,51 @@ enum Command {
     Bench(BenchArgs),
     /// Print the RMS and max difference of IMAGE against REFERENCE.
     Compare(CompareArgs),
+    /// Open a window on a scene: move the camera, the sun and the lights,
+    /// change the medium and the planes, turn passes off, play an
+    /// animation; the image refines while nothing changes. `--headless N`
+    /// times the same frame loop without a window.
+    View(ViewArgs),
     /// Write the scene's [[terrain]] height fields (dunes run here) to an
     /// image a scene can load back with `heights = { file = ... }`.
     Terrain(TerrainArgs),
+}
+
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// The scene file (TOML; see scenes/README.md); edits to it show as they are saved.
+    scene: PathBuf,
+    /// gpu: a Vulkan device (an error without one); cpu: the same kernel
+    /// functions on every core; auto: a device if there is one.
+    #[arg(long, value_enum, default_value = "auto")]
+    backend: BackendChoice,
+    /// Sub-pixel samples per pixel a still view accumulates (the positions
+    /// of `render --spp`; a moving view shows 1).
+    #[arg(long, default_value_t = 16)]
+    spp: u32,
+    /// Window size WxH [default: the scene's resolution].
+    #[arg(long, value_parser = parse_size)]
+    size: Option<[u32; 2]>,
+    /// Folder where `S` writes its PNG and EXR.
+    #[arg(long, default_value = ".")]
+    output_dir: PathBuf,
+    /// No window: time N views of the frame loop (each orbiting the last by
+    /// a degree, at 1 sample per pixel) and print their times.
+    #[arg(long)]
+    headless: Option<usize>,
+    /// With --headless: also write each view's times as CSV.
+    #[arg(long, requires = "headless")]
+    csv: Option<PathBuf>,
+}
+
+/// `WxH` in pixels.
+fn parse_size(s: &str) -> std::result::Result<[u32; 2], String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT (640x360), got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|n| (1..=16384).contains(n));
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok([w, h]),
+        _ => Err(format!("expected WIDTHxHEIGHT with each in 1..=16384, got {s:?}")),
+    }
 }
 
 #[derive(clap::Args)]
@@ -281,19 +323,7 @@ fn ensure_runtime_dir() {
     }
 }
 
-/// Prints a line on stdout; a closed pipe (`| head -1`) ends the program
-/// quietly with success, as the reader has what it wanted.
-fn say(line: &str) {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    if let Err(e) = writeln!(out, "{line}").and_then(|_| out.flush()) {
-        if e.kind() == std::io::ErrorKind::BrokenPipe {
-            std::process::exit(0);
-        }
-        eprintln!("slicelight: error: stdout: {e}");
-        std::process::exit(1);
-    }
-}
+use output::say;
 
 fn main() {
     ensure_runtime_dir();
@@ -390,6 +420,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench(args) => bench_command(args),
         Command::Compare(args) => compare_command(args),
         Command::Terrain(args) => terrain_command(args),
+        Command::View(args) => view_command(args),
     }
 }
 
@@ -578,6 +609,58 @@ fn bench_command(args: BenchArgs) -> Result<()> {
     let written = slicelight::bench::run(family.as_deref(), &scenes, Path::new("scenes"), &opts)?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     eprintln!("wrote {}", names.join(", "));
+    Ok(())
+}
+
+fn view_command(args: ViewArgs) -> Result<()> {
+    let ViewArgs { scene, backend, spp, size, output_dir, headless, csv } = args;
+    if !(1..=scene::MAX_SAMPLES_PER_PIXEL).contains(&spp) {
+        return Err(anyhow!("command line: --spp: expected 1 to {}, got {spp}", scene::MAX_SAMPLES_PER_PIXEL));
+    }
+    let Some(frames) = headless else {
+        return slicelight::view::run(slicelight::view::Options { scene, backend, samples: spp, size, output_dir });
+    };
+    if frames == 0 {
+        return Err(anyhow!("command line: --headless: expected at least 1 view, got 0"));
+    }
+    if let Some(path) = &csv {
+        check_outputs_dir(path)?;
+        check_distinct(&[path.as_path()], &[(&scene, "the scene")])?;
+    }
+    let base = scene::load(&scene)?;
+    let size = size.unwrap_or([base.width(), base.height()]);
+    let views = slicelight::view::headless(&scene, base, backend, size, frames)?;
+    let mut text = String::from("view,seconds,render_seconds\n");
+    for (k, (s, st)) in views.iter().enumerate() {
+        text += &format!("{k},{s:.6},{:.6}\n", st.total_seconds);
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let last = &views[views.len() - 1].1;
+    say(&format!(
+        "{}: {} views at {}x{}, 1 sample per pixel, {} on {}: median {:.1} ms per view (render {:.1} ms), first {:.1} ms",
+        scene.display(),
+        views.len(),
+        size[0],
+        size[1],
+        last.backend,
+        last.device,
+        1e3 * median(views.iter().map(|v| v.0).collect()),
+        1e3 * median(views.iter().map(|v| v.1.total_seconds).collect()),
+        1e3 * views[0].0
+    ));
+    for p in last.passes.iter().filter(|p| p.ran) {
+        let name = p.name;
+        let times: Vec<f64> =
+            views.iter().filter_map(|v| v.1.passes.iter().find(|q| q.name == name).map(|q| q.seconds)).collect();
+        say(&format!("  {name:<24} {:>8.2} ms", 1e3 * median(times)));
+    }
+    if let Some(path) = csv {
+        output::write_atomically(&path, text.as_bytes())?;
+        eprintln!("wrote {}", path.display());
+    }
     Ok(())
 }
 

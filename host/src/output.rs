@@ -228,6 +228,20 @@ pub fn regular_file(field: &str, path: &std::path::Path, limit: u64) -> anyhow::
     Ok(meta.len())
 }
 
+/// Prints a line on stdout; a closed pipe (`| head -1`) ends the program
+/// quietly with success, as the reader has what it wanted.
+pub fn say(line: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = writeln!(out, "{line}").and_then(|_| out.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("slicelight: error: stdout: {e}");
+        std::process::exit(1);
+    }
+}
+
 #[cfg(test)]
 mod write_tests {
     use super::*;

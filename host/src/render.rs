@@ -137,7 +137,23 @@ pub fn plan(data: &SceneData) -> Vec<PassStats> {
 const PIXEL_CHUNK: usize = 16384;
 
 fn plans(data: &SceneData) -> Vec<(&'static dyn Pass, Plan)> {
-    PASSES.iter().map(|&p| (p, p.plan(data))).collect()
+    let mut plans: Vec<(&'static dyn Pass, Plan)> = PASSES.iter().map(|&p| (p, p.plan(data))).collect();
+    // Passes turned off (the viewer's toggles, `SceneData::disabled_passes`):
+    // skipped unless another running pass reads what they write, in which
+    // case they run and only their layer is left out of the image.
+    for i in 0..plans.len() {
+        let (pass, plan) = &plans[i];
+        if !plan.runs || !data.disabled_passes.iter().any(|n| n == pass.name()) {
+            continue;
+        }
+        let read_elsewhere = plans.iter().enumerate().any(|(j, (other, p))| {
+            j != i && p.runs && other.reads().iter().any(|r| pass.writes().iter().any(|w| w.binding == r.binding))
+        });
+        if !read_elsewhere {
+            plans[i].1 = Plan::skip("turned off");
+        }
+    }
+    plans
 }
 
 /// The memory budget of a render in bytes (`--max-memory`); 0: the
@@ -317,6 +333,8 @@ struct Work<'a> {
     sums: Vec<Option<Buffer>>,
     stats: Vec<PassStats>,
     progress: ProgressBar,
+    /// The sub-pixel samples this render takes (of the scene's `samples_per_pixel` positions).
+    samples: std::ops::Range<u32>,
 }
 
 impl Work<'_> {
@@ -341,7 +359,7 @@ impl Work<'_> {
             r.pass.run_cpu(data, &data.common, &mut frame, pb);
             self.stats[r.stat].seconds += t.elapsed().as_secs_f64();
         }
-        for sample in 0..data.samples_per_pixel() {
+        for sample in self.samples.clone() {
             let mut common = data.common;
             common.sample_index = sample;
             for r in of_kind(&self.running, Dispatch::PerPixel) {
@@ -391,7 +409,7 @@ impl Work<'_> {
         let mut first = 0;
         while first < data.pixel_count() {
             let count = band.min(data.pixel_count() - first);
-            for sample in 0..data.samples_per_pixel() {
+            for sample in self.samples.clone() {
                 frame.set_band(first, count, sample);
                 pb.set_message("image");
                 let times = frame.run(&per_pixel.iter().map(|r| (r.pass, count)).collect::<Vec<_>>())?;
@@ -439,30 +457,18 @@ impl Work<'_> {
                 r.pass.report(data, &self.result).map_err(|e| e.context(format!("pass {}", r.pass.name())))?;
             counters.extend(r.pass.counters(data, &self.result));
         }
-        let inv = 1.0 / data.samples_per_pixel() as f32;
         let mut named = Vec::new();
         for pass in &self.layers {
-            let mut layer = self.result.remove(pass.radiance_layer().expect("a layer")).expect("inserted above");
-            layer.as_mut_slice::<Vec4>().par_chunks_mut(PIXEL_CHUNK).for_each(|chunk| {
-                for s in chunk {
-                    *s = (*s * inv).truncate().extend(0.0);
-                }
-            });
+            let layer = self.result.remove(pass.radiance_layer().expect("a layer")).expect("inserted above");
             named.push((pass.name(), layer));
         }
-        // Collected in parallel: the new image's first touch of its pages (a
-        // page fault each) is shared among the threads.
-        let image: Vec<Vec4> = (0..pixels)
-            .into_par_iter()
-            .with_min_len(PIXEL_CHUNK)
-            .map(|i| named.iter().map(|(_, layer)| layer.as_slice::<Vec4>()[i]).sum())
-            .collect();
+        let image = mean_image(&mut named, self.samples.len() as u32);
         let stats = RenderStats {
             backend: backend.name(),
             device: backend.device(),
             width: data.width(),
             height: data.height(),
-            samples_per_pixel: data.samples_per_pixel(),
+            samples_per_pixel: self.samples.len() as u32,
             passes: self.stats,
             pass_timing: timing,
             total_seconds: start.elapsed().as_secs_f64(),
@@ -473,6 +479,30 @@ impl Work<'_> {
     }
 }
 
+/// Turns per-layer sums over `samples` sub-pixel samples into their means
+/// (in place, alpha cleared) and returns the image: the sum of the layers
+/// (the box filter over the samples). A render's own last step, and the
+/// viewer's, so that a view accumulated sample by sample is the same image,
+/// bit for bit, as a render of all its samples at once.
+pub fn mean_image(layers: &mut [(&'static str, Buffer)], samples: u32) -> Vec<Vec4> {
+    let inv = 1.0 / samples.max(1) as f32;
+    let pixels = layers.first().map_or(0, |(_, b)| b.as_slice::<Vec4>().len());
+    for (_, layer) in layers.iter_mut() {
+        layer.as_mut_slice::<Vec4>().par_chunks_mut(PIXEL_CHUNK).for_each(|chunk| {
+            for s in chunk {
+                *s = (*s * inv).truncate().extend(0.0);
+            }
+        });
+    }
+    // Collected in parallel: the new image's first touch of its pages (a
+    // page fault each) is shared among the threads.
+    (0..pixels)
+        .into_par_iter()
+        .with_min_len(PIXEL_CHUNK)
+        .map(|i| layers.iter().map(|(_, layer)| layer.as_slice::<Vec4>()[i]).sum())
+        .collect()
+}
+
 /// Renders a scene: rgb radiance per pixel (W/(m^2 sr)).
 pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<(Vec<Vec4>, RenderStats)> {
     let r = render_layers(data, backend, show_progress)?;
@@ -481,6 +511,21 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
 
 /// Renders a scene, keeping each pass's radiance layer.
 pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<Rendered> {
+    render_samples(data, backend, 0..data.samples_per_pixel(), show_progress)
+}
+
+/// Renders sub-pixel samples `samples` of the scene's `samples_per_pixel`
+/// positions (the viewer's progressive refinement takes them one at a time):
+/// the image and layers are their means.
+pub fn render_samples(
+    data: &SceneData,
+    backend: &Backend,
+    samples: std::ops::Range<u32>,
+    show_progress: bool,
+) -> Result<Rendered> {
+    if samples.is_empty() || samples.end > data.samples_per_pixel() {
+        anyhow::bail!("samples {samples:?}: expected a range inside 0..{}", data.samples_per_pixel());
+    }
     let plans = plans(data);
     check_memory(data, backend, &plans)?;
     let stats: Vec<PassStats> = plans.iter().map(|(p, plan)| stats_of(*p, plan, data)).collect();
@@ -511,7 +556,7 @@ pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -
         }
     }
     let sums = (0..layers.len()).map(|_| None).collect();
-    let mut work = Work { data, running, layers, result: Frame::default(), sums, stats, progress };
+    let mut work = Work { data, running, layers, result: Frame::default(), sums, stats, progress, samples };
     let pass_timing = match backend {
         Backend::Cpu => work.run_cpu(known),
         Backend::Gpu(ctx) => work.run_gpu(ctx, known)?,

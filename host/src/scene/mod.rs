@@ -69,6 +69,9 @@ pub struct SceneData {
     pub desert: crate::desert::Setup,
     /// Passes a scene never needs that were asked for by name (self-checks).
     pub requested_passes: Vec<String>,
+    /// Passes turned off by name (the viewer's toggles): skipped where no
+    /// other running pass reads what they write (`render::plans`).
+    pub disabled_passes: Vec<String>,
     /// The instant shown, s (`[time] seconds`): simulations run to it.
     pub time: f64,
     /// The parsed file and the folder its paths are relative to: what
@@ -505,6 +508,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         volumes: Default::default(),
         desert,
         requested_passes: Vec::new(),
+        disabled_passes: Vec::new(),
         time,
         source: std::sync::Arc::new(Source { file: file.clone(), base: base.to_path_buf(), animated: None }),
     };

@@ -40,33 +40,25 @@ impl Display {
         for tool in ["Xvfb", "xdotool", "xwd"] {
             need(tool);
         }
-        // A display number no other server (or parallel test) holds: Xvfb
-        // refuses a taken one, so try the next.
-        let first = 90 + (std::process::id() % 100) * 10;
-        for n in first..first + 200 {
-            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() || Path::new(&format!("/tmp/.X{n}-lock")).exists() {
-                continue;
+        // Xvfb picks a free display number itself and writes it on the
+        // given descriptor (stdout here) once it listens: no race between
+        // tests started at once.
+        let mut server = Command::new("Xvfb")
+            .args(["-displayfd", "1", "-screen", "0", "800x600x24", "-nolisten", "tcp"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("Xvfb starts");
+        let mut line = String::new();
+        let read = BufReader::new(server.stdout.take().expect("piped")).read_line(&mut line);
+        match (read, line.trim().parse::<u32>()) {
+            (Ok(_), Ok(n)) => Display { server, name: format!(":{n}") },
+            _ => {
+                let _ = server.kill();
+                let _ = server.wait();
+                panic!("Xvfb did not start (it printed {line:?})");
             }
-            let mut server = Command::new("Xvfb")
-                .args([format!(":{n}").as_str(), "-screen", "0", "800x600x24", "-nolisten", "tcp"])
-                .stdout(Stdio::null())
-                .stderr(Stdio::null())
-                .spawn()
-                .expect("Xvfb starts");
-            let deadline = Instant::now() + Duration::from_secs(10);
-            while Instant::now() < deadline {
-                if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
-                    return Display { server, name: format!(":{n}") };
-                }
-                if server.try_wait().expect("Xvfb's status").is_some() {
-                    break; // lost a race for the number
-                }
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            let _ = server.kill();
-            let _ = server.wait();
         }
-        panic!("no X server could start (tried 200 display numbers)");
     }
 
     fn xdotool(&self, args: &[&str]) -> String {
@@ -375,11 +367,66 @@ fn the_window_shows_what_render_writes_moves_with_the_keys_and_survives_a_bad_ed
     std::fs::write(&watched, &good).expect("written");
     v.wait_for("converged:", Duration::from_secs(60));
 
+    // A resized window renders at its new size.
+    display.xdotool(&["windowsize", &w, "200", "150"]);
+    v.wait_for("converged: 4 samples per pixel, 200x150", Duration::from_secs(60));
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while v.screenshot().0 != 200 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (rw, rh, _) = v.screenshot();
+    assert_eq!([rw, rh], [200, 150], "the window took its new size");
+
     let (status, said) = v.quit();
     assert!(status.success(), "Escape exits 0: {status}");
     let latency = said.iter().find(|(_, l)| l.starts_with("input to frame"));
     assert!(latency.is_some(), "the input-to-frame latency is reported on exit: {said:#?}");
     println!("{}", latency.expect("checked").1);
+}
+
+/// The time in a `converged:` line.
+fn time_of(line: &str) -> f64 {
+    let t = line.split("t = ").nth(1).and_then(|r| r.split(' ').next()).expect("a time");
+    t.parse().unwrap_or_else(|e| panic!("{line}: {e}"))
+}
+
+#[test]
+fn an_animated_scene_scrubs_plays_and_pauses() {
+    let display = Display::start();
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    // The smoke test scene: its fluid runs to the instant shown.
+    let mut v = Viewer::start(&display, Path::new("../tests/data/smoke_small.toml"), "cpu", dir.path());
+    let first = v.seen.iter().rev().find(|(_, l)| l.starts_with("converged:")).expect("converged").1.clone();
+    assert_eq!(time_of(&first), 0.0, "{first}");
+    v.key("h");
+    v.key("h");
+    let (_, _, at_start) = v.screenshot();
+    // N: one second on; the smoke has moved.
+    v.key("n");
+    let later = v.wait_for("converged:", Duration::from_secs(120));
+    assert_eq!(time_of(&later), 1.0, "{later}");
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut moved = v.screenshot().2;
+    while moved == at_start && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+        moved = v.screenshot().2;
+    }
+    let change = rms_8bit(&moved, &at_start);
+    assert!(change > 0.1, "a second later the smoke looks different ({change:.3} % RMS)");
+    // Home: back to the start, the same image as before (deterministic).
+    v.key("Home");
+    let back = v.wait_for("converged:", Duration::from_secs(120));
+    assert_eq!(time_of(&back), 0.0, "{back}");
+    let again = v.screenshot_matching(&at_start);
+    assert!(again == at_start, "the same instant, the same image: {:.3} % RMS", rms_8bit(&again, &at_start));
+    // Space plays on the wall clock; Space again pauses and the view converges later on.
+    v.key("space");
+    std::thread::sleep(Duration::from_millis(1500));
+    v.key("space");
+    let paused = v.wait_for("converged:", Duration::from_secs(120));
+    assert!(time_of(&paused) > 0.5, "played for 1.5 s: {paused}");
+    let (status, _) = v.quit();
+    assert!(status.success(), "{status}");
 }
 
 #[test]

@@ -125,6 +125,8 @@ struct App {
     next_watch: Instant,
     /// An error that ends the viewer with a non-zero exit (no render thread).
     fatal: Option<String>,
+    /// Presentations that failed in a row.
+    surface_failures: u32,
 }
 
 impl App {
@@ -158,6 +160,7 @@ impl App {
             watched,
             next_watch: Instant::now() + WATCH_INTERVAL,
             fatal: None,
+            surface_failures: 0,
         }
     }
 
@@ -192,8 +195,12 @@ impl App {
                     }
                     if f.samples == f.target {
                         crate::output::say(&format!(
-                            "converged: {} samples per pixel, {}x{}, {:.3} s",
-                            f.target, f.width, f.height, f.seconds
+                            "converged: {} samples per pixel, {}x{}, t = {:.3} s, {:.3} s",
+                            f.target,
+                            f.width,
+                            f.height,
+                            self.file.time.seconds + f.time,
+                            f.seconds
                         ));
                     }
                     if f.samples == 1 {
@@ -407,17 +414,40 @@ impl App {
         lines
     }
 
+    /// Draws the newest image and the panel. A surface that fails (the X
+    /// server's shared memory gone, say) is made again from the window; three
+    /// failures in a row end the viewer with the error.
     fn present(&mut self) {
+        match self.try_present() {
+            Ok(()) => self.surface_failures = 0,
+            Err(e) => {
+                self.surface_failures += 1;
+                eprintln!("the window's surface failed ({e}); making it again");
+                self.surface = None;
+                if self.surface_failures >= 3 {
+                    self.fatal = Some(format!("the window's surface failed three times: {e}"));
+                    return;
+                }
+                if let Some(w) = &self.window {
+                    match make_surface(w) {
+                        Ok(s) => self.surface = Some(s),
+                        Err(e) => self.fatal = Some(format!("{e:#}")),
+                    }
+                }
+                self.redraw();
+            }
+        }
+    }
+
+    fn try_present(&mut self) -> Result<(), softbuffer::SoftBufferError> {
         let lines = if self.panel > 0 { self.panel_lines() } else { Vec::new() };
-        let (Some(window), Some(surface)) = (&self.window, &mut self.surface) else { return };
+        let (Some(window), Some(surface)) = (&self.window, &mut self.surface) else { return Ok(()) };
         let size = window.inner_size();
         let (Some(w), Some(h)) = (NonZeroU32::new(size.width), NonZeroU32::new(size.height)) else {
-            return; // minimised
+            return Ok(()); // minimised
         };
-        if surface.resize(w, h).is_err() {
-            return;
-        }
-        let Ok(mut buffer) = surface.buffer_mut() else { return };
+        surface.resize(w, h)?;
+        let mut buffer = surface.buffer_mut()?;
         let (ww, wh) = (size.width as usize, size.height as usize);
         buffer.fill(0);
         if let Some(f) = &self.frame {
@@ -430,15 +460,14 @@ impl App {
             }
         }
         overlay::draw(&mut buffer, ww, &lines);
-        if buffer.present().is_ok() {
-            let now = Instant::now();
-            self.presented.retain(|t| now.duration_since(*t) < Duration::from_secs(2));
-            self.presented.push(now);
-            if let (Some((g, at)), Some(f)) = (self.input_at, &self.frame) {
-                if f.generation >= g {
-                    self.latencies.push(at.elapsed().as_secs_f64());
-                    self.input_at = None;
-                }
+        buffer.present()?;
+        let now = Instant::now();
+        self.presented.retain(|t| now.duration_since(*t) < Duration::from_secs(2));
+        self.presented.push(now);
+        if let (Some((g, at)), Some(f)) = (self.input_at, &self.frame) {
+            if f.generation >= g {
+                self.latencies.push(at.elapsed().as_secs_f64());
+                self.input_at = None;
             }
         }
         if let Some(f) = &self.frame {
@@ -450,6 +479,7 @@ impl App {
                 1e3 * f.stats.total_seconds
             ));
         }
+        Ok(())
     }
 
     /// Looks at the scene file's modification time; a change reloads it.
@@ -503,6 +533,12 @@ fn pass_lines(stats: &RenderStats, toggleable: &[&str]) -> Vec<(String, u32)> {
         .collect()
 }
 
+/// The window's software framebuffer.
+fn make_surface(window: &Rc<Window>) -> Result<softbuffer::Surface<Rc<Window>, Rc<Window>>> {
+    let context = softbuffer::Context::new(window.clone()).map_err(|e| anyhow!("softbuffer: {e}"))?;
+    softbuffer::Surface::new(&context, window.clone()).map_err(|e| anyhow!("softbuffer: {e}"))
+}
+
 fn modified(path: &Path) -> Option<SystemTime> {
     std::fs::metadata(path).and_then(|m| m.modified()).ok()
 }
@@ -518,8 +554,7 @@ impl ApplicationHandler<()> for App {
             .with_inner_size(PhysicalSize::new(w, h));
         let made = event_loop.create_window(attrs).map_err(|e| anyhow!("cannot open a window: {e}")).and_then(|w| {
             let w = Rc::new(w);
-            let context = softbuffer::Context::new(w.clone()).map_err(|e| anyhow!("softbuffer: {e}"))?;
-            let surface = softbuffer::Surface::new(&context, w.clone()).map_err(|e| anyhow!("softbuffer: {e}"))?;
+            let surface = make_surface(&w)?;
             Ok((w, surface))
         });
         match made {
@@ -551,7 +586,12 @@ impl ApplicationHandler<()> for App {
                 }
                 self.redraw();
             }
-            WindowEvent::RedrawRequested => self.present(),
+            WindowEvent::RedrawRequested => {
+                self.present();
+                if self.fatal.is_some() {
+                    event_loop.exit();
+                }
+            }
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
                 self.key(&event.logical_key, event_loop)
             }

@@ -52,6 +52,8 @@ pub struct Frame {
     /// Seconds from the view's request to this image (build + render).
     pub seconds: f64,
     pub backend: String,
+    /// The view's clock (s after the scene's `[time] seconds`).
+    pub time: f64,
 }
 
 /// Something a change to the view does not need rebuilt: the scene as
@@ -63,6 +65,7 @@ struct Accumulation {
     sums: Vec<(&'static str, Buffer)>,
     taken: u32,
     requested: Instant,
+    time: f64,
 }
 
 /// The render thread's loop; returns when asked to quit or the window is gone.
@@ -115,7 +118,14 @@ pub fn run(
                     let requested = Instant::now();
                     match build(&base, &view) {
                         Ok(data) => {
-                            current = Some(Accumulation { generation, data, sums: Vec::new(), taken: 0, requested })
+                            current = Some(Accumulation {
+                                generation,
+                                data,
+                                sums: Vec::new(),
+                                taken: 0,
+                                requested,
+                                time: view.time,
+                            })
                         }
                         Err(e) => send(Reply::Error(format!("{}: {e:#}", path.display()))),
                     }
@@ -180,6 +190,7 @@ pub fn run(
             stats,
             seconds: acc.requested.elapsed().as_secs_f64(),
             backend: format!("{} on {}", backend.name(), backend.device()),
+            time: acc.time,
         })));
     }
 }

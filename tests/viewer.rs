@@ -483,3 +483,45 @@ fn headless_frame_loop_prints_its_times() {
     let rows = std::fs::read_to_string(&csv).expect("the CSV");
     assert_eq!(rows.lines().count(), 6, "a header and a row per view: {rows}");
 }
+
+/// The memo the viewer renders with (`render::Memo`) hands a `Whole` pass's
+/// outputs to the next render only when its inputs are the same: a view
+/// rendered after another, with the sky's and the sea's tables taken from
+/// the memo, is the image a fresh render gives, bit for bit, on both
+/// backends.
+#[test]
+fn a_view_rendered_with_the_memo_is_the_fresh_render() {
+    use slicelight::render::{self, Backend, Memo};
+    let base = slicelight::scene::load(Path::new("../scenes/sea_open.toml")).expect("the scene");
+    let at = |x: f32| {
+        base.reconfigure(|f| {
+            f.camera.resolution = [64, 36];
+            f.camera.position[0] += x;
+        })
+        .expect("valid")
+    };
+    let (a, b) = (at(0.0), at(5.0));
+    let ctx = slicelight::gpu::GpuContext::new().unwrap_or_else(|e| panic!("this test needs a Vulkan device: {e:#}"));
+    for backend in [Backend::Cpu, Backend::Gpu(Box::new(ctx))] {
+        let mut memo = Memo::default();
+        render::render_samples(&a, &backend, 0..1, false, Some(&mut memo)).expect("renders");
+        assert_eq!(memo.hits, 0);
+        let with = render::render_samples(&b, &backend, 0..1, false, Some(&mut memo)).expect("renders");
+        assert!(
+            memo.hits >= 4,
+            "{}: the sky's and the sea's tables came from the memo ({} hits)",
+            backend.name(),
+            memo.hits
+        );
+        let fresh = render::render_samples(&b, &backend, 0..1, false, None).expect("renders");
+        assert!(with.image == fresh.image, "{}: the memo changed the image", backend.name());
+        // A changed sun changes every table's inputs (the sky's and the
+        // sea's parameter blocks hold the sun): nothing is taken.
+        let sun = b.reconfigure(|f| f.sky.as_mut().expect("a sky").sun_zenith_deg += 10.0).expect("valid");
+        let hits = memo.hits;
+        let moved = render::render_samples(&sun, &backend, 0..1, false, Some(&mut memo)).expect("renders");
+        assert_eq!(memo.hits, hits, "{}: no table is reused after the sun moved", backend.name());
+        let fresh = render::render_samples(&sun, &backend, 0..1, false, None).expect("renders");
+        assert!(moved.image == fresh.image, "{}: after the sun moved", backend.name());
+    }
+}

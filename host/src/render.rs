@@ -300,6 +300,85 @@ struct Running {
     invocations: u64,
 }
 
+/// A pass's outputs: each resource it writes with its contents.
+type Outputs = Vec<(&'static Resource, Buffer)>;
+
+/// The outputs of `Whole` passes (shadow maps, the sky's and the sea's
+/// tables) kept from one render to the next: the viewer's renders, where a
+/// moved camera leaves the sky's tables as they were and every sub-pixel
+/// sample after the first would compute the same maps again. Each pass's
+/// outputs are kept under a key that hashes everything its kernel is given
+/// (its name and invocation count, the bytes of the scene resources it
+/// reads, and the keys of the passes that wrote the frame resources it
+/// reads), so a hit is the output the pass would write, bit for bit.
+#[derive(Default)]
+pub struct Memo {
+    entries: std::collections::HashMap<&'static str, (u128, Outputs)>,
+    /// Passes taken from the memo instead of run, over its life.
+    pub hits: u64,
+}
+
+impl Memo {
+    /// The keys of the `Whole` passes in `running`, in order; `None` for a
+    /// pass that reads something no key covers (a per-pixel buffer). `known`
+    /// holds the outputs cached before the frame (hashed by their bytes).
+    fn keys(running: &[Running], data: &SceneData, known: &Frame) -> Vec<Option<u128>> {
+        let mut written: std::collections::HashMap<u32, Option<u128>> = Default::default();
+        let mut keys = Vec::new();
+        for r in of_kind(running, Dispatch::Whole) {
+            let mut h = twox_hash::XxHash3_128::new();
+            h.write(r.pass.name().as_bytes());
+            h.write(&r.invocations.to_le_bytes());
+            let mut keyable = true;
+            for input in r.pass.reads() {
+                h.write(&input.binding.to_le_bytes());
+                let bytes = match input.kind {
+                    ResourceKind::Scene(f) => Some(f(data)),
+                    _ => match written.get(&input.binding) {
+                        Some(Some(k)) => {
+                            h.write(&k.to_le_bytes());
+                            continue;
+                        }
+                        Some(None) => None,
+                        None => known.bytes(input).or(match input.kind {
+                            ResourceKind::Frame(_) => Some(&[][..]),
+                            _ => None,
+                        }),
+                    },
+                };
+                match bytes {
+                    Some(b) => {
+                        h.write(&(b.len() as u64).to_le_bytes());
+                        h.write(b);
+                    }
+                    None => keyable = false,
+                }
+            }
+            let key = keyable.then(|| h.finish_128());
+            for w in r.pass.writes() {
+                written.insert(w.binding, key);
+            }
+            keys.push(key);
+        }
+        keys
+    }
+
+    fn get(&mut self, pass: &dyn Pass, key: Option<u128>) -> Option<Outputs> {
+        let (k, outputs) = self.entries.get(pass.name())?;
+        (Some(*k) == key).then(|| {
+            self.hits += 1;
+            outputs.clone()
+        })
+    }
+
+    fn put(&mut self, pass: &dyn Pass, key: Option<u128>, outputs: Outputs) {
+        match key {
+            Some(k) => self.entries.insert(pass.name(), (k, outputs)),
+            None => self.entries.remove(pass.name()),
+        };
+    }
+}
+
 /// What the `Whole` passes write that no running pass reads (a self-check's
 /// accumulators): the frame's results for `Pass::report` and `counters`.
 /// Intermediates such as the shadow maps stay on the device.
@@ -335,6 +414,8 @@ struct Work<'a> {
     progress: ProgressBar,
     /// The sub-pixel samples this render takes (of the scene's `samples_per_pixel` positions).
     samples: std::ops::Range<u32>,
+    /// `Whole` passes' outputs from earlier renders (the viewer's).
+    memo: Option<&'a mut Memo>,
 }
 
 impl Work<'_> {
@@ -353,11 +434,26 @@ impl Work<'_> {
                 }
             }
         }
-        for r in of_kind(&self.running, Dispatch::Whole) {
+        let keys = match self.memo {
+            Some(_) => Memo::keys(&self.running, data, &frame),
+            None => Vec::new(),
+        };
+        for (k, r) in of_kind(&self.running, Dispatch::Whole).enumerate() {
+            if let Some(memo) = self.memo.as_deref_mut() {
+                if let Some(outputs) = memo.get(r.pass, keys[k]) {
+                    outputs.into_iter().for_each(|(w, b)| frame.insert(w, b));
+                    continue;
+                }
+            }
             pb.set_message(r.pass.name());
             let t = Instant::now();
             r.pass.run_cpu(data, &data.common, &mut frame, pb);
             self.stats[r.stat].seconds += t.elapsed().as_secs_f64();
+            if let Some(memo) = self.memo.as_deref_mut() {
+                let outputs = r.pass.writes().iter().filter_map(|w| Some((*w, frame.remove(w)?))).collect::<Vec<_>>();
+                outputs.iter().for_each(|(w, b)| frame.insert(w, b.clone()));
+                memo.put(r.pass, keys[k], outputs);
+            }
         }
         for sample in self.samples.clone() {
             let mut common = data.common;
@@ -387,17 +483,41 @@ impl Work<'_> {
 
     /// Runs every pass on the device, band by band of pixels; returns how
     /// the pass times were taken.
-    fn run_gpu(&mut self, ctx: &GpuContext, known: Frame) -> Result<&'static str> {
+    fn run_gpu(&mut self, ctx: &GpuContext, mut known: Frame) -> Result<&'static str> {
         let (data, pb) = (self.data, &self.progress);
         let pixels = data.pixel_count() as usize;
         let passes: Vec<&'static dyn Pass> = self.running.iter().map(|r| r.pass).collect();
+        // Passes the memo holds are not run: their outputs are uploaded.
+        let keys = match self.memo {
+            Some(_) => Memo::keys(&self.running, data, &known),
+            None => Vec::new(),
+        };
+        let mut whole: Vec<(Running, Option<u128>)> = Vec::new();
+        for (k, r) in of_kind(&self.running, Dispatch::Whole).enumerate() {
+            let key = keys.get(k).copied().flatten();
+            match self.memo.as_deref_mut().and_then(|m| m.get(r.pass, key)) {
+                Some(outputs) => outputs.into_iter().for_each(|(w, b)| known.insert(w, b)),
+                None => whole.push((*r, key)),
+            }
+        }
         let frame = ctx.frame(data, &passes, Some(&known))?;
-        let whole: Vec<Running> = of_kind(&self.running, Dispatch::Whole).copied().collect();
         pb.set_message("maps");
-        let times = frame.run(&whole.iter().map(|r| (r.pass, r.invocations as u32)).collect::<Vec<_>>())?;
-        for (r, t) in whole.iter().zip(times) {
+        let times = frame.run(&whole.iter().map(|(r, _)| (r.pass, r.invocations as u32)).collect::<Vec<_>>())?;
+        for ((r, _), t) in whole.iter().zip(times) {
             self.stats[r.stat].seconds += t;
             pb.inc(r.invocations);
+        }
+        if let Some(memo) = self.memo.as_deref_mut() {
+            // Read back what ran, for the next render.
+            for (r, key) in &whole {
+                let mut outputs = Vec::new();
+                for w in r.pass.writes() {
+                    if let ResourceKind::Frame(len) = w.kind {
+                        outputs.push((*w, frame.read(w, len(data))?));
+                    }
+                }
+                memo.put(r.pass, *key, outputs);
+            }
         }
         for w in final_outputs(&self.running) {
             if let ResourceKind::Frame(len) = w.kind {
@@ -511,17 +631,19 @@ pub fn render(data: &SceneData, backend: &Backend, show_progress: bool) -> Resul
 
 /// Renders a scene, keeping each pass's radiance layer.
 pub fn render_layers(data: &SceneData, backend: &Backend, show_progress: bool) -> Result<Rendered> {
-    render_samples(data, backend, 0..data.samples_per_pixel(), show_progress)
+    render_samples(data, backend, 0..data.samples_per_pixel(), show_progress, None)
 }
 
 /// Renders sub-pixel samples `samples` of the scene's `samples_per_pixel`
 /// positions (the viewer's progressive refinement takes them one at a time):
-/// the image and layers are their means.
+/// the image and layers are their means. With a `memo`, `Whole` passes whose
+/// inputs are those of an earlier render take that render's outputs.
 pub fn render_samples(
     data: &SceneData,
     backend: &Backend,
     samples: std::ops::Range<u32>,
     show_progress: bool,
+    memo: Option<&mut Memo>,
 ) -> Result<Rendered> {
     if samples.is_empty() || samples.end > data.samples_per_pixel() {
         anyhow::bail!("samples {samples:?}: expected a range inside 0..{}", data.samples_per_pixel());
@@ -556,7 +678,7 @@ pub fn render_samples(
         }
     }
     let sums = (0..layers.len()).map(|_| None).collect();
-    let mut work = Work { data, running, layers, result: Frame::default(), sums, stats, progress, samples };
+    let mut work = Work { data, running, layers, result: Frame::default(), sums, stats, progress, samples, memo };
     let pass_timing = match backend {
         Backend::Cpu => work.run_cpu(known),
         Backend::Gpu(ctx) => work.run_gpu(ctx, known)?,

@@ -90,6 +90,7 @@ pub fn run(
     };
     send(Reply::Notice(format!("backend: {} on {}", backend.name(), backend.device())));
     let mut current: Option<Accumulation> = None;
+    let mut memo = render::Memo::default();
     loop {
         // Everything the window has asked since the last sample; while
         // there is nothing to render, wait for it.
@@ -153,11 +154,12 @@ pub fn run(
         }
         let Some(acc) = current.as_mut().filter(|a| a.taken < a.data.samples_per_pixel()) else { continue };
         let sample = acc.taken;
-        let rendered = match render::render_samples(&acc.data, &backend, sample..sample + 1, false) {
+        let rendered = match render::render_samples(&acc.data, &backend, sample..sample + 1, false, Some(&mut memo)) {
             Ok(r) => r,
             Err(e) if matches!(backend, Backend::Gpu(_)) => {
                 send(Reply::Notice(format!("the device failed ({e:#}); going on with the CPU backend")));
                 backend = Backend::Cpu;
+                memo = render::Memo::default();
                 continue;
             }
             Err(e) => {

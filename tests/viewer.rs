@@ -298,6 +298,8 @@ fn the_window_shows_what_render_writes_moves_with_the_keys_and_survives_a_bad_ed
     // The viewer watches its own copy of the scene, edited below.
     let watched = scene_with(dir.path(), "watched.toml", None);
     let mut v = Viewer::start(&display, &watched, "cpu", dir.path());
+    let window = v.seen.iter().find(|(_, l)| l.starts_with("window:")).map(|(_, l)| l.clone());
+    assert!(window.as_deref().is_some_and(|w| w.contains("software framebuffer")), "{window:?}");
 
     // `S` writes what `render` writes: the same PNG pixels, exactly (the
     // viewer sums the same samples in the same order: render::mean_image).
@@ -437,6 +439,11 @@ fn on_lavapipe_the_window_shows_the_cpu_render() {
     let mut v = Viewer::start(&display, &scene, "gpu", dir.path());
     let device = v.seen.iter().find(|(_, l)| l.starts_with("backend:")).map(|(_, l)| l.clone());
     assert!(device.as_deref().is_some_and(|d| d.starts_with("backend: gpu on")), "on the device: {device:?}");
+    let window = v.seen.iter().find(|(_, l)| l.starts_with("window:")).map(|(_, l)| l.clone());
+    assert!(
+        window.as_deref().is_some_and(|w| w.contains("the device's wgpu surface")),
+        "presented through the device's surface: {window:?}"
+    );
     let cpu = render(&scene_with(dir.path(), "cpu.toml", None), &dir.path().join("cpu.png"));
     v.key("h");
     v.key("h");

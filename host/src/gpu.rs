@@ -36,6 +36,8 @@ fn checked<T>(device: &wgpu::Device, what: &str, f: impl FnOnce() -> T) -> Resul
 }
 
 pub struct GpuContext {
+    instance: wgpu::Instance,
+    handle: wgpu::Adapter,
     device: wgpu::Device,
     queue: wgpu::Queue,
     pub adapter: wgpu::AdapterInfo,
@@ -86,6 +88,8 @@ impl GpuContext {
             })
         })?;
         Ok(GpuContext {
+            instance,
+            handle: adapter,
             device,
             queue,
             adapter: info,
@@ -95,6 +99,12 @@ impl GpuContext {
             band_limit_bytes: limits.max_storage_buffer_binding_size as u64,
             timestamps,
         })
+    }
+
+    /// The instance, adapter, device and queue: for presenting in a window
+    /// with the device that renders (the viewer's wgpu surface).
+    pub fn handles(&self) -> (wgpu::Instance, wgpu::Adapter, wgpu::Device, wgpu::Queue) {
+        (self.instance.clone(), self.handle.clone(), self.device.clone(), self.queue.clone())
     }
 
     pub fn device_name(&self) -> String {

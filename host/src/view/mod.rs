@@ -8,25 +8,24 @@
 //! once and a still one converges to `--spp` samples: the same image, bit
 //! for bit, as `render --spp N` (`render::mean_image` does both sums).
 //!
-//! Presentation is a software framebuffer (softbuffer, X11) on both
-//! backends: the passes' image is read back from the device anyway (the
-//! per-pixel layers are summed on the host), so a wgpu surface would add a
-//! copy, not remove one.
+//! The window shows the image through a wgpu surface on the rendering
+//! device (the GPU backend) or a software framebuffer (the CPU backend, or a
+//! device whose surface cannot be made): `present`.
 
 pub mod overlay;
+pub mod present;
 pub mod state;
 pub mod worker;
 
 use crate::passes::PASSES;
-use crate::render::{BackendChoice, RenderStats};
+use crate::render::{Backend, BackendChoice, RenderStats};
 use crate::scene::{self, SceneData, SceneFile};
 use anyhow::{anyhow, Context as _, Result};
 use glam::Vec3;
 use state::ViewState;
-use std::num::NonZeroU32;
 use std::path::{Path, PathBuf};
-use std::rc::Rc;
 use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
@@ -74,21 +73,27 @@ pub fn run(opts: Options) -> Result<()> {
     let event_loop = EventLoop::<()>::with_user_event()
         .build()
         .context("cannot open a window: no display (set DISPLAY, or run under Xvfb)")?;
+    let backend = Backend::open(opts.backend)?;
+    eprintln!("backend: {} on {}", backend.name(), backend.device());
+    let handles = match &backend {
+        Backend::Gpu(ctx) => Some(ctx.handles()),
+        Backend::Cpu => None,
+    };
     let proxy = event_loop.create_proxy();
     let (to_worker, requests) = channel();
     let (replies, from_worker) = channel();
     let view = ViewState::of(&base.source.file, size, opts.samples);
     let file = base.source.file.clone();
-    let (path, choice) = (opts.scene.clone(), opts.backend);
+    let path = opts.scene.clone();
     std::thread::Builder::new()
         .name("render".into())
         .spawn(move || {
-            worker::run(path, base, choice, requests, replies, move || {
+            worker::run(path, base, backend, requests, replies, move || {
                 let _ = proxy.send_event(());
             })
         })
         .context("cannot start the render thread")?;
-    let mut app = App::new(opts, file, view, to_worker, from_worker);
+    let mut app = App::new(opts, file, view, to_worker, from_worker, handles);
     app.show();
     event_loop.run_app(&mut app).context("the window's event loop")?;
     app.finish();
@@ -107,8 +112,12 @@ struct App {
     generation: u64,
     to_worker: Sender<worker::Request>,
     from_worker: Receiver<worker::Reply>,
-    window: Option<Rc<Window>>,
-    surface: Option<softbuffer::Surface<Rc<Window>, Rc<Window>>>,
+    window: Option<Arc<Window>>,
+    presenter: Option<present::Presenter>,
+    /// The rendering device's handles, for a wgpu surface (GPU backend).
+    handles: Option<(wgpu::Instance, wgpu::Adapter, wgpu::Device, wgpu::Queue)>,
+    /// The window's pixels: the image, then the panel over it.
+    canvas: Vec<u32>,
     frame: Option<Box<worker::Frame>>,
     /// Frames presented and when (the frame rate over the last second).
     presented: Vec<Instant>,
@@ -136,6 +145,7 @@ impl App {
         view: ViewState,
         to_worker: Sender<worker::Request>,
         from_worker: Receiver<worker::Reply>,
+        handles: Option<(wgpu::Instance, wgpu::Adapter, wgpu::Device, wgpu::Queue)>,
     ) -> App {
         let watched = modified(&opts.scene);
         App {
@@ -146,7 +156,9 @@ impl App {
             to_worker,
             from_worker,
             window: None,
-            surface: None,
+            presenter: None,
+            handles,
+            canvas: Vec::new(),
             frame: None,
             presented: Vec::new(),
             input_at: None,
@@ -415,22 +427,22 @@ impl App {
     }
 
     /// Draws the newest image and the panel. A surface that fails (the X
-    /// server's shared memory gone, say) is made again from the window; three
-    /// failures in a row end the viewer with the error.
+    /// server's shared memory gone, a swapchain lost) is made again from the
+    /// window; three failures in a row end the viewer with the error.
     fn present(&mut self) {
         match self.try_present() {
             Ok(()) => self.surface_failures = 0,
             Err(e) => {
                 self.surface_failures += 1;
-                eprintln!("the window's surface failed ({e}); making it again");
-                self.surface = None;
+                eprintln!("the window's surface failed ({e:#}); making it again");
+                self.presenter = None;
                 if self.surface_failures >= 3 {
-                    self.fatal = Some(format!("the window's surface failed three times: {e}"));
+                    self.fatal = Some(format!("the window's surface failed three times: {e:#}"));
                     return;
                 }
-                if let Some(w) = &self.window {
-                    match make_surface(w) {
-                        Ok(s) => self.surface = Some(s),
+                if let Some(w) = self.window.clone() {
+                    match self.make_presenter(&w) {
+                        Ok(p) => self.presenter = Some(p),
                         Err(e) => self.fatal = Some(format!("{e:#}")),
                     }
                 }
@@ -439,28 +451,45 @@ impl App {
         }
     }
 
-    fn try_present(&mut self) -> Result<(), softbuffer::SoftBufferError> {
+    /// The device's surface on the GPU backend, else (or if that fails,
+    /// with a notice) a software framebuffer.
+    fn make_presenter(&mut self, window: &Arc<Window>) -> Result<present::Presenter> {
+        if let Some(handles) = self.handles.clone() {
+            match present::Presenter::device(window, handles) {
+                Ok(p) => return Ok(p),
+                Err(e) => {
+                    let note = format!("{e:#}; presenting through a software framebuffer");
+                    eprintln!("{note}");
+                    self.notice = Some((note, Instant::now()));
+                    self.handles = None;
+                }
+            }
+        }
+        present::Presenter::software(window)
+    }
+
+    fn try_present(&mut self) -> Result<()> {
         let lines = if self.panel > 0 { self.panel_lines() } else { Vec::new() };
-        let (Some(window), Some(surface)) = (&self.window, &mut self.surface) else { return Ok(()) };
+        let Some(window) = self.window.clone() else { return Ok(()) };
         let size = window.inner_size();
-        let (Some(w), Some(h)) = (NonZeroU32::new(size.width), NonZeroU32::new(size.height)) else {
-            return Ok(()); // minimised
-        };
-        surface.resize(w, h)?;
-        let mut buffer = surface.buffer_mut()?;
         let (ww, wh) = (size.width as usize, size.height as usize);
-        buffer.fill(0);
+        if ww == 0 || wh == 0 {
+            return Ok(()); // minimised
+        }
+        self.canvas.clear();
+        self.canvas.resize(ww * wh, 0);
         if let Some(f) = &self.frame {
             // The image at the top left (during a resize it is the old size
             // until the new one renders).
             let (fw, fh) = (f.width as usize, f.height as usize);
             for y in 0..fh.min(wh) {
                 let n = fw.min(ww);
-                buffer[y * ww..y * ww + n].copy_from_slice(&f.pixels[y * fw..y * fw + n]);
+                self.canvas[y * ww..y * ww + n].copy_from_slice(&f.pixels[y * fw..y * fw + n]);
             }
         }
-        overlay::draw(&mut buffer, ww, &lines);
-        buffer.present()?;
+        overlay::draw(&mut self.canvas, ww, &lines);
+        let Some(presenter) = self.presenter.as_mut() else { return Ok(()) };
+        presenter.present(&self.canvas, size.width, size.height)?;
         let now = Instant::now();
         self.presented.retain(|t| now.duration_since(*t) < Duration::from_secs(2));
         self.presented.push(now);
@@ -533,12 +562,6 @@ fn pass_lines(stats: &RenderStats, toggleable: &[&str]) -> Vec<(String, u32)> {
         .collect()
 }
 
-/// The window's software framebuffer.
-fn make_surface(window: &Rc<Window>) -> Result<softbuffer::Surface<Rc<Window>, Rc<Window>>> {
-    let context = softbuffer::Context::new(window.clone()).map_err(|e| anyhow!("softbuffer: {e}"))?;
-    softbuffer::Surface::new(&context, window.clone()).map_err(|e| anyhow!("softbuffer: {e}"))
-}
-
 fn modified(path: &Path) -> Option<SystemTime> {
     std::fs::metadata(path).and_then(|m| m.modified()).ok()
 }
@@ -553,14 +576,15 @@ impl ApplicationHandler<()> for App {
             .with_title(format!("slicelight: {}", self.opts.scene.display()))
             .with_inner_size(PhysicalSize::new(w, h));
         let made = event_loop.create_window(attrs).map_err(|e| anyhow!("cannot open a window: {e}")).and_then(|w| {
-            let w = Rc::new(w);
-            let surface = make_surface(&w)?;
-            Ok((w, surface))
+            let w = Arc::new(w);
+            let presenter = self.make_presenter(&w)?;
+            Ok((w, presenter))
         });
         match made {
-            Ok((w, s)) => {
+            Ok((w, p)) => {
+                eprintln!("window: presenting through {}", p.describe());
                 self.window = Some(w);
-                self.surface = Some(s);
+                self.presenter = Some(p);
             }
             Err(e) => {
                 self.fatal = Some(format!("{e:#}"));
@@ -641,7 +665,8 @@ pub fn headless(
     let (replies, from_worker) = channel();
     let mut view = ViewState::of(&base.source.file, size, 1);
     let path = scene.to_path_buf();
-    let thread = std::thread::spawn(move || worker::run(path, base, choice, requests, replies, || {}));
+    let backend = Backend::open(choice)?;
+    let thread = std::thread::spawn(move || worker::run(path, base, backend, requests, replies, || {}));
     let mut out = Vec::with_capacity(frames);
     for generation in 1..=frames as u64 {
         view.orbit(1f32.to_radians(), 0.0);

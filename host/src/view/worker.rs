@@ -4,7 +4,7 @@
 
 use crate::output;
 use crate::passes::Buffer;
-use crate::render::{self, Backend, BackendChoice, RenderStats};
+use crate::render::{self, Backend, RenderStats};
 use crate::scene::{self, SceneData};
 use crate::view::state::ViewState;
 use anyhow::{anyhow, Result};
@@ -72,7 +72,7 @@ struct Accumulation {
 pub fn run(
     path: PathBuf,
     mut base: SceneData,
-    choice: BackendChoice,
+    mut backend: Backend,
     requests: Receiver<Request>,
     replies: Sender<Reply>,
     wake: impl Fn(),
@@ -81,14 +81,6 @@ pub fn run(
         let _ = replies.send(r);
         wake();
     };
-    let mut backend = match Backend::open(choice) {
-        Ok(b) => b,
-        Err(e) => {
-            send(Reply::Error(format!("{e:#}")));
-            return;
-        }
-    };
-    send(Reply::Notice(format!("backend: {} on {}", backend.name(), backend.device())));
     let mut current: Option<Accumulation> = None;
     let mut memo = render::Memo::default();
     loop {

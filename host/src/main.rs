@@ -653,9 +653,17 @@ fn view_command(args: ViewArgs) -> Result<()> {
     ));
     for p in last.passes.iter().filter(|p| p.ran) {
         let name = p.name;
-        let times: Vec<f64> =
-            views.iter().filter_map(|v| v.1.passes.iter().find(|q| q.name == name).map(|q| q.seconds)).collect();
-        say(&format!("  {name:<24} {:>8.2} ms", 1e3 * median(times)));
+        let of_pass: Vec<&render::PassStats> =
+            views.iter().filter_map(|v| v.1.passes.iter().find(|q| q.name == name)).collect();
+        let kept = of_pass.iter().filter(|q| q.kept).count();
+        let ran: Vec<f64> = of_pass.iter().filter(|q| !q.kept).map(|q| q.seconds).collect();
+        let time = if ran.is_empty() { "        -".to_string() } else { format!("{:>8.2} ms", 1e3 * median(ran)) };
+        let note = if kept > 0 {
+            format!("  (kept from an earlier view in {kept} of {})", of_pass.len())
+        } else {
+            String::new()
+        };
+        say(&format!("  {name:<24} {time}{note}"));
     }
     if let Some(path) = csv {
         output::write_atomically(&path, text.as_bytes())?;

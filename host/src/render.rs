@@ -81,6 +81,9 @@ pub struct PassStats {
     /// What the pass reported (a self-check's verdict).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub report: Option<String>,
+    /// Its outputs were taken from an earlier render (`Memo`), not computed.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub kept: bool,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -239,6 +242,7 @@ fn stats_of(pass: &'static dyn Pass, plan: &Plan, data: &SceneData) -> PassStats
         invocations: invocations(pass, plan, data),
         seconds: 0.0,
         report: None,
+        kept: false,
     }
 }
 
@@ -442,6 +446,7 @@ impl Work<'_> {
             if let Some(memo) = self.memo.as_deref_mut() {
                 if let Some(outputs) = memo.get(r.pass, keys[k]) {
                     outputs.into_iter().for_each(|(w, b)| frame.insert(w, b));
+                    self.stats[r.stat].kept = true;
                     continue;
                 }
             }
@@ -496,7 +501,10 @@ impl Work<'_> {
         for (k, r) in of_kind(&self.running, Dispatch::Whole).enumerate() {
             let key = keys.get(k).copied().flatten();
             match self.memo.as_deref_mut().and_then(|m| m.get(r.pass, key)) {
-                Some(outputs) => outputs.into_iter().for_each(|(w, b)| known.insert(w, b)),
+                Some(outputs) => {
+                    outputs.into_iter().for_each(|(w, b)| known.insert(w, b));
+                    self.stats[r.stat].kept = true;
+                }
                 None => whole.push((*r, key)),
             }
         }

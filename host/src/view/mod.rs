@@ -199,7 +199,19 @@ impl App {
 
     /// Everything the render thread has sent.
     fn receive(&mut self) {
-        while let Ok(reply) = self.from_worker.try_recv() {
+        let mut got = false;
+        loop {
+            let reply = match self.from_worker.try_recv() {
+                Ok(r) => {
+                    got = true;
+                    r
+                }
+                Err(std::sync::mpsc::TryRecvError::Empty) => break,
+                Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                    self.fatal.get_or_insert_with(|| "the render thread stopped".into());
+                    break;
+                }
+            };
             match reply {
                 worker::Reply::Frame(f) => {
                     if f.generation != self.generation {
@@ -258,7 +270,9 @@ impl App {
                 }
             }
         }
-        self.redraw();
+        if got {
+            self.redraw();
+        }
     }
 
     /// The passes that draw a layer, in the order the keys 1-9 toggle them.
@@ -393,18 +407,20 @@ impl App {
             ),
             WHITE,
         ));
-        lines.push((
-            format!(
-                "planes {}  sub-planes {}  keys move: {}",
+        let moves = match v.selected_light {
+            Some(k) => format!("light {k}"),
+            None => "camera".into(),
+        };
+        let shafts = self.frame.as_ref().is_some_and(|f| f.stats.passes.iter().any(|p| p.name == "shafts" && p.ran));
+        let planes = match shafts {
+            true => format!(
+                "planes {}  sub-planes {}  ",
                 v.planes.unwrap_or(self.file.shafts.planes),
-                v.subplanes.unwrap_or(self.file.shafts.subplanes),
-                match v.selected_light {
-                    Some(k) => format!("light {k}"),
-                    None => "camera".into(),
-                }
+                v.subplanes.unwrap_or(self.file.shafts.subplanes)
             ),
-            WHITE,
-        ));
+            false => String::new(),
+        };
+        lines.push((format!("{planes}keys move: {moves}"), WHITE));
         if self.panel == 2 {
             lines.extend(HELP.iter().map(|h| (h.to_string(), YELLOW)));
         } else {
@@ -552,7 +568,9 @@ fn pass_lines(stats: &RenderStats, toggleable: &[&str]) -> Vec<(String, u32)> {
                 Some(k) if k < 9 => format!("{} ", k + 1),
                 _ => "  ".into(),
             };
-            let text = if p.ran {
+            let text = if p.kept {
+                format!("{key}{:<20}     kept", p.name)
+            } else if p.ran {
                 format!("{key}{:<20} {:>8.2} ms", p.name, 1e3 * p.seconds)
             } else {
                 format!("{key}{:<20}      off", p.name)
@@ -645,6 +663,11 @@ impl ApplicationHandler<()> for App {
 
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
         self.watch();
+        self.receive();
+        if self.fatal.is_some() {
+            event_loop.exit();
+            return;
+        }
         event_loop.set_control_flow(ControlFlow::WaitUntil(self.next_watch));
     }
 }

@@ -109,7 +109,7 @@ pub fn run(
                 Request::Show { .. } if Some(i) != newest => {}
                 Request::Show { generation, view } => {
                     let requested = Instant::now();
-                    match build(&base, &view) {
+                    match guarded(|| build(&base, &view)) {
                         Ok(data) => {
                             current = Some(Accumulation {
                                 generation,
@@ -123,7 +123,7 @@ pub fn run(
                         Err(e) => send(Reply::Error(format!("{}: {e:#}", path.display()))),
                     }
                 }
-                Request::Reload => match scene::load(&path) {
+                Request::Reload => match guarded(|| scene::load(&path)) {
                     Ok(data) => {
                         let file = Box::new(data.source.file.clone());
                         base = data;
@@ -146,20 +146,21 @@ pub fn run(
         }
         let Some(acc) = current.as_mut().filter(|a| a.taken < a.data.samples_per_pixel()) else { continue };
         let sample = acc.taken;
-        let rendered = match render::render_samples(&acc.data, &backend, sample..sample + 1, false, Some(&mut memo)) {
-            Ok(r) => r,
-            Err(e) if matches!(backend, Backend::Gpu(_)) => {
-                send(Reply::Notice(format!("the device failed ({e:#}); going on with the CPU backend")));
-                backend = Backend::Cpu;
-                memo = render::Memo::default();
-                continue;
-            }
-            Err(e) => {
-                send(Reply::Error(format!("{}: {e:#}", path.display())));
-                current = None;
-                continue;
-            }
-        };
+        let rendered =
+            match guarded(|| render::render_samples(&acc.data, &backend, sample..sample + 1, false, Some(&mut memo))) {
+                Ok(r) => r,
+                Err(e) if matches!(backend, Backend::Gpu(_)) => {
+                    send(Reply::Notice(format!("the device failed ({e:#}); going on with the CPU backend")));
+                    backend = Backend::Cpu;
+                    memo = render::Memo::default();
+                    continue;
+                }
+                Err(e) => {
+                    send(Reply::Error(format!("{}: {e:#}", path.display())));
+                    current = None;
+                    continue;
+                }
+            };
         let render::Rendered { layers, stats, .. } = rendered;
         if acc.sums.is_empty() {
             acc.sums = layers;
@@ -186,6 +187,22 @@ pub fn run(
             backend: format!("{} on {}", backend.name(), backend.device()),
             time: acc.time,
         })));
+    }
+}
+
+/// `f`, with a panic turned into an error: a bug met by one view is
+/// reported on the panel and the viewer goes on with the next view.
+fn guarded<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(r) => r,
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a panic".into());
+            Err(anyhow!("internal error (please report it): {what}"))
+        }
     }
 }
 

@@ -303,7 +303,8 @@ fn failed_render_keeps_an_existing_output() {
 fn no_temp_files(dir: &Path) -> bool {
     std::fs::read_dir(dir).unwrap().all(|e| {
         let name = e.unwrap().file_name();
-        !name.to_string_lossy().starts_with(".tmp")
+        let name = name.to_string_lossy();
+        !(name.starts_with(".tmp") || name.starts_with(".slicelight-tmp-"))
     })
 }
 
@@ -747,4 +748,85 @@ fn a_spotlight_that_reaches_nothing_is_named_in_a_warning() {
             assert!(data.spotlights_reaching_nothing().is_empty(), "{}", path.display());
         }
     }
+}
+
+/// SIGINT (or SIGTERM) while the outputs are being written: the handler
+/// removes the temporaries, the old output stays whole, the exit is 130.
+/// The failpoint holds the written temporaries before the rename, so the
+/// signal lands exactly there.
+#[test]
+fn an_interrupted_write_leaves_no_temporary_and_the_old_output() {
+    for signal in ["INT", "TERM"] {
+        let dir = scene_dir(GOOD);
+        let old = b"the old image".to_vec();
+        std::fs::write(dir.path().join("out.png"), &old).unwrap();
+        let child = Command::new(env!("CARGO_BIN_EXE_slicelight"))
+            .args(["render", "scene.toml", "-o", "out.png", "-o", "out.exr", "--backend", "cpu", "-q"])
+            .env("SLICELIGHT_FAILPOINT_STALL_BEFORE_RENAME_MS", "20000")
+            .current_dir(dir.path())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Wait until both temporaries are written.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        while temporaries(dir.path()) < 2 {
+            assert!(std::time::Instant::now() < deadline, "no temporaries appeared");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let killed = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
+        assert!(killed.success());
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(130), "SIG{signal}: {stderr}");
+        assert!(stderr.contains("interrupted"), "{stderr}");
+        assert_eq!(temporaries(dir.path()), 0, "SIG{signal}: the temporaries are removed");
+        assert_eq!(std::fs::read(dir.path().join("out.png")).unwrap(), old, "the old output is whole");
+        assert!(!dir.path().join("out.exr").exists(), "no new output appeared");
+    }
+}
+
+/// A temporary left by a process killed outright (SIGKILL cannot be
+/// handled) is removed by the next write to its folder once it is an hour
+/// old; a fresh one (another render writing now) is left alone.
+#[test]
+fn a_stale_temporary_is_removed_by_the_next_render() {
+    let dir = scene_dir(GOOD);
+    let (stale, fresh) = (dir.path().join(".slicelight-tmp-stale"), dir.path().join(".slicelight-tmp-fresh"));
+    std::fs::write(&stale, b"left by a killed render").unwrap();
+    std::fs::write(&fresh, b"being written").unwrap();
+    let two_hours_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+    std::fs::File::options().write(true).open(&stale).unwrap().set_modified(two_hours_ago).unwrap();
+    let run = run_in(dir, &["render", "scene.toml", "-o", "out.png", "--backend", "cpu", "-q"]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(!stale.exists(), "the stale temporary is gone");
+    assert!(fresh.exists(), "the fresh one stays");
+}
+
+fn temporaries(dir: &Path) -> usize {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter(|e| e.as_ref().is_ok_and(|e| e.file_name().to_string_lossy().starts_with(".slicelight-tmp-")))
+        .count()
+}
+
+/// A point light inside a glass ball adds no light (the caustics start
+/// outside glass): the render names it in a warning rather than leave the
+/// image silently black; the same light outside the ball gets no warning.
+#[test]
+fn a_light_inside_glass_is_named_in_a_warning() {
+    let ball = std::fs::read_to_string("../scenes/caustics_ball.toml").unwrap();
+    let small = ball.replace("resolution = [640, 480]", "resolution = [32, 24]");
+    assert_ne!(small, ball, "the scene's resolution line is as expected");
+    let inside = small.replace("position = [1.5, 4.0, -1.0]", "position = [0.1, 0.55, 0.05]");
+    assert_ne!(inside, small, "the light's position line is as expected");
+    let run = run_in(scene_dir(&inside), &["render", "scene.toml", "-o", "out.png", "--backend", "cpu"]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(
+        run.stderr.contains("warning") && run.stderr.contains("point_light[0] is inside object[0]"),
+        "{}",
+        run.stderr
+    );
+    let run = run_in(scene_dir(&small), &["render", "scene.toml", "-o", "out.png", "--backend", "cpu"]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(!run.stderr.contains("inside object"), "{}", run.stderr);
 }

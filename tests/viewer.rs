@@ -365,6 +365,16 @@ fn the_window_shows_what_render_writes_moves_with_the_keys_and_survives_a_bad_ed
     let (_, _, still) = v.screenshot();
     let same = still.iter().zip(&shown_before).filter(|(a, b)| a == b).count();
     assert!(same > still.len() / 2, "the last good image stays ({same} of {} pixels)", still.len());
+    // The panel (H: on) shows the error in red (overlay::RED, 0xff6060).
+    v.key("h");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut red = 0;
+    while red == 0 && Instant::now() < deadline {
+        red = v.screenshot().2.iter().filter(|p| **p == [255, 96, 96]).count();
+    }
+    assert!(red > 50, "the error is on the panel in red ({red} red pixels)");
+    v.key("h");
+    v.key("h");
     // Fixed again: reloaded.
     std::fs::write(&watched, &good).expect("written");
     v.wait_for("converged:", Duration::from_secs(60));

@@ -327,6 +327,7 @@ use output::say;
 
 fn main() {
     ensure_runtime_dir();
+    output::remove_temporaries_on_signal();
     if let Err(e) = run(Cli::parse()) {
         eprintln!("slicelight: error: {e:#}");
         std::process::exit(1);
@@ -487,6 +488,12 @@ fn render_command(args: RenderArgs) -> Result<()> {
     let backend = Backend::open(backend)?;
     if !quiet {
         eprintln!("backend: {} on {}", backend.name(), backend.device());
+    }
+    for light in base.lights_inside_glass() {
+        output::note(&format!(
+            "warning: {}: {light}, which is glass: light from inside glass is not carried out of it (the caustics start outside the object), so it adds no light",
+            scene.display()
+        ));
     }
     for light in base.spotlights_reaching_nothing() {
         output::note(&format!(

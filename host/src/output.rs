@@ -99,6 +99,111 @@ pub fn encode(
     Ok(bytes.into_inner())
 }
 
+/// The name every temporary file of an output starts with: a later run
+/// removes stale ones (`remove_stale_temporaries`).
+pub const TEMPORARY_PREFIX: &str = ".slicelight-tmp-";
+
+/// A temporary file older than this in an output's folder is left from a
+/// process that was killed (SIGKILL) while writing: writing an output takes
+/// seconds, not an hour.
+const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// The temporary files this process is writing now: the signal handler
+/// removes them (`remove_temporaries_on_signal`).
+static STAGED: std::sync::Mutex<Vec<std::path::PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+/// On SIGINT, SIGTERM or SIGHUP: removes the temporary files being written
+/// (outputs are renamed into place only when all are whole, so none is
+/// half-written) and exits with 130.
+pub fn remove_temporaries_on_signal() {
+    let installed = ctrlc::set_handler(|| {
+        let staged = STAGED.lock().map(|s| s.clone()).unwrap_or_default();
+        for p in &staged {
+            let _ = std::fs::remove_file(p);
+        }
+        eprintln!("slicelight: interrupted; no output was half-written");
+        std::process::exit(130);
+    });
+    if let Err(e) = installed {
+        eprintln!("slicelight: warning: cannot handle SIGINT/SIGTERM ({e}); an interrupted write may leave a {TEMPORARY_PREFIX}* file");
+    }
+}
+
+/// Removes `TEMPORARY_PREFIX` files in `dir` older than `STALE_AFTER`.
+pub fn remove_stale_temporaries(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        if !name.to_string_lossy().starts_with(TEMPORARY_PREFIX) {
+            continue;
+        }
+        let old = e.metadata().and_then(|m| m.modified()).ok().and_then(|t| t.elapsed().ok());
+        if old.is_some_and(|age| age > STALE_AFTER) && e.file_type().is_ok_and(|t| t.is_file()) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
+/// A temporary file for `path` in its folder, registered for the signal
+/// handler until `finish` renames it into place.
+struct Staged {
+    /// Taken by `finish`.
+    file: Option<tempfile::NamedTempFile>,
+}
+
+impl Staged {
+    fn new(path: &Path) -> Result<Staged> {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        remove_stale_temporaries(dir);
+        let file = tempfile::Builder::new()
+            .prefix(TEMPORARY_PREFIX)
+            .tempfile_in(dir)
+            .with_context(|| format!("{}: cannot create a file in {}", path.display(), dir.display()))?;
+        if let Ok(mut s) = STAGED.lock() {
+            s.push(file.path().to_path_buf());
+        }
+        Ok(Staged { file: Some(file) })
+    }
+
+    fn write(&mut self, path: &Path, bytes: &[u8]) -> Result<()> {
+        let file = self.file.as_mut().expect("not finished");
+        file.write_all(bytes).with_context(|| format!("{}: write failed", path.display()))?;
+        // The temporary file is private (0600); the result is an ordinary file.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            file.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
+        }
+        Ok(())
+    }
+
+    fn finish(mut self, path: &Path) -> Result<()> {
+        let file = self.file.take().expect("not finished");
+        let tmp = file.path().to_path_buf();
+        let done = file.persist(path).map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error));
+        unstage(&tmp);
+        done.map(|_| ())
+    }
+}
+
+fn unstage(tmp: &Path) {
+    if let Ok(mut s) = STAGED.lock() {
+        s.retain(|p| p != tmp);
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        // Not renamed (an error before `finish`): the file goes with it.
+        if let Some(f) = &self.file {
+            unstage(f.path());
+        }
+    }
+}
+
 /// Writes every `(path, bytes)` or none: each goes to a temporary file in
 /// its folder first, and only when all are written whole are they renamed
 /// over their paths (a full disk or an unwritable folder for the last one
@@ -106,24 +211,17 @@ pub fn encode(
 pub fn write_all(files: &[(&Path, &[u8])]) -> Result<()> {
     let mut staged = Vec::with_capacity(files.len());
     for (path, bytes) in files {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        let mut tmp = tempfile::Builder::new()
-            .prefix(".slicelight-tmp-")
-            .tempfile_in(dir)
-            .with_context(|| format!("{}: cannot create a file in {}", path.display(), dir.display()))?;
-        tmp.write_all(bytes).with_context(|| format!("{}: write failed", path.display()))?;
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
-        }
+        let mut tmp = Staged::new(path)?;
+        tmp.write(path, bytes)?;
         staged.push((tmp, *path));
     }
+    // A failpoint for the interruption test (tests/cli.rs): hold the
+    // written temporaries this long before renaming them.
+    if let Some(ms) = std::env::var("SLICELIGHT_FAILPOINT_STALL_BEFORE_RENAME_MS").ok().and_then(|v| v.parse().ok()) {
+        std::thread::sleep(std::time::Duration::from_millis(ms));
+    }
     for (tmp, path) in staged {
-        tmp.persist(path).map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
+        tmp.finish(path)?;
     }
     Ok(())
 }
@@ -154,21 +252,9 @@ fn layered_exr(pixels: &[Vec4], layers: &[(&str, &[Vec4])], width: u32, height: 
 /// Writes `bytes` to `path` through a temporary file in the same folder, so
 /// that `path` either keeps its old contents or gets all of the new ones.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("{}: cannot create a file in {}", path.display(), dir.display()))?;
-    tmp.write_all(bytes).with_context(|| format!("{}: write failed", path.display()))?;
-    // The temporary file is private (0600); the result is an ordinary file.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
-    }
-    tmp.persist(path).map_err(|e| anyhow!("{}: cannot write: {}", path.display(), e.error))?;
-    Ok(())
+    let mut tmp = Staged::new(path)?;
+    tmp.write(path, bytes)?;
+    tmp.finish(path)
 }
 
 /// Where results worth keeping between runs go (the caustics' light

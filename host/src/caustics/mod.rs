@@ -356,19 +356,22 @@ pub mod cache {
     fn read(path: &Path, key: &[u8; 16], len: usize) -> Option<Vec<u8>> {
         crate::output::regular_file("cache", path, (HEADER + len + 8) as u64).ok()?;
         let bytes = std::fs::read(path).ok()?;
-        let (count, size) = (len, 1);
-        let sound = bytes.len() == HEADER + count * size + 8
-            && &bytes[..8] == MAGIC
-            && bytes[8..12] == VERSION.to_le_bytes()
-            && &bytes[12..28] == key
-            && bytes[28..36] == (len as u64).to_le_bytes()
-            && bytes[HEADER + count * size..]
-                == XxHash3_64::oneshot(&bytes[HEADER..HEADER + count * size]).to_le_bytes();
-        if !sound {
+        if !sound(&bytes, key, len) {
             eprintln!("{}: a stale or corrupt light transport table; tracing it again", path.display());
             return None;
         }
         Some(bytes)
+    }
+
+    /// Whether a cache file's bytes are whole: the magic, this version, the
+    /// table's `key`, a payload of `len` bytes and its checksum.
+    pub fn sound(bytes: &[u8], key: &[u8; 16], len: usize) -> bool {
+        bytes.len() == HEADER.saturating_add(len).saturating_add(8)
+            && &bytes[..8] == MAGIC
+            && bytes[8..12] == VERSION.to_le_bytes()
+            && &bytes[12..28] == key
+            && bytes[28..36] == (len as u64).to_le_bytes()
+            && bytes[HEADER + len..] == XxHash3_64::oneshot(&bytes[HEADER..HEADER + len]).to_le_bytes()
     }
 
     /// Writes each object's part of `table` (words) to its file (whole or not at all).

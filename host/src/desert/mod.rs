@@ -417,6 +417,18 @@ fn read_heights(field: &str, base: &Path, h: &HeightsFile) -> Result<Field> {
     crate::output::regular_file(&format!("{field}.file"), &path, crate::output::MAX_IMAGE_BYTES)?;
     let img = image::open(&path)
         .map_err(|e| anyhow!("{field}.file: cannot read the height image '{}': {e}", path.display()))?;
+    heights_from_image(field, &path, &img, h.scale, h.periodic)
+}
+
+/// A height field from a decoded grey image (the first channel, times
+/// `scale` metres); `path` names it in errors.
+pub fn heights_from_image(
+    field: &str,
+    path: &Path,
+    img: &image::DynamicImage,
+    scale: f32,
+    periodic: bool,
+) -> Result<Field> {
     let (w, hgt) = (img.width(), img.height());
     if w as u64 * hgt as u64 > MAX_NODES {
         bail!(invalid(
@@ -436,9 +448,9 @@ fn read_heights(field: &str, base: &Path, h: &HeightsFile) -> Result<Field> {
                 format!("{v} at pixel ({}, {}) of '{}'", i as u32 % w, i as u32 / w, path.display())
             ));
         }
-        heights.push(v * h.scale);
+        heights.push(v * scale);
     }
-    Ok(Field { nx: w, nz: hgt, heights, periodic: h.periodic })
+    Ok(Field { nx: w, nz: hgt, heights, periodic })
 }
 
 /// Value noise on integer lattice points (the counter-based hash), smoothed.

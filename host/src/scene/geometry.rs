@@ -505,20 +505,28 @@ fn lathe(field: &str, l: &LatheObject) -> Result<IndexedMesh> {
 fn load_mesh(field: &str, base: &Path, m: &MeshObject) -> Result<IndexedMesh> {
     let path = base.join(&m.file);
     crate::output::regular_file(&format!("{field}.file"), &path, crate::output::MAX_DATA_BYTES)?;
+    let bytes =
+        std::fs::read(&path).map_err(|e| anyhow!("{field}.file: cannot read mesh '{}': {e}", path.display()))?;
+    mesh_from_obj(field, &path, &bytes, m.scale, m.translate)
+}
+
+/// A mesh from the bytes of an OBJ file (`path` names it in errors; its
+/// materials are not read), scaled by `scale` and moved by `translate`.
+pub fn mesh_from_obj(field: &str, path: &Path, bytes: &[u8], scale: f32, translate: [f32; 3]) -> Result<IndexedMesh> {
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, _) = tobj::load_obj(&path, &options)
-        .map_err(|e| anyhow!("{field}.file: cannot read mesh '{}': {e}", path.display()))?;
-    let translate = finite3(&format!("{field}.translate"), m.translate)?;
-    if !(m.scale.is_finite() && m.scale > 0.0 && m.scale <= crate::scene::validate::MAX_COORDINATE) {
-        return Err(invalid(&format!("{field}.scale"), "a positive number", m.scale));
+    let (models, _) =
+        tobj::load_obj_buf(&mut std::io::BufReader::new(bytes), &options, |_| Err(tobj::LoadError::OpenFileFailed))
+            .map_err(|e| anyhow!("{field}.file: cannot read mesh '{}': {e}", path.display()))?;
+    let translate = finite3(&format!("{field}.translate"), translate)?;
+    if !(scale.is_finite() && scale > 0.0 && scale <= crate::scene::validate::MAX_COORDINATE) {
+        return Err(invalid(&format!("{field}.scale"), "a positive number", scale));
     }
     let mut mesh = IndexedMesh::default();
     for model in models {
         let first = mesh.positions.len() as u32;
         let p = &model.mesh.positions;
         let count = p.len() / 3;
-        mesh.positions
-            .extend((0..count).map(|i| Vec3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]) * m.scale + translate));
+        mesh.positions.extend((0..count).map(|i| Vec3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]) * scale + translate));
         let n = &model.mesh.normals;
         let file_normals = n.len() == p.len();
         for f in model.mesh.indices.as_chunks::<3>().0 {

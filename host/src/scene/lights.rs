@@ -228,12 +228,17 @@ fn load_light_map(field: &str, base: &Path, file: &Path) -> Result<(u32, u32, Ve
     let path = base.join(file);
     crate::output::regular_file(field, &path, crate::output::MAX_IMAGE_BYTES)?;
     let img = image::open(&path).map_err(|e| anyhow!("{field}: cannot read light map '{}': {e}", path.display()))?;
+    Ok(light_map_from_image(&img))
+}
+
+/// A decoded image's texels in linear light (sRGB transfer undone).
+pub fn light_map_from_image(img: &image::DynamicImage) -> (u32, u32, Vec<Vec4>) {
     let img = img.to_rgb32f();
     let texels = img
         .pixels()
         .map(|p| Vec4::new(srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2]), 1.0))
         .collect();
-    Ok((img.width(), img.height(), texels))
+    (img.width(), img.height(), texels)
 }
 
 pub fn srgb_to_linear(c: f32) -> f32 {

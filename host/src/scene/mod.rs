@@ -149,6 +149,53 @@ impl SceneData {
         out
     }
 
+    /// Spotlights and point lights inside a glass object
+    /// (`point_light[k] is inside object[j]`): slicelight carries light
+    /// through glass only from outside it (the caustics method sweeps
+    /// illumination volumes from lights outside the object, and surfaces'
+    /// shadow rays stop at glass), so such a light adds nothing and the
+    /// render warns instead of leaving it silently black. Inside means: rays
+    /// in three generic directions each cross the object's closed mesh an
+    /// odd number of times (two of three, so a ray grazing an edge does not
+    /// decide it).
+    pub fn lights_inside_glass(&self) -> Vec<String> {
+        use slicelight_shaders::geometry::{ray_triangle, NO_HIT};
+        if self.glass_triangles.is_empty() {
+            return Vec::new();
+        }
+        let file = &self.source.file;
+        let lights = file
+            .spotlight
+            .iter()
+            .enumerate()
+            .map(|(k, l)| (format!("spotlight[{k}]"), l.position))
+            .chain(file.point_light.iter().enumerate().map(|(k, l)| (format!("point_light[{k}]"), l.position)));
+        let directions =
+            [Vec3::new(0.5773, 0.6124, 0.5403), Vec3::new(-0.7, 0.1414, 0.6928), Vec3::new(0.2236, -0.8660, -0.4472)];
+        let objects = self.glass_triangles.iter().map(|t| t.object).max().map_or(0, |m| m as usize + 1);
+        let mut out = Vec::new();
+        for (name, position) in lights {
+            let origin = Vec3::from(position);
+            let mut inside_votes = vec![0u32; objects];
+            for dir in directions.map(|d| d.normalize()) {
+                let mut crossings = vec![0u32; objects];
+                for t in &self.glass_triangles {
+                    let [a, b, c] = t.vertices.map(|i| self.glass_vertices[i as usize].position.truncate());
+                    if ray_triangle(origin, dir, a, b, c, 0.0) != NO_HIT {
+                        crossings[t.object as usize] += 1;
+                    }
+                }
+                for (v, c) in inside_votes.iter_mut().zip(crossings) {
+                    *v += c % 2;
+                }
+            }
+            if let Some(j) = inside_votes.iter().position(|v| *v >= 2) {
+                out.push(format!("{name} is inside object[{j}]"));
+            }
+        }
+        out
+    }
+
     /// Whether light `i` is one of a line light's points (the references
     /// light the line itself instead).
     pub fn is_line_point(&self, i: usize) -> bool {
@@ -269,6 +316,12 @@ pub fn load(path: &Path) -> Result<SceneData> {
         .map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let text =
         std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the scene file", path.display()))?;
+    from_text(&text, path)
+}
+
+/// A scene from a scene file's text; `path` names it in errors and its
+/// folder is where the file's paths start.
+pub fn from_text(text: &str, path: &Path) -> Result<SceneData> {
     let base = path.parent().unwrap_or(Path::new("."));
     let mut raw: toml::Table = text.parse().map_err(|e| anyhow!("{}: {}", path.display(), e))?;
     let keys = keyframes::take(&mut raw).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
@@ -276,7 +329,7 @@ pub fn load(path: &Path) -> Result<SceneData> {
         return from_table(&raw, &keys, base, None).map_err(|e| anyhow!("{}: {}", path.display(), e));
     }
     // Without keyframes, read from the text: serde's errors then give lines.
-    let file: SceneFile = toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    let file: SceneFile = toml::from_str(text).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
     build(&file, base).map_err(|e| anyhow!("{}: {}", path.display(), e))
 }
 

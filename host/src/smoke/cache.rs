@@ -91,6 +91,12 @@ pub fn save(dir: &Path, hash: u64, fluid: &Fluid) -> Result<PathBuf> {
 fn read(path: &Path, hash: u64, config: &Config, cells: &[u32]) -> Result<Fluid> {
     crate::output::regular_file("smoke state", path, crate::output::MAX_DATA_BYTES)?;
     let bytes = std::fs::read(path)?;
+    decode(&bytes, hash, config, cells)
+}
+
+/// A state file's bytes as a fluid started from `config` on `cells`; an
+/// error for anything but a whole state of this configuration.
+pub fn decode(bytes: &[u8], hash: u64, config: &Config, cells: &[u32]) -> Result<Fluid> {
     let mut at = 0usize;
     let mut take = |n: usize| -> Result<&[u8]> {
         let s = bytes.get(at..at + n).context("truncated")?;

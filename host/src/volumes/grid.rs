@@ -25,6 +25,11 @@ pub struct Grid {
 pub fn read_vol(field: &str, path: &Path) -> Result<Grid> {
     crate::output::regular_file(field, path, crate::output::MAX_DATA_BYTES)?;
     let bytes = std::fs::read(path).with_context(|| format!("{field}: cannot read {}", path.display()))?;
+    parse_vol(field, path, &bytes)
+}
+
+/// A `.vol` file's bytes as a grid (`path` names it in errors).
+pub fn parse_vol(field: &str, path: &Path, bytes: &[u8]) -> Result<Grid> {
     let fail = |what: String| anyhow::anyhow!("{field}: {}: {what}", path.display());
     if bytes.len() < HEADER || &bytes[0..3] != b"VOL" {
         return Err(fail("not a Mitsuba .vol file (expected the bytes VOL and a 48-byte header)".into()));

@@ -235,6 +235,23 @@ fn missing_mesh() {
     assert_rejected(&run, &["scene.toml", "object[1].file", "teapot.obj"]);
 }
 
+/// The fuzzer's first finding (fuzz/artifacts, the `obj` target): a face
+/// index back past the first normal overflowed inside tobj. Refused with
+/// the line, on any build.
+#[test]
+fn a_mesh_index_before_the_first_element_is_refused_with_its_line() {
+    for (obj, needle) in [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 2//-4 1 3\n", "line 4: a normal index -4, but 0 are defined"),
+        ("v 0 0 0\nv 1 0 0\nf 1 2 3\n", "line 3: a vertex index 3, but 2 are defined"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "a vertex index 0"),
+    ] {
+        let dir = scene_dir(&format!("{GOOD}\n[[object]]\ntype = \"mesh\"\nfile = \"bad.obj\"\n"));
+        std::fs::write(dir.path().join("bad.obj"), obj).unwrap();
+        let run = run_in(dir, &["render", "scene.toml", "-o", "out.png", "--backend", "cpu"]);
+        assert_rejected(&run, &["object[1].file", "bad.obj", needle]);
+    }
+}
+
 #[test]
 fn missing_light_map() {
     let run =

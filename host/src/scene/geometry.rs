@@ -513,6 +513,7 @@ fn load_mesh(field: &str, base: &Path, m: &MeshObject) -> Result<IndexedMesh> {
 /// A mesh from the bytes of an OBJ file (`path` names it in errors; its
 /// materials are not read), scaled by `scale` and moved by `translate`.
 pub fn mesh_from_obj(field: &str, path: &Path, bytes: &[u8], scale: f32, translate: [f32; 3]) -> Result<IndexedMesh> {
+    check_obj_indices(field, path, bytes)?;
     let options = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (models, _) =
         tobj::load_obj_buf(&mut std::io::BufReader::new(bytes), &options, |_| Err(tobj::LoadError::OpenFileFailed))
@@ -561,6 +562,42 @@ pub fn mesh_from_obj(field: &str, path: &Path, bytes: &[u8], scale: f32, transla
         }
     }
     Ok(mesh)
+}
+
+/// Every index of a face, line or point names a vertex, texture coordinate
+/// or normal defined before it (`1..=n` counting from the first, `-n..=-1`
+/// back from the last). tobj turns an index beyond them into an overflowing
+/// `usize` (found by fuzzing: `f 2//-4` with no normals), so they are
+/// refused here with the line.
+fn check_obj_indices(field: &str, path: &Path, bytes: &[u8]) -> Result<()> {
+    let text = String::from_utf8_lossy(bytes);
+    let mut counts = [0i64; 3];
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => counts[0] += 1,
+            Some("vt") => counts[1] += 1,
+            Some("vn") => counts[2] += 1,
+            Some("f" | "l" | "p") => {
+                for word in words {
+                    for (k, part) in word.split('/').enumerate().take(3) {
+                        let Ok(i) = part.parse::<i64>() else { continue };
+                        let count = counts[k];
+                        if !((1..=count).contains(&i) || (-count..=-1).contains(&i)) {
+                            let what = ["vertex", "texture coordinate", "normal"][k];
+                            bail!(
+                                "{field}.file: mesh '{}', line {}: a {what} index {i}, but {count} are defined before it",
+                                path.display(),
+                                n + 1
+                            );
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// Axis-aligned bounds of all geometry (spheres and triangles).

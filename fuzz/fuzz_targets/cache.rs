@@ -1,0 +1,33 @@
+//! The cache files: a caustics light transport table's header and
+//! checksum, and a smoke state file decoded into a fluid. A damaged file
+//! must be refused (and traced or simulated again), never trusted or a
+//! crash.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use slicelight::smoke::{cache, configure, Config, Settings};
+use std::sync::LazyLock;
+
+/// The smoke test scene's fluid (tests/data/smoke_small.toml): 8^3 cells.
+static SMOKE: LazyLock<(Config, Vec<u32>)> = LazyLock::new(|| {
+    let settings: Settings = toml::from_str(
+        "cells = [8, 8, 8]\nseconds = 0.5\ndt = 0.1\nwind = [0.5, 0.0, 0.0]\n\
+         [[source]]\nposition = [0.5, 0.3, 0.0]\nradius = 0.3\nrate = 10.0\ntemperature = 500.0\n",
+    )
+    .expect("the smoke settings");
+    let config = configure("volume[0]", &settings, glam::Vec3::new(0.0, 0.0, -1.0), glam::Vec3::new(2.0, 2.0, 1.0))
+        .expect("a valid fluid");
+    let cells = vec![1u32; config.params.cells as usize];
+    (config, cells)
+});
+
+fuzz_target!(|bytes: &[u8]| {
+    let key = [7u8; 16];
+    let len = bytes.len().saturating_sub(44);
+    let _ = slicelight::caustics::cache::sound(bytes, &key, len);
+    let (config, cells) = &*SMOKE;
+    // The hash the file must carry: its own (bytes 8..16) so that decoding
+    // goes past the check and into the arrays.
+    let hash = bytes.get(8..16).map_or(0, |b| u64::from_le_bytes(b.try_into().expect("8 bytes")));
+    let _ = cache::decode(bytes, hash, config, cells);
+});

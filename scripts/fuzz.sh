@@ -26,7 +26,7 @@ done
 [ ${#targets[@]} -gt 0 ] || targets=(scene obj image grid cache)
 if ! cargo fuzz --version >/dev/null 2>&1; then
     echo "fuzz: installing cargo-fuzz" >&2
-    cargo +stable install cargo-fuzz --locked
+    (cd / && cargo install cargo-fuzz --locked)  # the default toolchain, not the pinned one
 fi
 # Sanitizer builds in a folder of their own (their flags differ from the
 # project's, so sharing would rebuild both each time).

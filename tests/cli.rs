@@ -244,12 +244,18 @@ fn a_mesh_index_before_the_first_element_is_refused_with_its_line() {
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 2//-4 1 3\n", "line 4: a normal index -4, but 0 are defined"),
         ("v 0 0 0\nv 1 0 0\nf 1 2 3\n", "line 3: a vertex index 3, but 2 are defined"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "a vertex index 0"),
+        ("v 0 0 0\nv 1e30 0 0\nv 0 1 0\nf 1 2 3\n", "beyond the 1e7 m"),
     ] {
         let dir = scene_dir(&format!("{GOOD}\n[[object]]\ntype = \"mesh\"\nfile = \"bad.obj\"\n"));
         std::fs::write(dir.path().join("bad.obj"), obj).unwrap();
         let run = run_in(dir, &["render", "scene.toml", "-o", "out.png", "--backend", "cpu"]);
         assert_rejected(&run, &["object[1].file", "bad.obj", needle]);
     }
+    // A sound file scaled past the coordinates' limit names the scale.
+    let dir = scene_dir(&format!("{GOOD}\n[[object]]\ntype = \"mesh\"\nfile = \"ok.obj\"\nscale = 1e7\n"));
+    std::fs::write(dir.path().join("ok.obj"), "v 0 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let run = run_in(dir, &["render", "scene.toml", "-o", "out.png", "--backend", "cpu"]);
+    assert_rejected(&run, &["object[1].scale", "ok.obj", "beyond the 1e7 m"]);
 }
 
 #[test]

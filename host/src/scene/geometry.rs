@@ -546,6 +546,19 @@ pub fn mesh_from_obj(field: &str, path: &Path, bytes: &[u8], scale: f32, transla
     if let Some(v) = mesh.positions.iter().find(|v| !v.is_finite()) {
         return Err(anyhow!("{field}.file: mesh '{}' has a vertex that is not finite: {v}", path.display()));
     }
+    // Scaled and moved, every vertex stays where scene coordinates may be
+    // (`validate::MAX_COORDINATE`): a file in millimetres given `scale =
+    // 1e6` would otherwise overflow the kernels' squared distances.
+    let limit = crate::scene::validate::MAX_COORDINATE;
+    if let Some(v) = mesh.positions.iter().find(|v| v.abs().max_element() > limit) {
+        // The file's own vertex, or what the scale and translation made of it.
+        let own = ((*v - translate) / scale).abs().max_element() > limit;
+        return Err(anyhow!(
+            "{field}.{}: mesh '{}' scaled by {scale} and moved by {translate} puts a vertex at {v}, beyond the {limit:e} m every coordinate is held to",
+            if own { "file" } else { "scale" },
+            path.display()
+        ));
+    }
     // Vertices without a normal from the file: the area-weighted mean of
     // their faces' (by winding: counter-clockwise seen from outside).
     let mut sums = vec![Vec3::ZERO; mesh.positions.len()];

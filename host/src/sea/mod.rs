@@ -636,6 +636,29 @@ fn polar_of(directions: Option<u32>) -> Result<Option<u32>> {
 /// Chooses `n_d` (unless `polar` is given) and `n_z` (unless `planes` is)
 /// by the paper's 1/255 rule (6.1); returns what it chose, for the plan.
 fn choose_sampling(params: &mut SeaParams, planes: Option<u32>, polar: Option<u32>) -> Vec<String> {
+    /// The last choice: its inputs (the parameter block's bytes and the
+    /// counts given), the block it left, its notes. The rule takes about
+    /// 20 ms and depends on nothing else, and the viewer builds the scene
+    /// again for every move of the camera.
+    type Choice = (Vec<u8>, SeaParams, Vec<String>);
+    static LAST: std::sync::Mutex<Option<Choice>> = std::sync::Mutex::new(None);
+    let mut key = bytemuck::bytes_of(params).to_vec();
+    key.extend(planes.unwrap_or(u32::MAX).to_le_bytes());
+    key.extend(polar.unwrap_or(u32::MAX).to_le_bytes());
+    if let Some((k, after, notes)) = LAST.lock().ok().as_deref().and_then(|l| l.clone()) {
+        if k == key {
+            *params = after;
+            return notes;
+        }
+    }
+    let notes = choose_sampling_now(params, planes, polar);
+    if let Ok(mut last) = LAST.lock() {
+        *last = Some((key, *params, notes.clone()));
+    }
+    notes
+}
+
+fn choose_sampling_now(params: &mut SeaParams, planes: Option<u32>, polar: Option<u32>) -> Vec<String> {
     let mut sampling = Vec::new();
     let chosen = std::time::Instant::now();
     // Over a varying bottom the rule runs for the deepest bottom and

@@ -42,7 +42,7 @@ for t in "${targets[@]}"; do
         > "$scratch/$t.log" 2>&1
     status=$?
     set -e
-    grep -E "^(INFO: seed|#[0-9]+ *(INITED|DONE)|stat::number_of_executed_units|stat::peak_rss_mb|Done [0-9]+ runs)" \
+    grep -E "^(INFO: seed|#[0-9]+[[:space:]]+(INITED|DONE)|stat::number_of_executed_units|stat::peak_rss_mb|Done [0-9]+ runs)" \
         "$scratch/$t.log" || true
     if [ "$status" != 0 ]; then
         tail -60 "$scratch/$t.log" >&2

@@ -348,3 +348,30 @@ temperature = 500.0
     assert_eq!(grid, &f.smoke[..]);
     assert!(grid.iter().any(|&d| d > 0.1), "no smoke in the grid");
 }
+
+/// A smoke state file is decoded only if whole: the fuzzer's finding (an
+/// array length near 2^64 overflowed the reader's offset) is an error, as
+/// is every truncation; the kept corpus file itself decodes.
+#[test]
+fn a_damaged_state_file_is_an_error_never_a_panic() {
+    use slicelight::smoke::{cache, configure, Settings};
+    let settings: Settings = toml::from_str(
+        "cells = [8, 8, 8]\nseconds = 0.5\ndt = 0.1\nwind = [0.5, 0.0, 0.0]\n\
+         [[source]]\nposition = [0.5, 0.3, 0.0]\nradius = 0.3\nrate = 10.0\ntemperature = 500.0\n",
+    )
+    .expect("settings");
+    let config = configure("volume[0]", &settings, glam::Vec3::new(0.0, 0.0, -1.0), glam::Vec3::new(2.0, 2.0, 1.0))
+        .expect("a valid fluid");
+    let cells = vec![1u32; config.params.cells as usize];
+    let bytes = std::fs::read("../fuzz/corpus/cache/smoke.state").expect("the kept state");
+    let hash = u64::from_le_bytes(bytes[8..16].try_into().expect("8 bytes"));
+    cache::decode(&bytes, hash, &config, &cells).expect("the kept state decodes");
+    // The first array's length (after magic, hash, step and emitted count).
+    let mut huge = bytes.clone();
+    huge[24..32].copy_from_slice(&(u64::MAX - 3).to_le_bytes());
+    assert!(cache::decode(&huge, hash, &config, &cells).is_err());
+    for cut in [0, 7, 8, 23, 31, 100, bytes.len() - 1] {
+        assert!(cache::decode(&bytes[..cut], hash, &config, &cells).is_err(), "cut at {cut}");
+    }
+    assert!(cache::decode(&bytes, hash ^ 1, &config, &cells).is_err(), "another configuration's state");
+}

@@ -99,7 +99,9 @@ fn read(path: &Path, hash: u64, config: &Config, cells: &[u32]) -> Result<Fluid>
 pub fn decode(bytes: &[u8], hash: u64, config: &Config, cells: &[u32]) -> Result<Fluid> {
     let mut at = 0usize;
     let mut take = |n: usize| -> Result<&[u8]> {
-        let s = bytes.get(at..at + n).context("truncated")?;
+        // A length read from the file may be anything: `at + n` is checked
+        // (found by fuzzing: a length near 2^64 overflowed it).
+        let s = at.checked_add(n).and_then(|end| bytes.get(at..end)).context("truncated")?;
         at += n;
         Ok(s)
     };

@@ -355,13 +355,12 @@ temperature = 500.0
 #[test]
 fn a_damaged_state_file_is_an_error_never_a_panic() {
     use slicelight::smoke::{cache, configure, Settings};
-    let settings: Settings = toml::from_str(
-        "cells = [8, 8, 8]\nseconds = 0.5\ndt = 0.1\nwind = [0.5, 0.0, 0.0]\n\
-         [[source]]\nposition = [0.5, 0.3, 0.0]\nradius = 0.3\nrate = 10.0\ntemperature = 500.0\n",
-    )
-    .expect("settings");
-    let config = configure("volume[0]", &settings, glam::Vec3::new(0.0, 0.0, -1.0), glam::Vec3::new(2.0, 2.0, 1.0))
-        .expect("a valid fluid");
+    // The small smoke scene's fluid (8^3 cells), as the fuzz target's.
+    let scene: toml::Table = toml::from_str(include_str!("data/smoke_small.toml")).expect("the scene");
+    let volume = &scene["volume"][0];
+    let settings: Settings = volume["smoke"].clone().try_into().expect("settings");
+    let corner = |k: &str| -> glam::Vec3 { volume[k].clone().try_into::<[f32; 3]>().expect("a corner").into() };
+    let config = configure("volume[0]", &settings, corner("min"), corner("max")).expect("a valid fluid");
     let cells = vec![1u32; config.params.cells as usize];
     let bytes = std::fs::read("../fuzz/corpus/cache/smoke.state").expect("the kept state");
     let hash = u64::from_le_bytes(bytes[8..16].try_into().expect("8 bytes"));

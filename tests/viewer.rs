@@ -121,6 +121,11 @@ impl<'a> Viewer<'a> {
         v
     }
 
+    /// The first line seen so far that starts with `prefix`.
+    fn line_starting(&self, prefix: &str) -> Option<String> {
+        self.seen.iter().find(|(_, l)| l.starts_with(prefix)).map(|(_, l)| l.clone())
+    }
+
     /// Waits for a line containing `text`; returns it.
     fn wait_for(&mut self, text: &str, within: Duration) -> String {
         let deadline = Instant::now() + within;
@@ -298,12 +303,12 @@ fn the_window_shows_what_render_writes_moves_with_the_keys_and_survives_a_bad_ed
     // The viewer watches its own copy of the scene, edited below.
     let watched = scene_with(dir.path(), "watched.toml", None);
     let mut v = Viewer::start(&display, &watched, "cpu", dir.path());
-    let window = v.seen.iter().find(|(_, l)| l.starts_with("window:")).map(|(_, l)| l.clone());
+    let window = v.line_starting("window:");
     assert!(window.as_deref().is_some_and(|w| w.contains("software framebuffer")), "{window:?}");
 
     // `S` writes what `render` writes: the same PNG pixels, exactly (the
     // viewer sums the same samples in the same order: render::mean_image).
-    let expected = render(&scene_with(dir.path(), "same.toml", None), &dir.path().join("render.png"));
+    let expected = render(&watched, &dir.path().join("render.png"));
     v.key("s");
     v.wait_for("wrote", Duration::from_secs(30));
     let saved = read_png(&dir.path().join("watched-view-000.png"));
@@ -412,7 +417,7 @@ fn an_animated_scene_scrubs_plays_and_pauses() {
     let dir = tempfile::tempdir().expect("a temporary folder");
     // The smoke test scene: its fluid runs to the instant shown.
     let mut v = Viewer::start(&display, Path::new("../tests/data/smoke_small.toml"), "cpu", dir.path());
-    let first = v.seen.iter().rev().find(|(_, l)| l.starts_with("converged:")).expect("converged").1.clone();
+    let first = v.line_starting("converged:").expect("converged");
     assert_eq!(time_of(&first), 0.0, "{first}");
     // What the window must show at 0 s and 1 s: `render` of the scene
     // at that instant (the fluid simulated to it), at the window's size.
@@ -459,14 +464,14 @@ fn on_lavapipe_the_window_shows_the_cpu_render() {
     let dir = tempfile::tempdir().expect("a temporary folder");
     let scene = scene_with(dir.path(), "lavapipe.toml", None);
     let mut v = Viewer::start(&display, &scene, "gpu", dir.path());
-    let device = v.seen.iter().find(|(_, l)| l.starts_with("backend:")).map(|(_, l)| l.clone());
+    let device = v.line_starting("backend:");
     assert!(device.as_deref().is_some_and(|d| d.starts_with("backend: gpu on")), "on the device: {device:?}");
-    let window = v.seen.iter().find(|(_, l)| l.starts_with("window:")).map(|(_, l)| l.clone());
+    let window = v.line_starting("window:");
     assert!(
         window.as_deref().is_some_and(|w| w.contains("the device's wgpu surface")),
         "presented through the device's surface: {window:?}"
     );
-    let cpu = render(&scene_with(dir.path(), "cpu.toml", None), &dir.path().join("cpu.png"));
+    let cpu = render(&scene, &dir.path().join("cpu.png"));
     v.key("h");
     v.key("h");
     let shown = v.screenshot_matching(&cpu);

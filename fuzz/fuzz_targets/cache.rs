@@ -8,15 +8,13 @@ use libfuzzer_sys::fuzz_target;
 use slicelight::smoke::{cache, configure, Config, Settings};
 use std::sync::LazyLock;
 
-/// The smoke test scene's fluid (tests/data/smoke_small.toml): 8^3 cells.
+/// The small smoke scene's fluid (tests/data/smoke_small.toml): 8^3 cells.
 static SMOKE: LazyLock<(Config, Vec<u32>)> = LazyLock::new(|| {
-    let settings: Settings = toml::from_str(
-        "cells = [8, 8, 8]\nseconds = 0.5\ndt = 0.1\nwind = [0.5, 0.0, 0.0]\n\
-         [[source]]\nposition = [0.5, 0.3, 0.0]\nradius = 0.3\nrate = 10.0\ntemperature = 500.0\n",
-    )
-    .expect("the smoke settings");
-    let config = configure("volume[0]", &settings, glam::Vec3::new(0.0, 0.0, -1.0), glam::Vec3::new(2.0, 2.0, 1.0))
-        .expect("a valid fluid");
+    let scene: toml::Table = toml::from_str(include_str!("../../tests/data/smoke_small.toml")).expect("the scene");
+    let volume = &scene["volume"][0];
+    let settings: Settings = volume["smoke"].clone().try_into().expect("the smoke settings");
+    let corner = |k: &str| -> glam::Vec3 { volume[k].clone().try_into::<[f32; 3]>().expect("a corner").into() };
+    let config = configure("volume[0]", &settings, corner("min"), corner("max")).expect("a valid fluid");
     let cells = vec![1u32; config.params.cells as usize];
     (config, cells)
 });

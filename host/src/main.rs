@@ -354,15 +354,10 @@ fn write_outputs(
     quiet: bool,
     extra: &[(&Path, Vec<u8>)],
 ) -> Result<()> {
-    let mut files = Vec::with_capacity(outputs.len() + extra.len());
-    for o in outputs {
-        files.push((o.as_path(), output::encode(o, pixels, layers, data.width(), data.height(), data.exposure)?));
-    }
-    files.extend(extra.iter().map(|(p, b)| (*p, b.clone())));
-    let list: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
-    output::write_all(&list)?;
+    let extra: Vec<(&Path, &[u8])> = extra.iter().map(|(p, b)| (*p, b.as_slice())).collect();
+    output::write_images(outputs, pixels, layers, (data.width(), data.height(), data.exposure), &extra)?;
     if !quiet {
-        for (o, _) in &files {
+        for o in outputs.iter().map(|p| p.as_path()).chain(extra.iter().map(|(p, _)| *p)) {
             eprintln!("wrote {}", o.display());
         }
     }
@@ -641,10 +636,7 @@ fn view_command(args: ViewArgs) -> Result<()> {
     for (k, (s, st)) in views.iter().enumerate() {
         text += &format!("{k},{s:.6},{:.6}\n", st.total_seconds);
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
+    let median = slicelight::bench::median;
     let last = &views[views.len() - 1].1;
     say(&format!(
         "{}: {} views at {}x{}, 1 sample per pixel, {} on {}: median {:.1} ms per view (render {:.1} ms), first {:.1} ms",

@@ -99,6 +99,27 @@ pub fn encode(
     Ok(bytes.into_inner())
 }
 
+/// Writes the image (with its per-pass `layers`) to every path in `images`,
+/// each in the format its extension names (`encode`), and the `extra`
+/// files, all or none (`write_all`): what `render` and the viewer's `S`
+/// write.
+pub fn write_images(
+    images: &[std::path::PathBuf],
+    pixels: &[Vec4],
+    layers: &[(&str, &[Vec4])],
+    (width, height, exposure): (u32, u32, f32),
+    extra: &[(&Path, &[u8])],
+) -> Result<()> {
+    let mut encoded = Vec::with_capacity(images.len());
+    for p in images {
+        encoded.push(encode(p, pixels, layers, width, height, exposure)?);
+    }
+    let mut files: Vec<(&Path, &[u8])> =
+        images.iter().map(|p| p.as_path()).zip(encoded.iter().map(|b| b.as_slice())).collect();
+    files.extend_from_slice(extra);
+    write_all(&files)
+}
+
 /// The name every temporary file of an output starts with: a later run
 /// removes stale ones (`remove_stale_temporaries`).
 pub const TEMPORARY_PREFIX: &str = ".slicelight-tmp-";

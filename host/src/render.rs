@@ -139,6 +139,10 @@ pub fn plan(data: &SceneData) -> Vec<PassStats> {
 /// Pixels per rayon task in the frame's own per-pixel loops (summing layers).
 const PIXEL_CHUNK: usize = 16384;
 
+/// The plan's reason for a pass skipped because it was turned off
+/// (`SceneData::disabled_passes`).
+pub const TURNED_OFF: &str = "turned off";
+
 fn plans(data: &SceneData) -> Vec<(&'static dyn Pass, Plan)> {
     let mut plans: Vec<(&'static dyn Pass, Plan)> = PASSES.iter().map(|&p| (p, p.plan(data))).collect();
     // Passes turned off (the viewer's toggles, `SceneData::disabled_passes`):
@@ -153,7 +157,7 @@ fn plans(data: &SceneData) -> Vec<(&'static dyn Pass, Plan)> {
             j != i && p.runs && other.reads().iter().any(|r| pass.writes().iter().any(|w| w.binding == r.binding))
         });
         if !read_elsewhere {
-            plans[i].1 = Plan::skip("turned off");
+            plans[i].1 = Plan::skip(TURNED_OFF);
         }
     }
     plans
@@ -257,7 +261,7 @@ fn progress_bar(total: u64) -> ProgressBar {
 }
 
 /// `sum += layer`, pixel by pixel.
-fn add_into(sum: &mut [Vec4], layer: &[Vec4]) {
+pub fn add_into(sum: &mut [Vec4], layer: &[Vec4]) {
     sum.iter_mut().zip(layer).for_each(|(s, v)| *s += *v);
 }
 
@@ -444,7 +448,7 @@ impl Work<'_> {
         };
         for (k, r) in of_kind(&self.running, Dispatch::Whole).enumerate() {
             if let Some(memo) = self.memo.as_deref_mut() {
-                if let Some(outputs) = memo.get(r.pass, keys[k]) {
+                if let Some(outputs) = memo.get(r.pass, keys.get(k).copied().flatten()) {
                     outputs.into_iter().for_each(|(w, b)| frame.insert(w, b));
                     self.stats[r.stat].kept = true;
                     continue;
@@ -457,7 +461,7 @@ impl Work<'_> {
             if let Some(memo) = self.memo.as_deref_mut() {
                 let outputs = r.pass.writes().iter().filter_map(|w| Some((*w, frame.remove(w)?))).collect::<Vec<_>>();
                 outputs.iter().for_each(|(w, b)| frame.insert(w, b.clone()));
-                memo.put(r.pass, keys[k], outputs);
+                memo.put(r.pass, keys.get(k).copied().flatten(), outputs);
             }
         }
         for sample in self.samples.clone() {

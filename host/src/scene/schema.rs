@@ -55,7 +55,7 @@ pub struct Time {
     pub seconds: f64,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
     pub position: [f32; 3],

@@ -239,7 +239,7 @@ impl App {
                     }
                 }
                 worker::Reply::Loaded(file) => {
-                    let camera_moved = format!("{:?}", file.camera) != format!("{:?}", self.file.camera);
+                    let camera_moved = file.camera != self.file.camera;
                     let size = self.view.size;
                     let mut fresh = ViewState::of(&file, size, self.opts.samples);
                     if !camera_moved {
@@ -281,7 +281,7 @@ impl App {
         f.stats
             .passes
             .iter()
-            .filter(|p| p.ran || p.reason == "turned off")
+            .filter(|p| p.ran || p.reason == crate::render::TURNED_OFF)
             .filter(|p| PASSES.iter().any(|q| q.name() == p.name && q.radiance_layer().is_some()))
             .map(|p| p.name)
             .collect()
@@ -544,13 +544,12 @@ impl App {
     fn finish(&mut self) {
         let _ = self.to_worker.send(worker::Request::Quit);
         if !self.latencies.is_empty() {
-            let mut l = self.latencies.clone();
-            l.sort_by(f64::total_cmp);
+            let worst = self.latencies.iter().copied().fold(0.0, f64::max);
             eprintln!(
                 "input to frame: median {:.1} ms, worst {:.1} ms over {} changes",
-                1e3 * l[l.len() / 2],
-                1e3 * l[l.len() - 1],
-                l.len()
+                1e3 * crate::bench::median(self.latencies.clone()),
+                1e3 * worst,
+                self.latencies.len()
             );
         }
     }
@@ -562,7 +561,7 @@ fn pass_lines(stats: &RenderStats, toggleable: &[&str]) -> Vec<(String, u32)> {
     stats
         .passes
         .iter()
-        .filter(|p| p.ran || p.reason == "turned off")
+        .filter(|p| p.ran || p.reason == crate::render::TURNED_OFF)
         .map(|p| {
             let key = match toggleable.iter().position(|n| *n == p.name) {
                 Some(k) if k < 9 => format!("{} ", k + 1),

@@ -9,7 +9,7 @@ use crate::scene::{self, SceneData};
 use crate::view::state::ViewState;
 use anyhow::{anyhow, Result};
 use glam::Vec4;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError};
 use std::time::Instant;
 
@@ -166,12 +166,11 @@ pub fn run(
             acc.sums = layers;
         } else {
             for ((_, sum), (_, layer)) in acc.sums.iter_mut().zip(&layers) {
-                let s = sum.as_mut_slice::<Vec4>();
-                s.iter_mut().zip(layer.as_slice::<Vec4>()).for_each(|(s, v)| *s += *v);
+                render::add_into(sum.as_mut_slice(), layer.as_slice());
             }
         }
         acc.taken += 1;
-        let image = mean(acc);
+        let (image, _) = mean(acc);
         let (width, height) = (acc.data.width(), acc.data.height());
         let rgb = output::tone_map(&image, width, height, acc.data.exposure);
         let pixels = rgb.pixels().map(|p| (u32::from(p[0]) << 16) | (u32::from(p[1]) << 8) | u32::from(p[2])).collect();
@@ -219,26 +218,20 @@ pub fn build(base: &SceneData, view: &ViewState) -> Result<SceneData> {
     Ok(data)
 }
 
-/// The image of the samples taken so far (the same arithmetic as a
-/// render's: `render::mean_image`).
-fn mean(acc: &Accumulation) -> Vec<Vec4> {
+/// The image of the samples taken so far and each pass's layer (the same
+/// arithmetic as a render's: `render::mean_image`).
+fn mean(acc: &Accumulation) -> (Vec<Vec4>, Vec<(&'static str, Buffer)>) {
     let mut layers = acc.sums.clone();
-    render::mean_image(&mut layers, acc.taken)
+    (render::mean_image(&mut layers, acc.taken), layers)
 }
 
 /// Writes the current image to `paths` (PNG tone-mapped, EXR linear with a
 /// layer per pass, as `render` writes them), all or none.
 fn save(acc: &Accumulation, paths: &[PathBuf]) -> Result<String> {
-    let mut layers = acc.sums.clone();
-    let image = render::mean_image(&mut layers, acc.taken);
+    let (image, layers) = mean(acc);
     let slices: Vec<(&str, &[Vec4])> = layers.iter().map(|(n, b)| (*n, b.as_slice::<Vec4>())).collect();
-    let (w, h) = (acc.data.width(), acc.data.height());
-    let mut files = Vec::new();
-    for p in paths {
-        files.push((p.as_path(), output::encode(p, &image, &slices, w, h, acc.data.exposure)?));
-    }
-    let list: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (*p, b.as_slice())).collect();
-    output::write_all(&list)?;
+    let shape = (acc.data.width(), acc.data.height(), acc.data.exposure);
+    output::write_images(paths, &image, &slices, shape, &[])?;
     let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     Ok(format!("wrote {} ({} of {} samples)", names.join(", "), acc.taken, acc.data.samples_per_pixel()))
 }

@@ -59,7 +59,7 @@ pub struct SceneData {
     pub shafts: crate::shafts::Setup,
     /// The sky passes' parameter block (`enabled` false without `[sky]`).
     pub sky: crate::sky::Setup,
-    /// The sea passes' parameter block and wave normals (`enabled` false without `[sea]`).
+    /// The sea passes' parameter block and wave slope pyramid (`enabled` false without `[sea]`).
     pub sea: crate::sea::Setup,
     /// The caustics passes' parameter block (`enabled` false without glass and light on it).
     pub caustics: crate::caustics::Setup,

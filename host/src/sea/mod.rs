@@ -37,6 +37,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &table::SeaTableSamples,
     &table::SeaDepthTable,
     &table::SeaBottomCorrection,
+    &SeaSurface,
     &SeaReflection,
     &SeaOrder1,
     &SeaOrder2,
@@ -50,9 +51,10 @@ use crate::scene::{invalid, validate, SceneData};
 
 pub static SEA_PARAMS: Resource =
     Resource { binding: 19, name: "sea parameters", kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.sea.params)) };
-/// Surface normals of the waves (a single up normal for a flat sea).
+/// The waves' slope-moment pyramid (`slicelight_shaders::sea::surface`; two
+/// zero `Vec4`s for a flat sea).
 pub static SEA_WAVES: Resource =
-    Resource { binding: 20, name: "wave normals", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.sea.waves)) };
+    Resource { binding: 20, name: "wave slopes", kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.sea.waves)) };
 /// Order-1 radiance (rgb) per plane and direction of the sun's set (eq. 7).
 pub static SEA_RADIANCE_MAP: Resource =
     Resource { binding: 21, name: "sea radiance map", kind: ResourceKind::Frame(|s| s.sea.radiance_map_texels() * 16) };
@@ -75,6 +77,11 @@ pub static SEA_BOTTOM_GRID: Resource = Resource {
     name: "sea bottom depths",
     kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.sea.bottom)),
 };
+/// What the terms below the surface need of it, per pixel (`sea.surface`):
+/// the direction light leaves the water toward the eye (xyz) and the
+/// transmission `(1 - R)/n^2` (w); zero where the sea is not seen.
+pub static SEA_SURFACE: Resource =
+    Resource { binding: 68, name: "sea surface", kind: ResourceKind::PerPixel { blank: no_radiance } };
 pub static SEA_REFLECTION: Resource =
     Resource { binding: 23, name: "sea reflection", kind: ResourceKind::PerPixel { blank: no_radiance } };
 pub static SEA_ORDER1: Resource =
@@ -326,7 +333,7 @@ pub enum Waves {
 pub struct Setup {
     pub enabled: bool,
     pub params: SeaParams,
-    /// The wave normal map (one up normal for a flat sea).
+    /// The waves' slope-moment pyramid (`slicelight_shaders::sea::surface`).
     pub waves: Vec<Vec4>,
     /// A varying bottom's depth grid (one 0 for a flat bottom).
     pub bottom: Vec<f32>,
@@ -532,11 +539,13 @@ pub fn configure(
         }
     }
     let polar = polar_of(s.directions)?;
-    let (waves_kind, waves, wave_resolution, wave_size) = match &s.waves {
-        Waves::Flat => (WAVES_FLAT, vec![Vec4::new(0.0, 1.0, 0.0, 0.0)], 1, 1.0),
+    let (waves_kind, waves, wave_resolution, wave_size, roughness, wave_filter) = match &s.waves {
+        Waves::Flat => (WAVES_FLAT, vec![Vec4::ZERO; 2], 1, 1.0, Vec4::ZERO, 0),
         Waves::Spectrum(spectrum) => {
             let normals = spectrum.normal_map(time)?;
-            (WAVES_NORMAL_MAP, normals, spectrum.resolution, spectrum.size_m)
+            let pyramid = waves::slope_pyramid(&normals, spectrum.resolution as usize);
+            let roughness = spectrum.unresolved_roughness(&normals);
+            (WAVES_NORMAL_MAP, pyramid, spectrum.resolution, spectrum.size_m, roughness, spectrum.filter as u32)
         }
     };
 
@@ -577,8 +586,9 @@ pub fn configure(
         shallow: grid.as_ref().map_or(0.0, |g| g.shallow),
         table_width: if grid.is_some() && s.second_order { s.depth_table } else { 0 },
         table_height: if grid.is_some() && s.second_order { table_rows(s.depth_table, common) } else { 0 },
+        roughness,
         sun_light: 0,
-        _pad: 0,
+        wave_filter,
     };
     let sampling = if s.second_order { choose_sampling(&mut params, s.planes, polar) } else { Vec::new() };
     check_table_size(&params, s.depth_table)?;
@@ -891,6 +901,59 @@ impl Pass for SeaAccumulatedMap {
     }
 }
 
+pub struct SeaSurface;
+
+impl Pass for SeaSurface {
+    fn name(&self) -> &'static str {
+        "sea.surface"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::surface_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_SURFACE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sea(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        if p.waves != slicelight_shaders::sea::WAVES_NORMAL_MAP {
+            return Plan::run("the flat surface: Fresnel and Snell per pixel", 0);
+        }
+        let how = if p.wave_filter != 0 {
+            "the wave slopes under each sample's footprint"
+        } else {
+            "the wave slopes at each sample's point"
+        };
+        Plan::run(format!("{how}: mean Fresnel transmission and refracted view"), 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        let blank = slicelight_shaders::common::surface::no_surface();
+        frame.write_all::<Vec4>(&SEA_SURFACE, common.band_pixels as usize, |frame, out| {
+            let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            for_each_invocation(out, common.band_start, progress, |i, v| {
+                let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
+                *v = slicelight_shaders::sea::surface_pixel(i, common, p, &scene.sea.waves, texel);
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Unit directions and transmissions near 1: the terms' 1e-3.
+        let c = cpu.get::<Vec4>(&SEA_SURFACE);
+        let g = gpu.get::<Vec4>(&SEA_SURFACE);
+        let flat = |v: &[Vec4]| v.iter().flat_map(|p| p.to_array()).collect::<Vec<f32>>();
+        compare_values("sea surface", &flat(g), &flat(c), 1e-3, c.len() * 4 / 1000 + 1)
+    }
+}
+
 pub struct SeaReflection;
 
 impl Pass for SeaReflection {
@@ -938,8 +1001,8 @@ impl Pass for SeaReflection {
     }
 }
 
-/// A per-pixel sea term whose kernel reads the G-buffer, the sea's
-/// parameters and waves, and optionally the accumulated map and the depth
+/// A per-pixel sea term whose kernel reads `sea.surface`'s value for the
+/// pixel, the sea's parameters, and optionally the accumulated map and the depth
 /// table's correction (empty where their passes did not run).
 fn run_term(
     scene: &SceneData,
@@ -947,19 +1010,18 @@ fn run_term(
     frame: &mut Frame,
     progress: &ProgressBar,
     out: &Resource,
-    term: impl Fn(u32, &GBufferTexel, &[Vec4], &[Vec4], &CloudShadow) -> Vec4 + Sync,
+    term: impl Fn(u32, Vec4, &[Vec4], &[Vec4], &CloudShadow) -> Vec4 + Sync,
 ) {
-    let blank = slicelight_shaders::common::surface::no_surface();
     frame.write_all::<Vec4>(out, common.band_pixels as usize, |frame, values| {
         let maps = frame.get::<Vec4>(&SEA_ACCUMULATED_MAP);
         let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION);
-        let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+        let surface = frame.get::<Vec4>(&SEA_SURFACE);
         // The clouds' shadow where the volumes' transmittance volumes ran.
         let lit = crate::common::light_inputs(scene, frame);
         let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
         for_each_invocation(values, common.band_start, progress, |i, v| {
-            let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-            *v = term(i, texel, maps, correction, &clouds);
+            let seen = surface.get((i - common.band_start) as usize).copied().unwrap_or(Vec4::ZERO);
+            *v = term(i, seen, maps, correction, &clouds);
         });
     });
 }
@@ -976,9 +1038,8 @@ impl Pass for SeaOrder1 {
     fn reads(&self) -> &'static [&'static Resource] {
         resources![
             COMMON,
-            GBUFFER,
             SEA_PARAMS,
-            SEA_WAVES,
+            SEA_SURFACE,
             SEA_BOTTOM_GRID,
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
@@ -1008,10 +1069,8 @@ impl Pass for SeaOrder1 {
         Plan::run(format!("single scattering, {how}"), 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, _, _, c| {
-            order1_pixel(i, common, p, waves, bottom, t, c)
-        });
+        let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
+        run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, _, _, c| order1_pixel(i, common, p, t, bottom, c));
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea order 1", &SEA_ORDER1, gpu, cpu)
@@ -1030,9 +1089,8 @@ impl Pass for SeaOrder2 {
     fn reads(&self) -> &'static [&'static Resource] {
         resources![
             COMMON,
-            GBUFFER,
             SEA_PARAMS,
-            SEA_WAVES,
+            SEA_SURFACE,
             SEA_ACCUMULATED_MAP,
             SEA_BOTTOM_GRID,
             SEA_BOTTOM_CORRECTION,
@@ -1066,9 +1124,9 @@ impl Pass for SeaOrder2 {
         Plan::run("second-order scattering, looked up in the accumulated map", 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
+        let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_ORDER2, |i, t, maps, correction, c| {
-            order2_pixel(i, common, p, waves, bottom, maps, correction, t, c)
+            order2_pixel(i, common, p, t, bottom, maps, correction, c)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
@@ -1088,9 +1146,8 @@ impl Pass for SeaBottom {
     fn reads(&self) -> &'static [&'static Resource] {
         resources![
             COMMON,
-            GBUFFER,
             SEA_PARAMS,
-            SEA_WAVES,
+            SEA_SURFACE,
             SEA_BOTTOM_GRID,
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
@@ -1131,10 +1188,8 @@ impl Pass for SeaBottom {
         Plan::run(format!("the bottom at {} m (eq. 9 with 1/pi)", p.depth), 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let (p, waves, bottom) = (&scene.sea.params, &scene.sea.waves[..], &scene.sea.bottom[..]);
-        run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, _, _, c| {
-            bottom_pixel(i, common, p, waves, bottom, t, c)
-        });
+        let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
+        run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, _, _, c| bottom_pixel(i, common, p, t, bottom, c));
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea bottom", &SEA_BOTTOM, gpu, cpu)

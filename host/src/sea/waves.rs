@@ -47,6 +47,28 @@ pub struct Spectrum {
     /// Seed of the random amplitudes.
     #[serde(default)]
     pub seed: u64,
+    /// Whether each sample reads the slopes under its footprint (true) or
+    /// at its point (false: sparkles where a pixel covers many waves).
+    #[serde(default = "filtered")]
+    pub filter: bool,
+    /// The waves shorter than the grid's texels, as slope variance added
+    /// to every footprint: `"cox-munk"` (Cox and Munk's clean-surface
+    /// measurements minus what the grid resolves) or `"none"`.
+    #[serde(default)]
+    pub roughness: Roughness,
+}
+
+/// `roughness` of a wave spectrum.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Roughness {
+    #[default]
+    CoxMunk,
+    None,
+}
+
+fn filtered() -> bool {
+    true
 }
 
 fn open_ocean() -> f32 {
@@ -136,6 +158,73 @@ impl Spectrum {
     }
 }
 
+/// The slope-moment pyramid of a `n x n` normal map (`surface`'s layout):
+/// level 0 the slopes `s = (-n_x/n_y, -n_z/n_y)` and their products at each
+/// texel, each further level the 2 x 2 means of the one below, down to one
+/// texel (`4 n^2 / 3` texels of two `Vec4`s).
+pub fn slope_pyramid(normals: &[Vec4], n: usize) -> Vec<Vec4> {
+    let mut level: Vec<[f32; 5]> = normals
+        .iter()
+        .map(|m| {
+            let (sx, sz) = (-m.x / m.y, -m.z / m.y);
+            [sx, sz, sx * sx, sz * sz, sx * sz]
+        })
+        .collect();
+    let mut out = Vec::with_capacity(normals.len() * 8 / 3 + 2);
+    let mut size = n;
+    loop {
+        for t in &level {
+            out.push(Vec4::new(t[0], t[1], t[2], t[3]));
+            out.push(Vec4::new(t[4], 0.0, 0.0, 0.0));
+        }
+        if size == 1 {
+            return out;
+        }
+        let half = size / 2;
+        let mut next = vec![[0.0f32; 5]; half * half];
+        for (j, row) in next.chunks_mut(half).enumerate() {
+            for (i, texel) in row.iter_mut().enumerate() {
+                for k in 0..5 {
+                    let at = |x: usize, z: usize| level[(2 * j + z) * size + 2 * i + x][k];
+                    texel[k] = 0.25 * (at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1));
+                }
+            }
+        }
+        level = next;
+        size = half;
+    }
+}
+
+impl Spectrum {
+    /// The slope covariance `(xx, zz, xz, 0)` of the waves the grid does not
+    /// resolve: Cox and Munk's (1954) clean-surface variances along and
+    /// across the wind, `3.16e-3 U` and `0.003 + 1.92e-3 U`, less the map's
+    /// own along each (never below 0), turned from the wind's axes to x, z.
+    pub fn unresolved_roughness(&self, normals: &[Vec4]) -> Vec4 {
+        if self.roughness == Roughness::None {
+            return Vec4::ZERO;
+        }
+        let u = self.wind_m_s as f64;
+        let a = (self.wind_direction_deg as f64).to_radians();
+        let (c, s) = (a.cos(), a.sin());
+        let (mut along, mut across) = (0.0f64, 0.0f64);
+        for m in normals {
+            let (sx, sz) = ((-m.x / m.y) as f64, (-m.z / m.y) as f64);
+            along += (sx * c + sz * s).powi(2);
+            across += (-sx * s + sz * c).powi(2);
+        }
+        let count = normals.len().max(1) as f64;
+        let up = (3.16e-3 * u - along / count).max(0.0);
+        let cross = (0.003 + 1.92e-3 * u - across / count).max(0.0);
+        Vec4::new(
+            (up * c * c + cross * s * s) as f32,
+            (up * s * s + cross * c * c) as f32,
+            ((up - cross) * c * s) as f32,
+            0.0,
+        )
+    }
+}
+
 /// The unnormalised inverse 2D transform of a row-major `n x n` grid in place.
 fn inverse_2d(field: &mut [Complex<f64>], n: usize, fft: &dyn rustfft::Fft<f64>) {
     fft.process(field);
@@ -163,6 +252,8 @@ mod tests {
             resolution: 128,
             wind_direction_deg: 0.0,
             seed: 7,
+            filter: true,
+            roughness: Roughness::CoxMunk,
         }
     }
 

@@ -51,6 +51,7 @@
 //! order-2 radiance at a depth depends on the point only through that
 //! direction, so one map serves every camera.
 
+pub mod surface;
 pub mod table;
 
 #[cfg(target_arch = "spirv")]
@@ -91,6 +92,9 @@ pub struct SeaParams {
     /// A varying bottom's depth grid: x, z of its first sample's position
     /// (m), the spacing (m), and w: the deepest depth (m), met beyond it.
     pub bottom_grid: Vec4,
+    /// The slope covariance `(xx, zz, xz)` of the waves shorter than the
+    /// normal map's texels (`surface`): added under every footprint.
+    pub roughness: Vec4,
     /// Height of the surface (scene y), m.
     pub level: f32,
     /// Depth of the flat bottom below the surface, m (`DEEP` for no bottom).
@@ -127,11 +131,13 @@ pub struct SeaParams {
     /// shade the sea through its transmittance volume (`CloudShadow`); 0:
     /// no volumes.
     pub sun_light: u32,
-    pub _pad: u32,
+    /// 1: the wave slopes are filtered over each sample's footprint
+    /// (`surface::footprint`); 0: read at the sample's point.
+    pub wave_filter: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
-// SAFETY: `repr(C)`, nine `Vec4`s and twenty 4-byte scalars, no padding; any bits are valid.
+// SAFETY: `repr(C)`, ten `Vec4`s and twenty 4-byte scalars, no padding; any bits are valid.
 unsafe impl bytemuck::Zeroable for SeaParams {}
 #[cfg(not(target_arch = "spirv"))]
 unsafe impl bytemuck::Pod for SeaParams {}
@@ -600,9 +606,9 @@ fn plane_integrand(source: Vec3, z: Vec3, c: Vec3, mu_v: f32) -> Vec3 {
 pub struct SeaView {
     /// Whether the ray meets the sea (before any object).
     pub hit: bool,
-    /// Fresnel reflectance at the surface.
+    /// Fresnel reflectance at the surface (waves: its mean over the slopes).
     pub reflectance: f32,
-    /// Reflected direction (unit, toward the sky).
+    /// Reflected direction at the (mean) normal (unit, toward the sky).
     pub reflected: Vec3,
     /// Direction of travel from the water toward the eye, after refraction
     /// (unit, upward; the reverse of the refracted view ray).
@@ -611,6 +617,12 @@ pub struct SeaView {
     pub transmission: f32,
     /// Where the view ray meets the surface.
     pub point: Vec3,
+    /// The view ray's direction (unit, downward).
+    pub dir: Vec3,
+    /// Waves: the slopes under the sample's footprint (`surface`) and the
+    /// rule that integrates over the visible ones.
+    pub slopes: surface::Slopes,
+    pub rule: surface::SlopeRule,
 }
 
 /// Depth of a varying bottom at horizontal `(x, z)`, m: bilinear in the
@@ -699,27 +711,16 @@ pub fn layer_at(p: &SeaParams, depth: f32) -> (u32, f32) {
 }
 
 /// The normal of the surface at horizontal position `(x, z)`: up for a flat
-/// sea, else the wave normal map's, bilinear, tiled.
+/// sea, else the wave map's slopes, bilinear, tiled (`surface::point_normal`).
 pub fn surface_normal(p: &SeaParams, waves: &[Vec4], x: f32, z: f32) -> Vec3 {
-    if p.waves != WAVES_NORMAL_MAP {
-        return Vec3::Y;
-    }
-    let n = p.wave_resolution;
-    let (u, v) = (x / p.wave_size, z / p.wave_size);
-    let fx = (u - u.floor()) * n as f32;
-    let fz = (v - v.floor()) * n as f32;
-    let (x0, z0) = ((fx as u32).min(n - 1), (fz as u32).min(n - 1));
-    let (ax, az) = (fx - x0 as f32, fz - z0 as f32);
-    let (x1, z1) = ((x0 + 1) % n, (z0 + 1) % n);
-    let (r0, r1) = ((z0 * n) as usize, (z1 * n) as usize);
-    let (a, b) = (waves[r0 + x0 as usize].xyz(), waves[r0 + x1 as usize].xyz());
-    let (c, d) = (waves[r1 + x0 as usize].xyz(), waves[r1 + x1 as usize].xyz());
-    ((a * (1.0 - ax) + b * ax) * (1.0 - az) + (c * (1.0 - ax) + d * ax) * az).normalize()
+    surface::point_normal(p, waves, x, z)
 }
 
-/// The sea as pixel `index`'s current sub-pixel sample sees it (`texel`: the
-/// pixel's G-buffer texel; objects hide the sea).
-pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> SeaView {
+/// Where pixel `index`'s current sub-pixel sample meets the sea (`texel`:
+/// the pixel's G-buffer texel; objects hide the sea), and over waves the
+/// slope rule there (`surface`); the reflectance, the refracted view and
+/// the transmission are left to `sea_view`.
+pub fn sea_hit(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> SeaView {
     let x = index % common.width;
     let y = index / common.width;
     let mut out = SeaView::default();
@@ -731,23 +732,87 @@ pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4]
         return out;
     }
     let t = (p.level - origin.y) / dir.y;
-    let hit = origin + dir * t;
-    let mut normal = surface_normal(p, waves, hit.x, hit.z);
-    if normal.dot(dir) >= 0.0 {
-        // A wave facet turned away from the eye: seen edge-on, take the mean surface.
-        normal = Vec3::Y;
+    out.hit = true;
+    out.point = origin + dir * t;
+    out.dir = dir;
+    if p.waves == WAVES_NORMAL_MAP {
+        let (a, b) = if p.wave_filter != 0 {
+            surface::footprint(common, x, y, dir, t, 2.0 * p.wave_size)
+        } else {
+            (Vec2::ZERO, Vec2::ZERO)
+        };
+        out.slopes = surface::footprint_slopes(p, waves, out.point.x, out.point.z, a, b);
+        out.rule = surface::SlopeRule::new(&out.slopes, dir);
+    }
+    out
+}
+
+/// The sea as pixel `index`'s current sub-pixel sample sees it (`sea_hit`).
+///
+/// A flat sea has one normal. Waves are read as the slope distribution
+/// under the sample's footprint (`surface`): the reflectance (so the
+/// transmission `(1 - R) / n^2`) is averaged over the slope rule's facets,
+/// and the light below is taken from the mean of their refracted view
+/// directions, each weighted by what it transmits (`1 - R`).
+pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> SeaView {
+    let mut out = sea_hit(index, common, p, waves, texel);
+    if !out.hit {
+        return out;
+    }
+    let (dir, n) = (out.dir, p.extinction.w);
+    let mut normal = Vec3::Y;
+    let mut r = 0.0;
+    if p.waves == WAVES_NORMAL_MAP {
+        let mut mean = Vec3::ZERO;
+        let mut view = Vec3::ZERO;
+        let mut k = 0;
+        while k < surface::SLOPE_NODES {
+            let facet = out.rule.node(k);
+            let rk = reflectance(facet.cos_i, 1.0 / n);
+            r += facet.weight * rk;
+            mean += facet.normal * facet.weight;
+            view += view_in_water(dir, facet.normal, n) * (facet.weight * (1.0 - rk));
+            k += 1;
+        }
+        normal = mean.normalize();
+        out.view = if view.y > 0.0 { view.normalize() } else { view_in_water(dir, normal, n) };
+    } else {
+        r = reflectance(-dir.y, 1.0 / n);
+        out.view = view_in_water(dir, normal, n);
     }
     let cos_i = -dir.dot(normal);
-    let n = p.extinction.w;
-    let r = reflectance(cos_i, 1.0 / n);
     let reflected = dir + normal * (2.0 * cos_i);
-    let view = view_in_water(dir, normal, n);
-    out.hit = true;
     out.reflectance = r;
     out.reflected = Vec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
-    out.view = view;
     out.transmission = (1.0 - r) / (n * n);
-    out.point = hit;
+    out
+}
+
+/// Per-pixel kernel, `sea.surface`: what the terms below the surface need
+/// of it, computed once: the direction light leaves the water toward the
+/// eye (xyz) and the transmission `(1 - R)/n^2` (w); zero where the sample
+/// does not see the sea.
+pub fn surface_pixel(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> Vec4 {
+    let v = sea_view(index, common, p, waves, texel);
+    if !v.hit {
+        return Vec4::ZERO;
+    }
+    v.view.extend(v.transmission)
+}
+
+/// The sea as the terms below the surface see it: `surface_pixel`'s value
+/// for the sample, with the point where its view ray meets the surface.
+pub fn seen_from(index: u32, common: &CommonParams, p: &SeaParams, surface: Vec4) -> SeaView {
+    let mut out = SeaView::default();
+    if surface.y <= 0.0 {
+        return out;
+    }
+    let (origin, dir) = camera_ray(common, index % common.width, index / common.width);
+    out.hit = true;
+    out.point = origin + dir * ((p.level - origin.y) / dir.y);
+    out.dir = dir;
+    out.view = surface.xyz();
+    out.transmission = surface.w;
     out
 }
 
@@ -776,12 +841,38 @@ pub fn reflection_pixel(
     sky_view: &[Vec4],
     texel: &GBufferTexel,
 ) -> Vec4 {
-    let v = sea_view(index, common, p, waves, texel);
+    if p.waves != WAVES_NORMAL_MAP {
+        let v = sea_view(index, common, p, waves, texel);
+        if !v.hit {
+            return Vec4::ZERO;
+        }
+        let sky_light =
+            sky_radiance(sky, transmittance, sky_view, v.reflected) + sun_disk(sky, transmittance, v.reflected);
+        return (sky_light * v.reflectance).extend(0.0);
+    }
+    let v = sea_hit(index, common, p, waves, texel);
     if !v.hit {
         return Vec4::ZERO;
     }
-    let sky_light = sky_radiance(sky, transmittance, sky_view, v.reflected) + sun_disk(sky, transmittance, v.reflected);
-    (sky_light * v.reflectance).extend(0.0)
+    // Waves: the sky (and, by the turned-away share, the sun's disk)
+    // reflected by each facet of the slope rule (`surface::SlopeRule`), and
+    // the sun's glint in closed form.
+    let n = p.extinction.w;
+    let mut light = Vec3::ZERO;
+    let mut k = 0;
+    while k < surface::SLOPE_NODES {
+        let facet = v.rule.node(k);
+        let r = v.dir - facet.normal * (2.0 * v.dir.dot(facet.normal));
+        let reflected = Vec3::new(r.x, r.y.abs(), r.z).normalize();
+        let mut sky_light = sky_radiance(sky, transmittance, sky_view, reflected);
+        if k + 1 == surface::SLOPE_NODES {
+            sky_light += sun_disk(sky, transmittance, reflected);
+        }
+        light += sky_light * (facet.weight * reflectance(facet.cos_i, 1.0 / n));
+        k += 1;
+    }
+    light += surface::sun_glint(sky, transmittance, &v.rule, &v.slopes, n);
+    light.extend(0.0)
 }
 
 /// The volumes' shadow on the water: the sun's transmittance through them
@@ -820,12 +911,11 @@ pub fn order1_pixel(
     index: u32,
     common: &CommonParams,
     p: &SeaParams,
-    waves: &[Vec4],
+    surface: Vec4,
     bottom: &[f32],
-    texel: &GBufferTexel,
     clouds: &CloudShadow,
 ) -> Vec4 {
-    let v = sea_view(index, common, p, waves, texel);
+    let v = seen_from(index, common, p, surface);
     if !v.hit {
         return Vec4::ZERO;
     }
@@ -873,14 +963,13 @@ pub fn order2_pixel(
     index: u32,
     common: &CommonParams,
     p: &SeaParams,
-    waves: &[Vec4],
+    surface: Vec4,
     bottom: &[f32],
     accumulated: &[Vec4],
     correction: &[Vec4],
-    texel: &GBufferTexel,
     clouds: &CloudShadow,
 ) -> Vec4 {
-    let v = sea_view(index, common, p, waves, texel);
+    let v = seen_from(index, common, p, surface);
     if !v.hit {
         return Vec4::ZERO;
     }
@@ -938,12 +1027,11 @@ pub fn bottom_pixel(
     index: u32,
     common: &CommonParams,
     p: &SeaParams,
-    waves: &[Vec4],
+    surface: Vec4,
     bottom: &[f32],
-    texel: &GBufferTexel,
     clouds: &CloudShadow,
 ) -> Vec4 {
-    let v = sea_view(index, common, p, waves, texel);
+    let v = seen_from(index, common, p, surface);
     if !v.hit {
         return Vec4::ZERO;
     }
@@ -995,6 +1083,24 @@ pub fn accumulated_map_kernel(
     }
 }
 
+#[spirv(compute(threads(64)))]
+pub fn surface_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let common = &common[0];
+    if index < common.band_pixels {
+        surface[index as usize] =
+            surface_pixel(common.band_start + index, common, &params[0], waves, &gbuffer[index as usize]);
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn reflection_kernel(
@@ -1031,9 +1137,8 @@ pub fn order1_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
     #[spirv(num_workgroups)] groups: UVec3,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 24)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
@@ -1044,15 +1149,8 @@ pub fn order1_kernel(
     let common = &common[0];
     if index < common.band_pixels {
         let clouds = CloudShadow { lights, grids, depths };
-        radiance[index as usize] = order1_pixel(
-            common.band_start + index,
-            common,
-            &params[0],
-            waves,
-            bottom,
-            &gbuffer[index as usize],
-            &clouds,
-        );
+        radiance[index as usize] =
+            order1_pixel(common.band_start + index, common, &params[0], surface[index as usize], bottom, &clouds);
     }
 }
 
@@ -1062,9 +1160,8 @@ pub fn order2_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
     #[spirv(num_workgroups)] groups: UVec3,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 27)] accumulated: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 38)] correction: &[Vec4],
@@ -1081,11 +1178,10 @@ pub fn order2_kernel(
             common.band_start + index,
             common,
             &params[0],
-            waves,
+            surface[index as usize],
             bottom,
             accumulated,
             correction,
-            &gbuffer[index as usize],
             &clouds,
         );
     }
@@ -1097,9 +1193,8 @@ pub fn bottom_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
     #[spirv(num_workgroups)] groups: UVec3,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 26)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
@@ -1110,15 +1205,8 @@ pub fn bottom_kernel(
     let common = &common[0];
     if index < common.band_pixels {
         let clouds = CloudShadow { lights, grids, depths };
-        radiance[index as usize] = bottom_pixel(
-            common.band_start + index,
-            common,
-            &params[0],
-            waves,
-            bottom,
-            &gbuffer[index as usize],
-            &clouds,
-        );
+        radiance[index as usize] =
+            bottom_pixel(common.band_start + index, common, &params[0], surface[index as usize], bottom, &clouds);
     }
 }
 

@@ -514,3 +514,54 @@ fn shore_order2_against_the_height_field_quadrature() {
     println!("tolerance 1e-3 against 1e-4: {:.2e}", relative(loose, tight));
     assert!(relative(loose, tight) < 2e-3);
 }
+
+/// `sea_open` (Fig. 9b) seen through a 480x82 window just below its
+/// horizon at the scene's own pixel size (0.104 degrees, as its 720x480
+/// view), rendered at `spp` samples per pixel with the wave filter on or off.
+fn horizon_window(filter: bool, spp: u32) -> (Vec<glam::Vec4>, Vec<glam::Vec4>, u32, u32, f32) {
+    let text = std::fs::read_to_string(common::root().join("scenes/sea_open.toml")).unwrap();
+    let rest = text[text.find("[sky]").unwrap()..].replace("seed = 1 }", &format!("seed = 1, filter = {filter} }}"));
+    assert!(rest.contains("filter = "), "sea_open's waves line changed");
+    let (width, height) = (480u32, 82u32);
+    let mut data = common::scene_from_str(&format!(
+        "[camera]\nposition = [0.0, 12.0, 0.0]\nlook_at = [0.0, {}, -60.0]\nvfov_deg = {}\nresolution = [{width}, {height}]\nexposure = 8.0\n{rest}",
+        12.0 - 60.0 * 4.0f32.to_radians().tan(),
+        50.0 / 480.0 * height as f32,
+    ));
+    data.set_samples_per_pixel(spp).unwrap();
+    let r = render_checked(&data, &format!("filter {filter}, {spp} spp"));
+    (r.image.clone(), layer(&r, "sea.order1").to_vec(), width, height, data.exposure)
+}
+
+#[test]
+fn filtered_waves_at_one_sample_match_sixty_four_near_the_horizon() {
+    // Issue 26's target: with the slopes filtered by each sample's
+    // footprint, one sample per pixel matches 64 within 1 % RMS of the
+    // 8-bit range where a pixel covers many waves. Compared below the
+    // first row that sees only sea: the horizon's own row is the sky's
+    // edge, antialiasing's business, not the waves' (4 % there either way).
+    let (one, seen, w, h, exposure) = horizon_window(true, 1);
+    let (many, _, _, _, _) = horizon_window(true, 64);
+    let (raw_one, _, _, _, _) = horizon_window(false, 1);
+    let (raw_many, _, _, _, _) = horizon_window(false, 64);
+    let first = (0..h).find(|&y| (0..w).all(|x| seen[(y * w + x) as usize].max_element() > 0.0)).unwrap();
+    let band = ((first + 1) * w) as usize..(w * h) as usize;
+    assert!(band.len() >= (w * 60) as usize, "the window shows {} rows of sea", h - first);
+    let rms = |a: &[glam::Vec4], b: &[glam::Vec4]| {
+        let (a, b) = (slicelight::metrics::to_f64(&a[band.clone()]), slicelight::metrics::to_f64(&b[band.clone()]));
+        slicelight::metrics::difference(&a, &b, exposure).rms_8bit_percent
+    };
+    let (filtered, unfiltered, converged) = (rms(&one, &many), rms(&raw_one, &raw_many), rms(&many, &raw_many));
+    println!(
+        "rows {}..{h} below the horizon: 1 spp against 64 spp, filtered {filtered:.2} %, point-sampled {unfiltered:.2} %; \
+         the two at 64 spp {converged:.2} % apart",
+        first + 1
+    );
+    assert!(filtered < 1.0, "filtered: {filtered:.2} % RMS (8-bit)");
+    // Point samples there pick one wave of hundreds: the sparkle the
+    // filter removes is several times the filtered error.
+    assert!(unfiltered > 3.0 * filtered, "point-sampled {unfiltered:.2} % against filtered {filtered:.2} %");
+    // At 64 spp both approach the pixel's mean; the point samples are
+    // still noisy there (64 of hundreds of waves), so 2 %.
+    assert!(converged < 2.0, "filtered and point-sampled at 64 spp: {converged:.2} % apart");
+}

@@ -316,7 +316,7 @@ pub struct Facet {
 /// took three times the work.
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct SlopeRule {
-    /// The view ray's direction (unit, downward); w: the factor that makes
+    /// The view ray's direction (unit, downward); w: the factor that made
     /// the facing nodes' weights sum to `facing`.
     dir_scale: Vec4,
     /// Unit horizontal axes along (xy) and across (zw) the view.
@@ -328,6 +328,9 @@ pub struct SlopeRule {
     /// `l22`); w: the share of facets facing the eye, `P(N . v > 0)` with
     /// `N = (-s_x, 1, -s_z)`, `v = -dir`. (All `Vec4`s: see `Slopes`.)
     factor_facing: Vec4,
+    /// The facing nodes' weights (nodes 0-3, 4-7), summing to `facing`.
+    weights_low: Vec4,
+    weights_high: Vec4,
 }
 
 impl SlopeRule {
@@ -367,19 +370,21 @@ impl SlopeRule {
         };
         let z_star = if length > 1e-6 && l11 > 0.0 { (dir.y / length - mean.x) / l11 } else { -ALONG_REACH };
         let range = Vec2::new(z_star.clamp(-ALONG_REACH, ALONG_REACH), ALONG_REACH);
-        let mut mass = 0.0;
-        let mut i = 0;
-        while i < ALONG_NODES {
+        let weight = |i: u32| {
             let (x, w) = gauss_legendre8(i);
-            mass += w * standard_normal(range.x + (range.y - range.x) * 0.5 * (1.0 + x));
-            i += 1;
-        }
+            w * standard_normal(range.x + (range.y - range.x) * 0.5 * (1.0 + x))
+        };
+        let low = Vec4::new(weight(0), weight(1), weight(2), weight(3));
+        let high = Vec4::new(weight(4), weight(5), weight(6), weight(7));
+        let mass = low.element_sum() + high.element_sum();
         let scale = if mass > 0.0 { facing / mass } else { 0.0 };
         SlopeRule {
             dir_scale: dir.extend(scale),
             axes: Vec4::new(along.x, along.y, across.x, across.y),
             mean_range: Vec4::new(mean.x, mean.y, range.x, range.y),
             factor_facing: Vec4::new(l11, l21, l22, facing),
+            weights_low: low * scale,
+            weights_high: high * scale,
         }
     }
 
@@ -394,10 +399,17 @@ impl SlopeRule {
         if facing <= 0.0 {
             return Facet { weight: 0.0, ..edge_on };
         }
-        let (x, w) = gauss_legendre8(k);
+        let (x, _) = gauss_legendre8(k);
         let (lo, hi) = (self.mean_range.z, self.mean_range.w);
         let z = lo + (hi - lo) * 0.5 * (1.0 + x);
-        let weight = w * standard_normal(z) * self.dir_scale.w;
+        let weights = if k < 4 { self.weights_low } else { self.weights_high };
+        // A chain of selects: indexing a vector by a variable makes SPIR-V pointers.
+        let weight = match k & 3 {
+            0 => weights.x,
+            1 => weights.y,
+            2 => weights.z,
+            _ => weights.w,
+        };
         let (l11, l21, l22) = (self.factor_facing.x, self.factor_facing.y, self.factor_facing.z);
         let frame = self.mean_range.xy() + Vec2::new(l11 * z, l21 * z);
         let slope = self.axes.xy() * frame.x + self.axes.zw() * frame.y;
@@ -446,9 +458,10 @@ pub fn sun_glint(sky: &SkyParams, table: &[Vec4], rule: &SlopeRule, s: &Slopes, 
     if vh <= 0.0 {
         return Vec3::ZERO;
     }
-    let alpha = sky.sun_direction.w.clamp(-1.0, 1.0).acos();
+    // alpha^2 = 2 (1 - cos alpha) for the sun's small disk (to 1e-6 of it).
+    let alpha2 = 2.0 * (1.0 - sky.sun_direction.w.clamp(-1.0, 1.0));
     let hy2 = h.y * h.y;
-    let disk = alpha * alpha / 16.0 / (hy2 * hy2);
+    let disk = alpha2 / 16.0 / (hy2 * hy2);
     let spread = Slopes::new(s.mean(), s.cov() + Vec3::new(disk, disk, 0.0));
     let density = slope_density(&spread, Vec2::new(-h.x / h.y, -h.z / h.y));
     let e = sky.sun_irradiance.xyz() * transmittance_to_space(sky, table, l.y);

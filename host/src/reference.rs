@@ -379,10 +379,22 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     }
     let n = p.extinction.w as f64;
     let cos_i = -d.dot(normal);
-    let r = optics::reflectance(cos_i, 1.0 / n);
-    let reflected = d + normal * (2.0 * cos_i);
-    let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
-    let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(reflected);
+    let sky_reference = SkyReference::new(&data.sky.params, SKY_TOLERANCE);
+    // Waves: the map's slope at the hit, roughened by the unresolved waves
+    // (`crate::sea::reference::rough_reflection`); the light below is taken
+    // along the view refracted at the map's normal, times the mean
+    // transmission. A flat sea: one mirror.
+    let (sky, r) = if p.waves == slicelight_shaders::sea::WAVES_NORMAL_MAP {
+        let slope = glam::DVec2::new(-normal.x / normal.y, -normal.z / normal.y);
+        let rough = p.roughness.truncate().as_dvec3();
+        let (light, r) = crate::sea::reference::rough_reflection(&sky_reference, &data.sky.params, d, slope, rough, n);
+        (light / r.max(1e-300), r)
+    } else {
+        let r = optics::reflectance(cos_i, 1.0 / n);
+        let reflected = d + normal * (2.0 * cos_i);
+        let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
+        (sky_reference.radiance(reflected), r)
+    };
     // Snell: the refracted ray, reversed, is the direction light leaves the water toward the eye.
     let eta = 1.0 / n;
     let (cos_t, _) = optics::transmitted_cosine(cos_i, eta);

@@ -184,7 +184,7 @@ impl crate::bench::Sweep for SeaSweep {
     fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
         // The sea's reference costs ~0.2 s a pixel: at least every 40th.
         run(scenes, &opts.backends, opts.repeats, opts.stride.max(40), opts.quick, &opts.out_dir)?;
-        Ok([
+        let mut outputs = [
             "sea_bench.csv",
             "sea_time_vs_error_*.png",
             "sea_convergence.csv",
@@ -192,7 +192,9 @@ impl crate::bench::Sweep for SeaSweep {
             "sea_fig8_directions.png",
         ]
         .map(|f| opts.out_dir.join(f))
-        .to_vec())
+        .to_vec();
+        outputs.extend(super::bench_waves::run(scenes, &opts.backends, opts.repeats, opts.quick, &opts.out_dir)?);
+        Ok(outputs)
     }
 }
 

@@ -6,6 +6,7 @@
 //! Over a varying bottom, `table.rs` adds the depth table (5.4).
 
 pub mod bench;
+pub mod bench_waves;
 pub mod reference;
 pub mod table;
 pub mod waves;

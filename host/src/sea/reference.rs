@@ -414,6 +414,141 @@ impl SeaReference {
     }
 }
 
+/// Nodes and weights of `n`-point Gauss-Legendre on (-1, 1), by Newton's
+/// iteration on the Legendre polynomial (to 1e-15).
+pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+    (0..n)
+        .map(|i| {
+            let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+            loop {
+                let (mut p0, mut p1) = (1.0, x);
+                for k in 2..=n {
+                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                    (p0, p1) = (p1, p2);
+                }
+                let (p, dp) = if n == 0 { (1.0, 0.0) } else { (p1, n as f64 * (x * p1 - p0) / (x * x - 1.0)) };
+                let step = p / dp;
+                x -= step;
+                if step.abs() < 1e-15 {
+                    return (x, 2.0 / ((1.0 - x * x) * dp * dp));
+                }
+            }
+        })
+        .collect()
+}
+
+/// The wave surface's reflection at one point, in f64 and by its own
+/// rules: the slopes a Gaussian of mean `mean` (the map's slope there) and
+/// covariance `cov` (`xx, zz, xz`: the unresolved waves' roughness), a
+/// facet turned away from the eye taken as the mean surface (the method's
+/// convention, `slicelight_shaders::sea::surface::SlopeRule`), the eye
+/// looking along `d`, water of index `n`.
+///
+/// The sky (`sky`, without the sun's disk) is summed over a dense product
+/// rule: 24-point Gauss-Legendre with the normal density along the view's
+/// horizontal direction from the facets' horizon (or -6) to 6 standard
+/// deviations, times 6-point Gauss-Hermite across, the full 2D normal at
+/// every node (no conditional means). The sun is integrated over its disk
+/// (8 rings x 16 sectors of equal solid angle): each direction of the disk
+/// is mirrored by the facet whose normal is the half vector, of density
+/// `p(s_h)` per unit slope, `1/(4 (v.h) h_y^3)` per unit of solid angle.
+/// Returns the reflected radiance and the mean reflectance.
+pub fn rough_reflection(
+    sky: &crate::sky::reference::SkyReference,
+    sun: &slicelight_shaders::sky::SkyParams,
+    d: DVec3,
+    mean: glam::DVec2,
+    cov: DVec3,
+    n: f64,
+) -> (DVec3, f64) {
+    use glam::DVec2;
+    use slicelight_shaders::optics::reflectance;
+    let fresnel = |cos: f64| reflectance(cos, 1.0 / n);
+    let horizontal = DVec2::new(d.x, d.z);
+    let length = horizontal.length();
+    let along = if length > 1e-12 { horizontal / length } else { DVec2::X };
+    let across = DVec2::new(-along.y, along.x);
+    let var = |a: DVec2, b: DVec2| a.x * b.x * cov.x + a.y * b.y * cov.y + (a.x * b.y + a.y * b.x) * cov.z;
+    let l11 = var(along, along).max(0.0).sqrt();
+    let l21 = if l11 > 0.0 { var(along, across) / l11 } else { 0.0 };
+    let l22 = (var(across, across) - l21 * l21).max(0.0).sqrt();
+    let m = DVec2::new(mean.dot(along), mean.dot(across));
+    let z_star = if length > 1e-12 && l11 > 0.0 { ((d.y / length - m.x) / l11).clamp(-6.0, 6.0) } else { -6.0 };
+    let phi = |z: f64| (-0.5 * z * z).exp() / (2.0 * PI).sqrt();
+    // The facing share, from the same rule (its weights' sum over (z*, 6)).
+    let along_nodes: Vec<(f64, f64)> = gauss_legendre(24)
+        .into_iter()
+        .map(|(x, w)| {
+            let z = z_star + (6.0 - z_star) * 0.5 * (1.0 + x);
+            (z, w * 0.5 * (6.0 - z_star) * phi(z))
+        })
+        .collect();
+    let facing: f64 = along_nodes.iter().map(|n| n.1).sum();
+    let hermite = [
+        (-3.324_257_433_6, 0.002_555_784_95),
+        (-1.889_175_877_8, 0.088_615_746),
+        (-0.616_706_590_2, 0.408_828_469_5),
+        (0.616_706_590_2, 0.408_828_469_5),
+        (1.889_175_877_8, 0.088_615_746),
+        (3.324_257_433_6, 0.002_555_784_95),
+    ];
+    let normal_of = |s: DVec2| DVec3::new(-s.x, 1.0, -s.y).normalize();
+    let mut light = DVec3::ZERO;
+    let mut r_mean = 0.0;
+    // The turned-away share, seen edge-on as the mean surface.
+    let mut facet = |normal: DVec3, w: f64| {
+        let cos = -d.dot(normal);
+        let reflected = d + normal * (2.0 * cos);
+        let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
+        let r = fresnel(cos);
+        light += sky.sky_without_sun(reflected) * (w * r);
+        r_mean += w * r;
+    };
+    facet(DVec3::Y, 1.0 - facing.min(1.0));
+    for &(z1, w1) in &along_nodes {
+        for &(z2, w2) in &hermite {
+            let frame = m + DVec2::new(l11 * z1, l21 * z1 + l22 * z2);
+            let slope = along * frame.x + across * frame.y;
+            let normal = normal_of(slope);
+            facet(if normal.dot(d) >= 0.0 { DVec3::Y } else { normal }, w1 * w2);
+        }
+    }
+    // The sun's disk, mirrored by the facets of the half vector.
+    let to_sun = sun.sun_direction.xyz().as_dvec3().normalize();
+    let cos_radius = sun.sun_direction.w as f64;
+    if to_sun.y > 0.0 && cos_radius < 1.0 {
+        let det = cov.x * cov.y - cov.z * cov.z;
+        let (t, u) = {
+            let t = if to_sun.y.abs() < 0.9 { DVec3::Y.cross(to_sun) } else { DVec3::X.cross(to_sun) }.normalize();
+            (t, to_sun.cross(t))
+        };
+        let irradiance = sun.sun_irradiance.truncate().as_dvec3() * sky.sun_at_observer();
+        let (rings, sectors) = (8, 16);
+        let cell = 2.0 * PI * (1.0 - cos_radius) / (rings * sectors) as f64;
+        for i in 0..rings {
+            // Equal solid angles: cos theta uniform between 1 and cos_radius.
+            let cos_t = 1.0 - (1.0 - cos_radius) * (i as f64 + 0.5) / rings as f64;
+            let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+            for j in 0..sectors {
+                let a = 2.0 * PI * (j as f64 + 0.5) / sectors as f64;
+                let w = (to_sun * cos_t + (t * a.cos() + u * a.sin()) * sin_t).normalize();
+                let h = w - d;
+                if h.y <= 0.0 || det <= 0.0 {
+                    continue;
+                }
+                let h = h.normalize();
+                let vh = -d.dot(h);
+                let s_h = DVec2::new(-h.x / h.y, -h.z / h.y) - mean;
+                let q = (cov.y * s_h.x * s_h.x - 2.0 * cov.z * s_h.x * s_h.y + cov.x * s_h.y * s_h.y) / det;
+                let density = (-0.5 * q).exp() / (2.0 * PI * det.sqrt());
+                let radiance = irradiance / (2.0 * PI * (1.0 - cos_radius));
+                light += radiance * (cell * fresnel(vh) * density / (4.0 * vh * h.y.powi(3)));
+            }
+        }
+    }
+    (light, r_mean)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -257,6 +257,16 @@ impl SkyReference {
     /// single scattering, the ground's reflection of the direct sun where the
     /// ray meets the ground, and the sun's disk, W/(m^2 sr).
     pub fn radiance(&self, d: DVec3) -> DVec3 {
+        self.radiance_with(d, true)
+    }
+
+    /// `radiance` without the sun's disk (a reflection that integrates the
+    /// disk on its own takes the rest of the sky from here).
+    pub fn sky_without_sun(&self, d: DVec3) -> DVec3 {
+        self.radiance_with(d, false)
+    }
+
+    fn radiance_with(&self, d: DVec3, disk: bool) -> DVec3 {
         let Some((mut radiance, tau, ground)) = self.single_scattering(d, f64::INFINITY, true) else {
             return DVec3::ZERO;
         };
@@ -270,7 +280,7 @@ impl SkyReference {
                 }
             }
             None => {
-                if d.dot(self.sun) >= self.cos_sun_radius {
+                if disk && d.dot(self.sun) >= self.cos_sun_radius {
                     radiance += self.sun_irradiance / self.sun_solid_angle * (-tau).exp();
                 }
             }

@@ -544,7 +544,7 @@ fn filtered_waves_at_one_sample_match_sixty_four_near_the_horizon() {
     let (many, _, _, _, _) = horizon_window(true, 64);
     let (raw_one, _, _, _, _) = horizon_window(false, 1);
     let (raw_many, _, _, _, _) = horizon_window(false, 64);
-    let first = (0..h).find(|&y| (0..w).all(|x| seen[(y * w + x) as usize].max_element() > 0.0)).unwrap();
+    let first = slicelight::sea::bench_waves::first_sea_row(&seen, w, h).unwrap();
     let band = ((first + 1) * w) as usize..(w * h) as usize;
     assert!(band.len() >= (w * 60) as usize, "the window shows {} rows of sea", h - first);
     let rms = |a: &[glam::Vec4], b: &[glam::Vec4]| {

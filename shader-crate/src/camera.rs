@@ -65,6 +65,13 @@ pub fn in_image(params: &CommonParams, x: u32, y: u32) -> bool {
 /// (clamped to the circle; outside it see `in_image`).
 pub fn camera_ray(params: &CommonParams, x: u32, y: u32) -> (Vec3, Vec3) {
     let offset = sample_offset(params.sample_index, params.samples_per_pixel);
+    (params.camera_position.xyz(), ray_direction(params, x, y, offset))
+}
+
+/// The unit direction of the view ray through the point `offset` of pixel
+/// `(x, y)` (`camera_ray`'s, at any offset: ray differentials take it at
+/// the sample cell's edges).
+pub fn ray_direction(params: &CommonParams, x: u32, y: u32, offset: Vec2) -> Vec3 {
     let forward = params.camera_forward.xyz();
     if params.projection == PROJECTION_FISHEYE {
         let c = fisheye_coords(params, x, y, offset);
@@ -75,9 +82,9 @@ pub fn camera_ray(params: &CommonParams, x: u32, y: u32) -> (Vec3, Vec3) {
         } else {
             Vec3::ZERO
         };
-        return (params.camera_position.xyz(), (forward * theta.cos() + side * theta.sin()).normalize());
+        return (forward * theta.cos() + side * theta.sin()).normalize();
     }
-    (params.camera_position.xyz(), pinhole_direction(params, pixel_ndc(params, x, y, offset)))
+    pinhole_direction(params, pixel_ndc(params, x, y, offset))
 }
 
 /// The unit direction of a pinhole camera's ray through the point `ndc`

@@ -50,6 +50,13 @@ fn configure(data: &SceneData, filter: bool, spp: u32) -> Result<SceneData> {
     Ok(d)
 }
 
+/// The first image row whose every pixel sees the sea (`seen`: a sea
+/// layer, non-zero where the sea is seen): the rows below it are all sea,
+/// the horizon's own row is the one above.
+pub fn first_sea_row(seen: &[Vec4], width: u32, height: u32) -> Option<u32> {
+    (0..height).find(|&y| (0..width).all(|x| seen[(y * width + x) as usize].max_element() > 0.0))
+}
+
 /// Runs the sweep over the scenes with waves; writes `sea_wave_filter.csv`
 /// and `sea_wave_filter_<scene>_<backend>.png` into `out_dir`.
 pub fn run(
@@ -75,9 +82,7 @@ pub fn run(
             .context("no sea.order1 layer")?;
         let small = configure(data, false, 1)?;
         let (w, h) = (small.width(), small.height());
-        let first = (0..h)
-            .find(|&y| (0..w).all(|x| seen[(y * w + x) as usize].max_element() > 0.0))
-            .context("no row sees only sea")?;
+        let first = first_sea_row(&seen, w, h).context("no row sees only sea")?;
         let below = ((first + 1) * w) as usize..(w * h) as usize;
         let band = below.start..(((first + 1 + h / 10) * w) as usize).min(below.end);
         eprintln!(

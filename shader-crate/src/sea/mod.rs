@@ -620,7 +620,7 @@ pub struct SeaView {
     /// The view ray's direction (unit, downward).
     pub dir: Vec3,
     /// Waves: the slopes under the sample's footprint (`surface`) and the
-    /// rule that integrates over the visible ones.
+    /// rule that integrates over them (`surface::SlopeRule`).
     pub slopes: surface::Slopes,
     pub rule: surface::SlopeRule,
 }
@@ -784,12 +784,18 @@ pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4]
         r = reflectance(-dir.y, 1.0 / n);
         out.view = view_in_water(dir, normal, n);
     }
-    let cos_i = -dir.dot(normal);
-    let reflected = dir + normal * (2.0 * cos_i);
     out.reflectance = r;
-    out.reflected = Vec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
+    out.reflected = reflected_skyward(dir, normal);
     out.transmission = (1.0 - r) / (n * n);
     out
+}
+
+/// The view ray `dir` reflected at a surface of unit `normal`, turned up
+/// where a steep facet would send it below the horizon (it leaves the
+/// wave toward the sky).
+pub fn reflected_skyward(dir: Vec3, normal: Vec3) -> Vec3 {
+    let r = dir - normal * (2.0 * dir.dot(normal));
+    Vec3::new(r.x, r.y.abs(), r.z).normalize()
 }
 
 /// Per-pixel kernel, `sea.surface`: what the terms below the surface need
@@ -866,8 +872,7 @@ pub fn reflection_pixel(
     let mut k = 0;
     while k < surface::SLOPE_NODES {
         let facet = v.rule.node(k);
-        let r = v.dir - facet.normal * (2.0 * v.dir.dot(facet.normal));
-        let reflected = Vec3::new(r.x, r.y.abs(), r.z).normalize();
+        let reflected = reflected_skyward(v.dir, facet.normal);
         let mut sky_light = sky_radiance(sky, transmittance, sky_view, reflected);
         if k + 1 == surface::SLOPE_NODES {
             sky_light += sun_disk(sky, transmittance, reflected);

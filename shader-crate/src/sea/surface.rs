@@ -26,12 +26,12 @@
 use spirv_std::num_traits::Float;
 
 use super::{SeaParams, WAVES_NORMAL_MAP};
-use crate::camera::{fisheye_coords, pinhole_direction, pixel_ndc, sample_offset};
+use crate::camera::{ray_direction, sample_offset};
 use crate::glam::{Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::optics::reflectance;
 use crate::sky::{transmittance_to_space, SkyParams};
-use crate::types::{CommonParams, PROJECTION_FISHEYE};
-use core::f32::consts::{FRAC_PI_2, PI};
+use crate::types::CommonParams;
+use core::f32::consts::PI;
 
 /// `Vec4`s per pyramid texel.
 pub const TEXEL_VEC4S: u32 = 2;
@@ -143,19 +143,6 @@ pub fn point_normal(p: &SeaParams, waves: &[Vec4], x: f32, z: f32) -> Vec3 {
         return Vec3::Y;
     }
     slope_normal(point_slopes(p, waves, x, z).0)
-}
-
-/// The view ray's direction through the point `offset` of pixel `(x, y)`
-/// (`camera::camera_ray`'s, at any offset).
-fn ray_direction(common: &CommonParams, x: u32, y: u32, offset: Vec2) -> Vec3 {
-    if common.projection == PROJECTION_FISHEYE {
-        let c = fisheye_coords(common, x, y, offset);
-        let radius = c.length().max(1e-6);
-        let theta = radius.min(1.0) * FRAC_PI_2;
-        let side = (common.camera_right.xyz() * c.x + common.camera_up.xyz() * c.y) / radius;
-        return (common.camera_forward.xyz() * theta.cos() + side * theta.sin()).normalize();
-    }
-    pinhole_direction(common, pixel_ndc(common, x, y, offset))
 }
 
 /// The current sub-pixel sample's footprint on the mean surface: the two

@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
-"""Writes the metaballs of scenes/cloud_cumulus.toml: a cumulus as balls
-inside a half-ellipsoid with a flat base, radii and weights drawn from a
-fixed seed (so the scene file is reproducible). Usage: scripts/cumulus.py > balls.txt"""
+"""Writes the metaballs of scenes/cloud_cumulus.toml and
+cloud_cumulus_splat.toml: a cumulus as balls inside a half-ellipsoid with a
+flat base, radii and weights drawn from a fixed seed (so the file is
+reproducible), one ball a line (x y z radius q, metres).
+Usage: scripts/cumulus.py > scenes/assets/cumulus.metaballs"""
 import random
 
 random.seed(2000)
@@ -16,5 +18,6 @@ while len(balls) < 60:
     r = random.uniform(140.0, 320.0) * (1.0 - 0.35 * y)
     c = (centre[0] + x * half[0], centre[1] + 120.0 + y * half[1], centre[2] + z * half[2])
     balls.append((c, r, random.uniform(0.7, 1.0)))
+print("# x y z radius q (m, m, m, m, density at the centre): scripts/cumulus.py")
 for c, r, q in balls:
-    print(f"  [{c[0]:.1f}, {c[1]:.1f}, {c[2]:.1f}, {r:.1f}, {q:.2f}],")
+    print(f"{c[0]:.1f} {c[1]:.1f} {c[2]:.1f} {r:.1f} {q:.2f}")

@@ -103,6 +103,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("caustics_ball", traced("caustics_ball", 160, 120)),
         ("caustics_torus, turned", turned_torus()),
         ("cloud_cumulus", sky("cloud_cumulus", 160, 120)),
+        ("cloud_cumulus_splat", sky("cloud_cumulus_splat", 160, 120)),
         ("cloud_automaton", sky("cloud_automaton", 160, 120)),
         ("cloud_grid", sky("cloud_grid", 160, 120)),
         ("cloud_sea", sky("cloud_sea", 160, 120)),

@@ -19,14 +19,14 @@ fn cpu_image(data: &SceneData) -> Vec<glam::Vec4> {
 }
 
 /// A shipped scene at `width x height` with `scattering = "single"`, its
-/// CPU image, and that image's difference from the f64 reference at
-/// `tolerance` (printed).
+/// CPU image, that image's difference from the f64 reference at
+/// `tolerance` (printed), and the reference.
 fn single_against_reference(
     name: &str,
     width: u32,
     height: u32,
     tolerance: f64,
-) -> (SceneData, Vec<glam::DVec3>, slicelight::metrics::Difference) {
+) -> (SceneData, Vec<glam::DVec3>, slicelight::metrics::Difference, Vec<glam::DVec3>) {
     let data = shipped(name, width, height)
         .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
         .unwrap();
@@ -38,7 +38,7 @@ fn single_against_reference(
         "{name} {width}x{height}: {:.3} % RMS, {:.3} % max of the 8-bit range ({samples} reference samples per ray)",
         d.rms_8bit_percent, d.max_8bit_percent
     );
-    (data, image, d)
+    (data, image, d, reference)
 }
 
 /// Pixels of `image` that differ (by more than 1e-3 relative) from the
@@ -55,8 +55,7 @@ fn assert_sane(what: &str, data: &SceneData) {
     for (i, p) in r.image.iter().enumerate() {
         assert!(p.is_finite() && p.min_element() >= 0.0, "{what}: pixel {i} is {p}");
     }
-    let volumes = r.layers.iter().find(|(n, _)| *n == "volumes");
-    if let Some((_, layer)) = volumes {
+    for (_, layer) in r.layers.iter().filter(|(n, _)| *n == "volumes" || *n == "volume_splats") {
         for p in layer.as_slice::<glam::Vec4>() {
             assert!(p.truncate().is_finite() && p.truncate().min_element() >= 0.0, "{what}: volume radiance {p}");
         }
@@ -69,13 +68,141 @@ fn assert_sane(what: &str, data: &SceneData) {
 /// elsewhere on the cloud's edge); the bound, 0.5 %, is two and a half times
 /// that and half the 1 %: what a change to the planes, the density
 /// grid or the transmittance volume's defaults must keep.
+///
+/// Splatting (`cloud_cumulus_splat`'s method) on the same pixels against
+/// the same reference: measured 8.02 % RMS, 40 % at worst, energy 0.929.
+/// The paper's approximation, not a defect: each ball is lit as its centre
+/// is (deep in a ball of optical depth ~3.6), though the eye sees mostly its
+/// sunlit front. The bounds, 10 % RMS and energy within 0.88..1.0, hold
+/// that, so a change that makes splatting worse (or a broken step 1, which
+/// leaves it black) fails.
 #[test]
 fn cumulus_matches_the_reference() {
-    let (data, image, d) = single_against_reference("cloud_cumulus", 64, 48, 2e-4);
+    let (data, image, d, reference) = single_against_reference("cloud_cumulus", 64, 48, 2e-4);
     assert!(d.rms_8bit_percent < 0.5, "{d:?}");
     // The cloud is in the picture: it hides part of the sky.
     let changed = covered_pixels(&data, &image);
     assert!(changed > image.len() / 20, "the cloud covers {changed} of {} pixels", image.len());
+    let splat = splatted(&data);
+    let s = difference(&to_f64(&cpu_image(&splat)), &reference, data.exposure);
+    println!(
+        "cloud_cumulus 64x48 splatted: {:.3} % RMS, {:.3} % max of the 8-bit range, energy {:.4}",
+        s.rms_8bit_percent, s.max_8bit_percent, s.energy_ratio
+    );
+    assert!(s.rms_8bit_percent < 10.0 && (0.88..1.0).contains(&s.energy_ratio), "{s:?}");
+}
+
+/// The scene with every volume drawn by splatting.
+fn splatted(data: &SceneData) -> SceneData {
+    let s = data
+        .reconfigure(|f| f.volume.iter_mut().for_each(|v| v.method = slicelight::volumes::Method::Splatting))
+        .unwrap();
+    assert_eq!(s.volumes.params.method, slicelight::shaders::volumes::METHOD_SPLATTING);
+    s
+}
+
+/// Every pass the scene runs, on the CPU, into one frame (its last sample's
+/// per-pixel layers and every table).
+fn cpu_frame(data: &SceneData) -> slicelight::passes::Frame {
+    use slicelight::passes::{Frame, PASSES};
+    let pb = indicatif::ProgressBar::hidden();
+    let mut frame = Frame::default();
+    for r in PASSES.iter().flat_map(|p| p.reads().iter().chain(p.writes())) {
+        if let Some(blank) = r.blank(data.pixel_count() as usize) {
+            frame.insert(r, blank);
+        }
+    }
+    for &pass in PASSES.iter() {
+        if pass.plan(data).runs {
+            pass.run_cpu(data, &data.common, &mut frame, &pb);
+        }
+    }
+    frame
+}
+
+/// Splatting's view transmittance is exact: the billboards' chords are the
+/// field's integral in closed form, so the product of their attenuations
+/// is `exp(-tau)` of the whole ray through overlapping metaballs, clipped
+/// by the box and the floor. Against 4096 jittered strata in f64 on every
+/// pixel of the puff (optical depths up to ~1.5): within 2e-4 (f32 exps
+/// and sums; measured in the print). The slices' transmittance, from the
+/// density grid by planes, is printed beside it.
+#[test]
+fn splatted_transmittance_is_exact() {
+    use slicelight::shaders::camera::camera_ray;
+    let data = splatted(&puff(BALLS, "", ""));
+    let frame = cpu_frame(&data);
+    let splat = frame.get::<glam::Vec4>(&slicelight::volumes::splat::SPLAT_TRANSMITTANCE);
+    let slices = cpu_frame(&puff(BALLS, "", ""));
+    let slices = slices.get::<glam::Vec4>(&slicelight::volumes::VOLUME_TRANSMITTANCE);
+    let gbuffer = frame.get::<slicelight::shaders::types::GBufferTexel>(&slicelight::passes::GBUFFER);
+    let (mut worst, mut worst_slices, mut seen) = (0.0f64, 0.0f64, 0);
+    for y in 0..data.height() {
+        for x in 0..data.width() {
+            let i = (y * data.width() + x) as usize;
+            let (o, d) = camera_ray(&data.common, x, y);
+            let distance = gbuffer[i].normal_distance.w as f64;
+            let exact =
+                slicelight::volumes::reference::transmittance_strata(&data, o.as_dvec3(), d.as_dvec3(), distance, 4096);
+            if exact.x < 0.999 {
+                seen += 1;
+            }
+            worst = worst.max((splat[i].truncate().as_dvec3() - exact).abs().max_element());
+            worst_slices = worst_slices.max((slices[i].truncate().as_dvec3() - exact).abs().max_element());
+        }
+    }
+    println!(
+        "puff transmittance on {seen} pixels: splatting within {worst:.2e} of exp(-tau), slices {worst_slices:.2e}"
+    );
+    assert!(seen > 100, "the puff covers {seen} pixels");
+    assert!(worst < 2e-4, "splatting's transmittance is {worst} from exp(-tau)");
+}
+
+/// On one thin metaball (optical depth 0.016 through its centre) the light
+/// is nearly the same all over it, so splatting's one colour per ball is
+/// nearly exact: its radiance against the f64 reference's single
+/// scattering over the pixels it covers. Measured: see the print; the
+/// bounds, 2 % of the summed radiance and 3 % at any pixel above a tenth of
+/// the peak, are twice the light's spread over the ball (±0.8 %).
+#[test]
+fn one_thin_metaball_splats_as_the_reference() {
+    use slicelight::shaders::camera::camera_ray;
+    let data = splatted(
+        &puff("[0.0, 1.0, 0.0, 0.8, 1.0]", "", "[volumes]\nscattering = \"single\"")
+            .reconfigure(|f| {
+                f.volume[0].sigma_t = [0.02; 3];
+                f.volume[0].sigma_s = [0.018; 3];
+            })
+            .unwrap(),
+    );
+    let frame = cpu_frame(&data);
+    let splat = frame.get::<glam::Vec4>(&slicelight::volumes::splat::SPLAT_RADIANCE);
+    let gbuffer = frame.get::<slicelight::shaders::types::GBufferTexel>(&slicelight::passes::GBUFFER);
+    let peak = splat.iter().map(|p| p.x).fold(0.0f32, f32::max) as f64;
+    assert!(peak > 0.0, "the ball scatters no light");
+    let (mut sum, mut sum_ref, mut worst) = (0.0f64, 0.0f64, 0.0f64);
+    for y in 0..data.height() {
+        for x in 0..data.width() {
+            let i = (y * data.width() + x) as usize;
+            let (o, d) = camera_ray(&data.common, x, y);
+            let t = gbuffer[i].normal_distance.w as f64;
+            let (exact, _) =
+                slicelight::volumes::reference::volume_ray(&data, o.as_dvec3(), d.as_dvec3(), t, 512, i as u64);
+            let got = splat[i].x as f64;
+            sum += got;
+            sum_ref += exact.x;
+            if exact.x > 0.1 * peak {
+                worst = worst.max((got - exact.x).abs() / exact.x);
+            }
+        }
+    }
+    println!(
+        "one thin metaball: splatted radiance {:.4} of the reference's, worst pixel {:.2} %",
+        sum / sum_ref,
+        100.0 * worst
+    );
+    assert!((sum / sum_ref - 1.0).abs() < 0.02, "{sum} against {sum_ref}");
+    assert!(worst < 0.03, "worst pixel {worst}");
 }
 
 /// The default, multiple scattering by octaves, against the Monte Carlo
@@ -163,7 +290,7 @@ const BALLS: &str = "[0.0, 1.0, 0.0, 0.8, 1.0], [0.5, 1.4, 0.2, 0.6, 0.8]";
 /// Density 0, optical depths from 0 to 10^4, radii of 1 mm and 10 km (in a
 /// box to match), one metaball and 10^4 overlapping ones, a camera inside
 /// the cloud, an empty volume, a box cutting through the floor: no NaN or
-/// Inf, nothing negative.
+/// Inf, nothing negative; by slices and by splatting.
 #[test]
 fn stress_cases_stay_finite() {
     sane_cases(&[
@@ -209,9 +336,15 @@ fn stress_cases_stay_finite() {
     sane_cases(&[("radius 10 km", huge)]);
 }
 
+/// `assert_sane` on each case, drawn by slices and, where its volumes are
+/// all metaballs, by splatting.
 fn sane_cases(cases: &[(&str, SceneData)]) {
     for (what, data) in cases {
         assert_sane(what, data);
+        let v = &data.volumes;
+        if v.params.automaton_volume == 0 && !v.volumes.iter().any(|g| g.is_file_grid()) {
+            assert_sane(&format!("{what}, splatted"), &splatted(data));
+        }
     }
 }
 
@@ -294,6 +427,15 @@ fn bad_volumes_name_the_field() {
         let e = load_error(&format!("{base}\n{volume}\n[volumes]\n{settings}"));
         assert!(e.contains(field), "{settings}: {e}");
     }
+    // Splatting draws metaballs, and one method draws all volumes.
+    let e = load_error(&format!(
+        "{base}\n{volume}\nmethod = \"splatting\"\nautomaton = {{ cells = [4, 4, 4], steps = 2, seed = 1, {ELLIPSOID} }}"
+    ));
+    assert!(e.contains("volume[0].method") && e.contains("slices"), "{e}");
+    let e = load_error(&format!("{base}\n{volume}\n[[volume]]\n{volume}\nsigma_s = [0.5, 0.5, 0.5]\nsigma_t = [1.0, 1.0, 1.0]\nmethod = \"splatting\""));
+    assert!(e.contains("volume[1].method"), "{e}");
+    let e = load_error(&format!("{base}\n{volume}\nmethod = \"billboards\""));
+    assert!(e.contains("method"), "{e}");
 }
 
 /// The automaton's clouds with `scattering = "single"` at 48x36 pixel
@@ -303,7 +445,7 @@ fn bad_volumes_name_the_field() {
 /// docs/volumes.md; the bound is the 1 %.
 #[test]
 fn automaton_clouds_match_the_reference() {
-    let (data, image, d) = single_against_reference("cloud_automaton", 48, 36, 1e-3);
+    let (data, image, d, _) = single_against_reference("cloud_automaton", 48, 36, 1e-3);
     assert!(data.volumes.params.automaton_volume == 1);
     assert!(d.rms_8bit_percent < 1.0, "{d:?}");
     let changed = covered_pixels(&data, &image);
@@ -495,7 +637,7 @@ fn volumes_shadow_the_surfaces() {
 /// Measured: see the print and docs/volumes.md; the bound is the 1 %.
 #[test]
 fn grid_cloud_matches_the_reference() {
-    let (data, _, d) = single_against_reference("cloud_grid", 48, 36, 1e-3);
+    let (data, _, d, _) = single_against_reference("cloud_grid", 48, 36, 1e-3);
     assert_eq!(data.volumes.volumes[0].nx, 48);
     assert!(d.rms_8bit_percent < 1.0, "{d:?}");
 }

@@ -68,6 +68,17 @@ pub static PASSES: std::sync::LazyLock<Vec<&'static dyn Pass>> = std::sync::Lazy
     whole.chain(all.filter(|p| p.dispatch() == Dispatch::PerPixel)).collect()
 });
 
+/// Whether a pass that runs for `scene` reads `resource`, leaving out the
+/// passes named in `besides` (a pass that declares a read it makes only
+/// in some modes, which its caller checks itself). A pass whose only work
+/// is an input of others runs when this holds: what no running pass reads
+/// is not computed.
+pub fn read_by_a_running_pass(scene: &SceneData, resource: &Resource, besides: &[&str]) -> bool {
+    PASSES.iter().any(|p| {
+        !besides.contains(&p.name()) && p.reads().iter().any(|r| r.binding == resource.binding) && p.plan(scene).runs
+    })
+}
+
 /// The registered pass named `name`.
 pub fn by_name(name: &str) -> Option<&'static dyn Pass> {
     PASSES.iter().copied().find(|p| p.name() == name)

@@ -12,8 +12,8 @@ use slicelight_shaders::types::{CommonParams, GpuLight, LIGHT_DIRECTIONAL, PROJE
 
 use crate::cpu::for_each_invocation;
 use crate::passes::{
-    count_differences, Dispatch, Frame, Pass, Plan, Resource, BVH_NODES, COMMON, LIGHTS, SHADOW_MAPS, SPHERES,
-    TRIANGLES,
+    count_differences, read_by_a_running_pass, Dispatch, Frame, Pass, Plan, Resource, BVH_NODES, COMMON, LIGHTS,
+    SHADOW_MAPS, SPHERES, TRIANGLES,
 };
 use crate::scene::SceneData;
 
@@ -44,10 +44,10 @@ impl Pass for ShadowMaps {
         } else if !scene.has_geometry() {
             Plan::skip("no geometry to cast shadows")
         } else if scene.common.surface_shadows != slicelight_shaders::types::SHADOWS_MAP
-            && !crate::shafts::Shafts.plan(scene).runs
-            && !crate::volumes::Volumes.plan(scene).runs
+            // The surface pass reads the maps only with `SHADOWS_MAP`, checked here.
+            && !read_by_a_running_pass(scene, &SHADOW_MAPS, &[super::surface::Surface.name()])
         {
-            Plan::skip("surfaces use shadow rays and no shafts or volumes are rendered")
+            Plan::skip("surfaces use shadow rays and no running pass reads the maps")
         } else {
             let sizes: Vec<String> = scene
                 .lights

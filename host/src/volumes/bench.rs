@@ -2,14 +2,17 @@
 //! of the volumes' passes over their settings, on each scene and backend; a
 //! CSV and a PNG plot.
 //!
-//! Three series:
+//! Four series:
 //! - `planes`: the sample planes, single scattering, against the f64
 //!   quadrature reference (`volumes::reference`);
 //! - `light-grid`: the transmittance volume's nodes (`n` a side), single
 //!   scattering, against the same reference;
 //! - `octaves`: multiple scattering by 1 (single scattering), 2, 4, 8 and
 //!   12 octaves at the default factors, against the Monte Carlo reference
-//!   for all orders (`volumes::montecarlo`).
+//!   for all orders (`volumes::montecarlo`);
+//! - `splatting` (scenes whose volumes are all metaballs): Dobashi et al.
+//!   2000's billboards (`volumes::splat`), single scattering against the
+//!   quadrature and the default octaves against Monte Carlo.
 //!
 //! Error is the RMS and largest difference of the 8-bit images (the
 //! scene's exposure) at a lattice of pixel centres, % of 255, and the
@@ -38,10 +41,15 @@ pub struct Config {
     pub light_grid: Option<u32>,
     /// Octaves (1: single scattering).
     pub octaves: u32,
+    /// Splatting (`splat`) instead of slices.
+    pub splatting: bool,
 }
 
-pub fn sweep(quick: bool) -> Vec<Config> {
-    let base = Config { series: "", planes: None, light_grid: None, octaves: 1 };
+/// The sweep's configurations; `splattable`: the scene's volumes are all
+/// metaballs, so the `splatting` series (single scattering, and the default
+/// octaves) runs too.
+pub fn sweep(quick: bool, splattable: bool) -> Vec<Config> {
+    let base = Config { series: "", planes: None, light_grid: None, octaves: 1, splatting: false };
     let planes: &[u32] = if quick { &[32, 128, 512] } else { &[16, 32, 64, 128, 256, 512, 1024] };
     let grids: &[u32] = if quick { &[16, 64, 128] } else { &[16, 32, 64, 128, 256] };
     let octaves: &[u32] = if quick { &[1, 8] } else { &[1, 2, 4, 8, 12] };
@@ -49,6 +57,10 @@ pub fn sweep(quick: bool) -> Vec<Config> {
     v.extend(planes.iter().map(|&n| Config { series: "planes", planes: Some(n), ..base }));
     v.extend(grids.iter().map(|&n| Config { series: "light-grid", light_grid: Some(n), ..base }));
     v.extend(octaves.iter().map(|&n| Config { series: "octaves", octaves: n, ..base }));
+    if splattable {
+        let octaves = [1, super::OCTAVES];
+        v.extend(octaves.iter().map(|&n| Config { series: "splatting", octaves: n, splatting: true, ..base }));
+    }
     v
 }
 
@@ -58,6 +70,8 @@ fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
         let s = &mut f.volumes;
         s.planes = c.planes;
         s.light_grid = c.light_grid.map(|n| [n; 3]);
+        let method = if c.splatting { super::Method::Splatting } else { super::Method::Slices };
+        f.volume.iter_mut().for_each(|v| v.method = method);
         if c.octaves == 1 {
             s.scattering = Scattering::Single;
             s.octaves = None;
@@ -118,7 +132,7 @@ pub fn run(
         let pixels = crate::bench::pixel_lattice(data, stride);
         let mut references = Vec::new();
         for octaves in [1, 8] {
-            let d = configure(data, &Config { series: "", planes: None, light_grid: None, octaves })?;
+            let d = configure(data, &Config { series: "", planes: None, light_grid: None, octaves, splatting: false })?;
             let t = std::time::Instant::now();
             let (values, _) =
                 crate::reference::render_converged_at(&d, &pixels, if octaves == 1 { 2e-4 } else { 3e-3 });
@@ -131,14 +145,23 @@ pub fn run(
             references.push(values);
         }
         for backend in backends {
-            for c in sweep(quick) {
+            let splattable =
+                data.volumes.params.automaton_volume == 0 && !data.volumes.volumes.iter().any(|v| v.is_file_grid());
+            for c in sweep(quick, splattable) {
                 let d = configure(data, &c)?;
-                let grids: &[&dyn Pass] =
-                    &[&super::automaton::Steps, &super::automaton::Smooth, &super::Density, &super::OpticalDepth];
-                let timed = time_renders(&d, backend, repeats, &[grids, &[&super::Volumes]])?;
+                let grids: &[&dyn Pass] = &[
+                    &super::automaton::Steps,
+                    &super::automaton::Smooth,
+                    &super::Density,
+                    &super::OpticalDepth,
+                    &super::splat::SplatSort,
+                    &super::splat::SplatTiles,
+                ];
+                let timed = time_renders(&d, backend, repeats, &[grids, &[&super::Volumes, &super::splat::Splats]])?;
                 let img = &timed.last.image;
                 let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
-                let reference = &references[if c.series == "octaves" { 1 } else { 0 }];
+                let all_orders = c.series == "octaves" || c.octaves > 1;
+                let reference = &references[if all_orders { 1 } else { 0 }];
                 let diff = crate::metrics::difference(&at, reference, data.exposure);
                 let row = Row {
                     scene: name.clone(),

@@ -9,6 +9,7 @@ pub mod bench;
 pub mod grid;
 pub mod montecarlo;
 pub mod reference;
+pub mod splat;
 
 use anyhow::{anyhow, bail, Context, Result};
 use glam::{Vec3, Vec4};
@@ -22,7 +23,7 @@ use slicelight_shaders::types::{
 };
 use slicelight_shaders::volumes::{
     density_cell, optical_depth_column, volumes_pixel, GpuMetaball, GpuVolume, LightGrid, VolumeInputs, VolumesParams,
-    PHASE_DOUBLE_HENYEY_GREENSTEIN,
+    METHOD_SLICES, METHOD_SPLATTING, PHASE_DOUBLE_HENYEY_GREENSTEIN,
 };
 use std::path::Path;
 
@@ -31,7 +32,16 @@ use crate::passes::*;
 use crate::scene::{invalid, validate, SceneData};
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
-pub static PASSES: &[&dyn Pass] = &[&automaton::Steps, &automaton::Smooth, &Density, &OpticalDepth, &Volumes];
+pub static PASSES: &[&dyn Pass] = &[
+    &automaton::Steps,
+    &automaton::Smooth,
+    &Density,
+    &OpticalDepth,
+    &splat::SplatSort,
+    &splat::SplatTiles,
+    &Volumes,
+    &splat::Splats,
+];
 
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family = Family { name: "volumes", passes: PASSES, bench: Some(&bench::VolumesSweep) };
@@ -102,7 +112,9 @@ pub struct Volume {
     /// Density grid cells along x, y, z (default: a quarter of the
     /// smallest metaball's radius, at most `MAX_DEFAULT_CELLS` in all).
     pub resolution: Option<[u32; 3]>,
-    /// `"slices"`: the slice renderer (the only one so far).
+    /// `"slices"` (the default): the slice renderer; `"splatting"`:
+    /// Dobashi et al. 2000's billboards, one per metaball (`splat`). Every
+    /// volume of a scene takes the same method.
     #[serde(default)]
     pub method: Method,
     /// The cloud automaton fills the box (instead of metaballs).
@@ -127,6 +139,7 @@ pub struct GridFile {
 pub enum Method {
     #[default]
     Slices,
+    Splatting,
 }
 
 /// A volume's phase function: the medium's kinds and two-lobe Henyey-Greenstein.
@@ -615,10 +628,28 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
     let mut automaton_volume = 0;
     for (i, v) in list.iter().enumerate() {
         let field = format!("volume[{i}]");
-        let (mut record, own, file) = match &v.smoke {
+        let (mut record, mut own, file) = match &v.smoke {
             Some(s) => smoke_volume(&field, v, s, data, base)?,
             None => volume(&field, v, base)?,
         };
+        if v.method != list[0].method {
+            bail!(invalid(
+                &format!("{field}.method"),
+                &format!("volume[0]'s method, {:?} (one renderer draws all volumes)", list[0].method),
+                format!("{:?}", v.method)
+            ));
+        }
+        if v.method == Method::Splatting && (file.is_some() || v.automaton.is_some()) {
+            bail!(invalid(
+                &format!("{field}.method"),
+                "\"slices\" for a grid or automaton volume (splatting draws metaballs)",
+                "\"splatting\""
+            ));
+        }
+        for ball in &mut own {
+            // The ball's volume, for the splatting kernels (`splat::volume_of`).
+            ball.q.y = i as f32;
+        }
         if let Some(a) = &v.automaton {
             if automaton_volume != 0 {
                 bail!(invalid(&format!("{field}.automaton"), "one automaton per scene", "a second"));
@@ -709,6 +740,11 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
         octave_extinction: b,
         octave_phase: c,
         automaton_volume,
+        method: if list[0].method == Method::Splatting { METHOD_SPLATTING } else { METHOD_SLICES },
+        ball_count: balls.len() as u32,
+        tiles_x: common.width.div_ceil(slicelight_shaders::volumes::splat::TILE),
+        tiles_y: common.height.div_ceil(slicelight_shaders::volumes::splat::TILE),
+        tile_capacity: splat::TILE_CAPACITY.min(balls.len() as u32),
     };
     Ok(Setup { enabled: true, params, volumes, balls, bins, grids, automaton: cloud_automaton, grid_values })
 }
@@ -746,6 +782,9 @@ impl Pass for Density {
     fn plan(&self, scene: &SceneData) -> Plan {
         if let Some(skip) = skip_without_volumes(scene) {
             return skip;
+        }
+        if !read_by_a_running_pass(scene, &DENSITY, &[]) {
+            return Plan::skip("no running pass reads the density grids (the volumes are splatted)");
         }
         let v = &scene.volumes;
         Plan::run(
@@ -802,6 +841,9 @@ impl Pass for OpticalDepth {
     fn plan(&self, scene: &SceneData) -> Plan {
         if let Some(skip) = skip_without_volumes(scene) {
             return skip;
+        }
+        if !read_by_a_running_pass(scene, &OPTICAL_DEPTHS, &[]) {
+            return Plan::skip("no running pass reads the transmittance volumes (the volumes are splatted)");
         }
         let v = &scene.volumes;
         let sizes: Vec<String> =
@@ -895,6 +937,9 @@ impl Pass for Volumes {
             return skip;
         }
         let p = &scene.volumes.params;
+        if p.method == METHOD_SPLATTING {
+            return Plan::skip("the volumes are splatted (volume_splats)");
+        }
         let scattering = if p.octaves > 1 {
             format!(
                 "multiple scattering ({} octaves, a {} b {} c {})",
@@ -912,46 +957,63 @@ impl Pass for Volumes {
         )
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let n = common.band_pixels as usize;
         let v = &scene.volumes;
-        let blank = slicelight_shaders::common::surface::no_surface();
-        let mut radiance = Buffer::overwritten::<Vec4>(n);
-        let mut transmittance = Buffer::overwritten::<Vec4>(n);
-        {
-            let inputs = VolumeInputs {
-                params: &v.params,
-                volumes: &v.volumes,
-                density: frame.get(&DENSITY),
-                lights: &scene.lights,
-                light_map: &scene.light_map,
-                shadow: frame.get(&SHADOW_MAPS),
-                grids: &v.grids,
-                depths: frame.get(&OPTICAL_DEPTHS),
-            };
-            let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
-            for_each_invocation2(
-                radiance.as_mut_slice::<Vec4>(),
-                transmittance.as_mut_slice::<Vec4>(),
-                common.band_start,
-                progress,
-                |i, l, t| {
-                    let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-                    (*l, *t) = volumes_pixel(i, common, &inputs, texel.normal_distance.w);
-                },
-            );
-        }
-        frame.insert(&VOLUME_RADIANCE, radiance);
-        frame.insert(&VOLUME_TRANSMITTANCE, transmittance);
+        let inputs = VolumeInputs {
+            params: &v.params,
+            volumes: &v.volumes,
+            density: frame.get(&DENSITY),
+            lights: &scene.lights,
+            light_map: &scene.light_map,
+            shadow: frame.get(&SHADOW_MAPS),
+            grids: &v.grids,
+            depths: frame.get(&OPTICAL_DEPTHS),
+        };
+        let layers = per_pixel_layers(common, frame, progress, |i, d| volumes_pixel(i, common, &inputs, d));
+        frame.insert(&VOLUME_RADIANCE, layers.0);
+        frame.insert(&VOLUME_TRANSMITTANCE, layers.1);
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
-        // Hundreds of intervals per ray, each a product of f32 exps and
-        // trilinear lookups: 1e-3 of the peak. A ray that grazes a box's
-        // edge or a plane may take or miss one interval between the
-        // backends: 1e-3 of the values may differ more.
-        let l = cpu.get::<Vec4>(&VOLUME_RADIANCE);
-        let a = compare_rgb("volume radiance", gpu.get(&VOLUME_RADIANCE), l, 1e-3, l.len() * 3 / 1000 + 1)?;
-        let t = cpu.get::<Vec4>(&VOLUME_TRANSMITTANCE);
-        let b = compare_rgb("volume transmittance", gpu.get(&VOLUME_TRANSMITTANCE), t, 1e-3, t.len() * 3 / 1000 + 1)?;
-        Ok(format!("{a}; {b}"))
+        compare_layers(gpu, cpu, &VOLUME_RADIANCE, &VOLUME_TRANSMITTANCE)
     }
+}
+
+/// Runs a volume renderer's per-pixel function (pixel index and the
+/// G-buffer's surface distance to radiance and transmittance) over the
+/// band: its radiance and transmittance layers.
+fn per_pixel_layers(
+    common: &CommonParams,
+    frame: &Frame,
+    progress: &ProgressBar,
+    pixel: impl Fn(u32, f32) -> (Vec4, Vec4) + Sync,
+) -> (Buffer, Buffer) {
+    let n = common.band_pixels as usize;
+    let blank = slicelight_shaders::common::surface::no_surface();
+    let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+    let mut radiance = Buffer::overwritten::<Vec4>(n);
+    let mut transmittance = Buffer::overwritten::<Vec4>(n);
+    for_each_invocation2(
+        radiance.as_mut_slice::<Vec4>(),
+        transmittance.as_mut_slice::<Vec4>(),
+        common.band_start,
+        progress,
+        |i, l, t| {
+            let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
+            (*l, *t) = pixel(i, texel.normal_distance.w);
+        },
+    );
+    (radiance, transmittance)
+}
+
+/// Compares a volume renderer's two layers between the backends.
+fn compare_layers(gpu: &Frame, cpu: &Frame, radiance: &Resource, transmittance: &Resource) -> Result<String> {
+    // Hundreds of intervals or billboards per ray, each a product of f32
+    // exps (and trilinear lookups): 1e-3 of the peak. A ray that grazes a
+    // box's edge or a plane may take or miss one interval between the
+    // backends, and a tile or order that differs (splatting) changes a few
+    // pixels: 1e-3 of the values may differ more.
+    let l = cpu.get::<Vec4>(radiance);
+    let a = compare_rgb(radiance.name, gpu.get(radiance), l, 1e-3, l.len() * 3 / 1000 + 1)?;
+    let t = cpu.get::<Vec4>(transmittance);
+    let b = compare_rgb(transmittance.name, gpu.get(transmittance), t, 1e-3, t.len() * 3 / 1000 + 1)?;
+    Ok(format!("{a}; {b}"))
 }

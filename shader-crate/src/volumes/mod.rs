@@ -33,6 +33,7 @@ use crate::types::{CommonParams, GBufferTexel, GpuLight, LIGHT_DIRECTIONAL, LIGH
 use spirv_std::spirv;
 
 pub mod automaton;
+pub mod splat;
 use automaton::{lattice_density, AutomatonParams};
 
 /// `GpuVolume::phase_kind` for the two-lobe Henyey-Greenstein function
@@ -134,7 +135,21 @@ pub struct VolumesParams {
     pub octave_phase: f32,
     /// The volume filled by the cloud automaton, plus one (0: none).
     pub automaton_volume: u32,
+    /// `METHOD_SLICES` or `METHOD_SPLATTING` (`splat`): how every volume is drawn.
+    pub method: u32,
+    /// Metaballs in all volumes (the splatting kernels' balls).
+    pub ball_count: u32,
+    /// Splatting's screen tiles (`splat::TILE` pixels a side) across and
+    /// down, and the most balls a tile lists (`splat::splat_tile`).
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub tile_capacity: u32,
 }
+
+/// `VolumesParams::method`: the slice renderer (`volumes_pixel`).
+pub const METHOD_SLICES: u32 = 0;
+/// `VolumesParams::method`: Dobashi et al. 2000's splatting (`splat`).
+pub const METHOD_SPLATTING: u32 = 1;
 
 #[cfg(not(target_arch = "spirv"))]
 mod pod {
@@ -461,9 +476,9 @@ pub struct VolumeInputs<'a> {
 /// volumes' attenuation, with the light's own falloff, light map, shadow
 /// test against the surfaces and the homogeneous medium's attenuation on
 /// its way; and the unit direction the light travels at `p`.
-fn light_at(common: &CommonParams, light: &GpuLight, inputs: &VolumeInputs, p: Vec3) -> (Vec4, Vec3) {
+fn light_at(common: &CommonParams, light: &GpuLight, light_map: &[Vec4], shadow: &[f32], p: Vec3) -> (Vec4, Vec3) {
     let local = light_local(light, p);
-    let e = emitted_visible(light, inputs.light_map, inputs.shadow, local, 1.0);
+    let e = emitted_visible(light, light_map, shadow, local, 1.0);
     if light.kind == LIGHT_DIRECTIONAL {
         let fog = crate::light::transmittance(common.sigma_t, local.z.max(0.0));
         return (e * fog, light.axis_z.xyz());
@@ -646,7 +661,7 @@ fn in_scattered(common: &CommonParams, inputs: &VolumeInputs, p: Vec3, d: Vec3) 
         let light = &copy;
         #[cfg(not(target_arch = "spirv"))]
         let light = &inputs.lights[l];
-        let (e, travel) = light_at(common, light, inputs, p);
+        let (e, travel) = light_at(common, light, inputs.light_map, inputs.shadow, p);
         if e.x > 0.0 || e.y > 0.0 || e.z > 0.0 {
             let (tau, through) = light_optical_depths(light, &inputs.grids[l], inputs.depths, p);
             // The octaves' weight: the share of the light that scatters at
@@ -659,16 +674,7 @@ fn in_scattered(common: &CommonParams, inputs: &VolumeInputs, p: Vec3, d: Vec3) 
                 let vol = &inputs.volumes[v];
                 let rho = grid_density(vol, inputs.density, p);
                 if rho > 0.0 {
-                    let (mut a, mut b, mut c) = (Vec4::ONE, 1.0f32, 1.0f32);
-                    let mut octave = 0;
-                    while octave < params.octaves.max(1) {
-                        let arriving = e * Vec4::new((-b * tau.x).exp(), (-b * tau.y).exp(), (-b * tau.z).exp(), 0.0);
-                        source += arriving * vol.sigma_s * a * (rho * volume_phase(vol, cos_theta, c));
-                        a *= thick * params.octave_scattering;
-                        b *= params.octave_extinction;
-                        c *= params.octave_phase;
-                        octave += 1;
-                    }
+                    source += octave_light(params, vol, e, tau, thick, cos_theta) * vol.sigma_s * rho;
                 }
                 v += 1;
             }
@@ -676,6 +682,28 @@ fn in_scattered(common: &CommonParams, inputs: &VolumeInputs, p: Vec3, d: Vec3) 
         l += 1;
     }
     source
+}
+
+/// The light of the octaves that reaches a point of volume `vol` and is
+/// scattered toward the camera per unit scattering coefficient (W/(m^2 sr),
+/// rgb; times `sigma_s rho` it is `in_scattered`'s source): the sum over
+/// octaves `i` of `e exp(-b^i tau) a_i p(cos_theta, c^i)`, `a_0 = 1`,
+/// `a_(i+1) = a_i thick octave_scattering`. `e` is what the light sends
+/// before the volumes, `tau` its optical depth to the point, `thick` the
+/// share of its ray's light the volumes scatter at all (`in_scattered`).
+pub fn octave_light(params: &VolumesParams, vol: &GpuVolume, e: Vec4, tau: Vec4, thick: Vec4, cos_theta: f32) -> Vec4 {
+    let mut sum = Vec4::ZERO;
+    let (mut a, mut b, mut c) = (Vec4::ONE, 1.0f32, 1.0f32);
+    let mut octave = 0;
+    while octave < params.octaves.max(1) {
+        let arriving = e * Vec4::new((-b * tau.x).exp(), (-b * tau.y).exp(), (-b * tau.z).exp(), 0.0);
+        sum += arriving * a * volume_phase(vol, cos_theta, c);
+        a *= thick * params.octave_scattering;
+        b *= params.octave_extinction;
+        c *= params.octave_phase;
+        octave += 1;
+    }
+    sum
 }
 
 /// The density kernel's entry point (`density_cell`).

@@ -1,0 +1,245 @@
+//! Splatting (`method = "splatting"` on metaball volumes; kernels:
+//! `shader-crate/src/volumes/splat.rs`): Dobashi et al. 2000's billboard
+//! renderer as three passes: each metaball's light and rank
+//! (`volume_splat_sort`, step 1 and the sort), the screen tiles' lists
+//! (`volume_splat_tiles`), and the per-pixel blend (`volume_splats`,
+//! step 2), which draws the layer the slice renderer's `volumes` pass
+//! draws otherwise.
+
+use anyhow::Result;
+use glam::Vec4;
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+use slicelight_shaders::types::CommonParams;
+use slicelight_shaders::volumes::splat::{splat_ball, splat_pixel, splat_tile, SplatBall};
+use slicelight_shaders::volumes::METHOD_SPLATTING;
+
+use super::{clear, compare_layers, per_pixel_layers, METABALLS, VOLUMES, VOLUMES_PARAMS};
+use crate::passes::*;
+use crate::scene::SceneData;
+
+/// Per metaball, its billboard (`SplatBall`).
+pub static SPLATS: Resource =
+    Resource { binding: 69, name: "splats", kind: ResourceKind::Frame(|s| s.volumes.params.ball_count as u64 * 32) };
+/// The metaballs' indices front to back.
+pub static SPLAT_ORDER: Resource = Resource {
+    binding: 70,
+    name: "splat order",
+    kind: ResourceKind::Frame(|s| s.volumes.params.ball_count as u64 * 4),
+};
+/// Per screen tile, its count and list of metaballs.
+pub static SPLAT_TILES: Resource =
+    Resource { binding: 71, name: "splat tiles", kind: ResourceKind::Frame(|s| tile_words(s) * 4) };
+/// Splatting's radiance per pixel (rgb).
+pub static SPLAT_RADIANCE: Resource =
+    Resource { binding: 72, name: "splat radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
+/// The view transmittance through the billboards per pixel (rgb).
+pub static SPLAT_TRANSMITTANCE: Resource =
+    Resource { binding: 73, name: "splat transmittance", kind: ResourceKind::PerPixel { blank: clear } };
+
+/// Most metaballs a tile lists; a tile that meets more walks them all.
+pub const TILE_CAPACITY: u32 = 1024;
+
+fn tile_words(s: &SceneData) -> u64 {
+    let p = &s.volumes.params;
+    p.tiles_x as u64 * p.tiles_y as u64 * (p.tile_capacity as u64 + 1)
+}
+
+/// Why a splatting pass does not run, if it does not.
+fn skip(scene: &SceneData) -> Option<Plan> {
+    if !scene.volumes.enabled {
+        return Some(Plan::skip("no [[volume]]"));
+    }
+    (scene.volumes.params.method != METHOD_SPLATTING).then(|| Plan::skip("the volumes are drawn by slices"))
+}
+
+pub struct SplatSort;
+
+impl Pass for SplatSort {
+    fn name(&self) -> &'static str {
+        "volume_splat_sort"
+    }
+    fn kernel(&self) -> &'static str {
+        "volumes::splat::splat_ball_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, LIGHTS, LIGHT_MAPS, SHADOW_MAPS, VOLUMES_PARAMS, VOLUMES, METABALLS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SPLATS, SPLAT_ORDER]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip(scene) {
+            return skip;
+        }
+        let n = scene.volumes.params.ball_count as u64;
+        Plan::run(
+            format!(
+                "{n} metaballs: the light at each centre through all billboards toward {} light(s), and the order from the eye",
+                scene.lights.len()
+            ),
+            n,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let v = &scene.volumes;
+        let n = v.params.ball_count as usize;
+        let shadow = frame.get::<f32>(&SHADOW_MAPS);
+        let splats: Vec<SplatBall> = (0..n as u32)
+            .into_par_iter()
+            .map(|j| {
+                let s = splat_ball(j, common, &v.params, &v.volumes, &v.balls, &scene.lights, &scene.light_map, shadow);
+                progress.inc(1);
+                s
+            })
+            .collect();
+        frame.write::<u32>(&SPLAT_ORDER, n, |_, order| {
+            for (j, s) in splats.iter().enumerate() {
+                order[s.rank as usize] = j as u32;
+            }
+        });
+        frame.insert(&SPLATS, Buffer::from_bytes(bytemuck::cast_slice(&splats)));
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Colours: per light, exps of sums of polynomial chords over all
+        // metaballs: 1e-4 of the peak. The order: two centres whose
+        // squared distances differ in the last bit may swap (a GPU's
+        // fused multiply-add): 1 % of the places.
+        let g = gpu.get::<SplatBall>(&SPLATS);
+        let c = cpu.get::<SplatBall>(&SPLATS);
+        let colors = |s: &[SplatBall]| s.iter().map(|b| b.color).collect::<Vec<Vec4>>();
+        let a = compare_rgb("splat colours", &colors(g), &colors(c), 1e-4, 0)?;
+        let (go, co) = (gpu.get::<u32>(&SPLAT_ORDER), cpu.get::<u32>(&SPLAT_ORDER));
+        anyhow::ensure!(go.len() == co.len(), "splat order: {} and {} places", go.len(), co.len());
+        let moved = go.iter().zip(co).filter(|(a, b)| a != b).count();
+        anyhow::ensure!(moved <= co.len() / 100, "splat order: {moved} of {} places differ", co.len());
+        Ok(format!("{a}; order: {moved} of {} places differ", co.len()))
+    }
+}
+
+pub struct SplatTiles;
+
+impl Pass for SplatTiles {
+    fn name(&self) -> &'static str {
+        "volume_splat_tiles"
+    }
+    fn kernel(&self) -> &'static str {
+        "volumes::splat::splat_tile_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, VOLUMES_PARAMS, METABALLS, SPLAT_ORDER]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SPLAT_TILES]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip(scene) {
+            return skip;
+        }
+        let p = &scene.volumes.params;
+        Plan::run(
+            format!(
+                "{}x{} tiles of {} pixels, up to {} metaballs each ({:.1} MiB)",
+                p.tiles_x,
+                p.tiles_y,
+                slicelight_shaders::volumes::splat::TILE,
+                p.tile_capacity,
+                tile_words(scene) as f64 * 4.0 / (1u64 << 20) as f64
+            ),
+            p.tiles_x as u64 * p.tiles_y as u64,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.volumes.params;
+        let stride = p.tile_capacity as usize + 1;
+        frame.write::<u32>(&SPLAT_TILES, tile_words(scene) as usize, |f, out| {
+            let order = f.get::<u32>(&SPLAT_ORDER);
+            out.par_chunks_mut(stride).enumerate().for_each(|(t, list)| {
+                splat_tile(t as u32, common, p, &scene.volumes.balls, order, list, 0);
+                progress.inc(1);
+            });
+        });
+    }
+    fn counters(&self, scene: &SceneData, frame: &Frame) -> Vec<(&'static str, u64)> {
+        let p = &scene.volumes.params;
+        let tiles = frame.get::<u32>(&SPLAT_TILES);
+        let counts = tiles.chunks(p.tile_capacity as usize + 1).map(|t| t.first().copied().unwrap_or(0));
+        let full = counts.clone().filter(|&n| n > p.tile_capacity).count() as u64;
+        let listed = counts.map(|n| n.min(p.tile_capacity) as u64).sum();
+        vec![("splat tile entries", listed), ("splat tiles over capacity", full)]
+    }
+    fn keeps(&self) -> &'static [&'static Resource] {
+        resources![SPLAT_TILES]
+    }
+    fn compare(&self, scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // A ball whose angular distance from a tile's cone is within the
+        // last bit of `acos` may be listed on one backend only, and a
+        // swapped pair in the order (`SplatSort::compare`) swaps entries:
+        // 1 % of the tiles may differ.
+        let stride = scene.volumes.params.tile_capacity as usize + 1;
+        let (g, c) = (gpu.get::<u32>(&SPLAT_TILES), cpu.get::<u32>(&SPLAT_TILES));
+        anyhow::ensure!(g.len() == c.len(), "splat tiles: {} and {} words", g.len(), c.len());
+        let tiles = c.len() / stride;
+        let differ = g.chunks(stride).zip(c.chunks(stride)).filter(|(a, b)| a != b).count();
+        anyhow::ensure!(differ <= tiles / 100, "splat tiles: {differ} of {tiles} tiles differ");
+        Ok(format!("splat tiles: {differ} of {tiles} tiles differ"))
+    }
+}
+
+pub struct Splats;
+
+impl Pass for Splats {
+    fn name(&self) -> &'static str {
+        "volume_splats"
+    }
+    fn kernel(&self) -> &'static str {
+        "volumes::splat::splat_pixel_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, VOLUMES_PARAMS, VOLUMES, METABALLS, SPLATS, SPLAT_ORDER, SPLAT_TILES]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SPLAT_RADIANCE, SPLAT_TRANSMITTANCE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&SPLAT_RADIANCE)
+    }
+    fn transmittance_layer(&self) -> Option<&'static Resource> {
+        Some(&SPLAT_TRANSMITTANCE)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip(scene) {
+            return skip;
+        }
+        let p = &scene.volumes.params;
+        let scattering = if p.octaves > 1 {
+            format!("multiple scattering ({} octaves)", p.octaves)
+        } else {
+            "single scattering".to_string()
+        };
+        Plan::run(format!("{} billboards blended front to back, {scattering}", p.ball_count), 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let v = &scene.volumes;
+        let splats = frame.get::<SplatBall>(&SPLATS);
+        let order = frame.get::<u32>(&SPLAT_ORDER);
+        let tiles = frame.get::<u32>(&SPLAT_TILES);
+        let layers = per_pixel_layers(common, frame, progress, |i, d| {
+            splat_pixel(i, common, &v.params, &v.volumes, &v.balls, splats, order, tiles, d)
+        });
+        frame.insert(&SPLAT_RADIANCE, layers.0);
+        frame.insert(&SPLAT_TRANSMITTANCE, layers.1);
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        compare_layers(gpu, cpu, &SPLAT_RADIANCE, &SPLAT_TRANSMITTANCE)
+    }
+}

@@ -161,14 +161,25 @@ fn splatted_transmittance_is_exact() {
 /// On one thin metaball (optical depth 0.016 through its centre) the light
 /// is nearly the same all over it, so splatting's one colour per ball is
 /// nearly exact: its radiance against the f64 reference's single
-/// scattering over the pixels it covers. Measured: see the print; the
-/// bounds, 2 % of the summed radiance and 3 % at any pixel above a tenth of
-/// the peak, are twice the light's spread over the ball (±0.8 %).
+/// scattering over the pixels it covers, under the sun (through its bins)
+/// and under the sun and a spotlight (whose balls are all walked). Measured:
+/// sun 0.9965 of the summed radiance, 0.83 % at worst (twice that, 2 % and
+/// 3 %, the bounds: the sun's light varies by ±0.8 % over the ball); with
+/// the spot 0.992 and 8.0 % at worst, where its 1/r^2 (0.57 to 2.2 times
+/// the centre's over the ball, 2.5 m from the spot) varies along the
+/// pixel's chord and the centre's value stands for it: 2 % and 12 % held.
 #[test]
 fn one_thin_metaball_splats_as_the_reference() {
+    let spot = "[[spotlight]]\nposition = [0.0, 3.0, 1.5]\ndirection = [0.0, -0.8, -0.6]\ncutoff_deg = 40.0\nbeam_deg = 35.0\nintensity = [3.0, 3.0, 3.0]";
+    for (lights, worst_bound) in [("", 0.03), (spot, 0.12)] {
+        thin_metaball_against_reference(lights, worst_bound);
+    }
+}
+
+fn thin_metaball_against_reference(lights: &str, worst_bound: f64) {
     use slicelight::shaders::camera::camera_ray;
     let data = splatted(
-        &puff("[0.0, 1.0, 0.0, 0.8, 1.0]", "", "[volumes]\nscattering = \"single\"")
+        &puff("[0.0, 1.0, 0.0, 0.8, 1.0]", "", &format!("{lights}\n[volumes]\nscattering = \"single\""))
             .reconfigure(|f| {
                 f.volume[0].sigma_t = [0.02; 3];
                 f.volume[0].sigma_s = [0.018; 3];
@@ -197,12 +208,13 @@ fn one_thin_metaball_splats_as_the_reference() {
         }
     }
     println!(
-        "one thin metaball: splatted radiance {:.4} of the reference's, worst pixel {:.2} %",
+        "one thin metaball, {} light(s): splatted radiance {:.4} of the reference's, worst pixel {:.2} %",
+        data.lights.len(),
         sum / sum_ref,
         100.0 * worst
     );
     assert!((sum / sum_ref - 1.0).abs() < 0.02, "{sum} against {sum_ref}");
-    assert!(worst < 0.03, "worst pixel {worst}");
+    assert!(worst < worst_bound, "worst pixel {worst}");
 }
 
 /// The default, multiple scattering by octaves, against the Monte Carlo

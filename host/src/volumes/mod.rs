@@ -268,6 +268,9 @@ pub struct Setup {
     pub automaton: automaton::Setup,
     /// The grid volumes' values from their files, one after another.
     pub grid_values: Vec<f32>,
+    /// Splatting: each light's bins of metaballs and their lists (`splat::light_bins`).
+    pub light_bins: Vec<slicelight_shaders::volumes::splat::LightBins>,
+    pub light_lists: Vec<u32>,
 }
 
 impl Setup {
@@ -746,7 +749,23 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
         tiles_y: common.height.div_ceil(slicelight_shaders::volumes::splat::TILE),
         tile_capacity: splat::TILE_CAPACITY.min(balls.len() as u32),
     };
-    Ok(Setup { enabled: true, params, volumes, balls, bins, grids, automaton: cloud_automaton, grid_values })
+    let (light_bins, light_lists) = if params.method == METHOD_SPLATTING {
+        splat::light_bins(&data.lights, &balls)
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    Ok(Setup {
+        enabled: true,
+        params,
+        volumes,
+        balls,
+        bins,
+        grids,
+        automaton: cloud_automaton,
+        grid_values,
+        light_bins,
+        light_lists,
+    })
 }
 
 fn skip_without_volumes(scene: &SceneData) -> Option<Plan> {

@@ -7,11 +7,15 @@
 //! draws otherwise.
 
 use anyhow::Result;
+use glam::Vec2;
 use glam::Vec4;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
+use slicelight_shaders::light::light_local;
 use slicelight_shaders::types::CommonParams;
-use slicelight_shaders::volumes::splat::{splat_ball, splat_pixel, splat_tile, SplatBall};
+use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL};
+use slicelight_shaders::volumes::splat::{splat_ball, splat_pixel, splat_tile, LightBins, SplatBall};
+use slicelight_shaders::volumes::GpuMetaball;
 use slicelight_shaders::volumes::METHOD_SPLATTING;
 
 use super::{clear, compare_layers, per_pixel_layers, METABALLS, VOLUMES, VOLUMES_PARAMS};
@@ -37,8 +41,78 @@ pub static SPLAT_RADIANCE: Resource =
 pub static SPLAT_TRANSMITTANCE: Resource =
     Resource { binding: 73, name: "splat transmittance", kind: ResourceKind::PerPixel { blank: clear } };
 
+/// Per light, its bins of metaballs (`LightBins`; `nx = 0`: none).
+pub static SPLAT_LIGHT_BINS: Resource = Resource {
+    binding: 74,
+    name: "splat light bins",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.volumes.light_bins)),
+};
+/// The light bins' cell starts and lists of balls.
+pub static SPLAT_LIGHT_LISTS: Resource = Resource {
+    binding: 75,
+    name: "splat light lists",
+    kind: ResourceKind::Scene(|s| bytemuck::cast_slice(&s.volumes.light_lists)),
+};
+
 /// Most metaballs a tile lists; a tile that meets more walks them all.
 pub const TILE_CAPACITY: u32 = 1024;
+
+/// Most cells of a light's bins, per metaball.
+const CELLS_PER_BALL: f32 = 4.0;
+
+/// Each directional light's bins of metaballs (`LightBins`), and their
+/// cell starts and lists one after another: a grid across the light's rays
+/// over the balls' shadows, cells the balls' mean radius wide (coarsened to
+/// at most `CELLS_PER_BALL` cells a ball), each ball listed, in order, in
+/// every cell its shadow's square meets (its radius widened by 1e-3 for
+/// rounding: the field is 0 with zero slope at its edge). Step 1 then walks
+/// the few balls in its centre's cell instead of every ball: the sea of
+/// clouds' 10^4 balls took 0.82 s a frame walking them all. Spot lights
+/// get none (their rays are not parallel).
+pub fn light_bins(lights: &[GpuLight], balls: &[GpuMetaball]) -> (Vec<LightBins>, Vec<u32>) {
+    let mut bins = Vec::with_capacity(lights.len());
+    let mut lists = Vec::new();
+    for light in lights {
+        if light.kind != LIGHT_DIRECTIONAL || balls.is_empty() {
+            bins.push(LightBins::default());
+            continue;
+        }
+        let shadows: Vec<(Vec2, f32)> = balls
+            .iter()
+            .map(|b| (light_local(light, b.center_radius.truncate()).truncate(), b.center_radius.w * 1.001))
+            .collect();
+        let lo = shadows.iter().fold(Vec2::MAX, |m, (c, r)| m.min(*c - *r));
+        let hi = shadows.iter().fold(Vec2::MIN, |m, (c, r)| m.max(*c + *r));
+        let size = (hi - lo).max(Vec2::splat(1e-6));
+        let mean_radius = shadows.iter().map(|(_, r)| *r as f64).sum::<f64>() / shadows.len() as f64;
+        let most = CELLS_PER_BALL * balls.len() as f32;
+        let cell = (mean_radius as f32).max((size.x * size.y / most).sqrt());
+        let nx = ((size.x / cell).ceil() as u32).max(1);
+        let ny = ((size.y / cell).ceil() as u32).max(1);
+        let mut cells: Vec<Vec<u32>> = vec![Vec::new(); (nx * ny) as usize];
+        let index = |v: f32, n: u32| (((v / cell).floor()) as i64).clamp(0, n as i64 - 1) as u32;
+        for (i, (c, r)) in shadows.iter().enumerate() {
+            let (a, b) = ((*c - *r - lo), (*c + *r - lo));
+            for y in index(a.y, ny)..=index(b.y, ny) {
+                for x in index(a.x, nx)..=index(b.x, nx) {
+                    cells[(y * nx + x) as usize].push(i as u32);
+                }
+            }
+        }
+        let offset = lists.len() as u32;
+        let mut start = offset + nx * ny + 1;
+        for c in &cells {
+            lists.push(start);
+            start += c.len() as u32;
+        }
+        lists.push(start);
+        for c in &cells {
+            lists.extend_from_slice(c);
+        }
+        bins.push(LightBins { lo: lo.extend(0.0).extend(0.0), cell, nx, ny, offset });
+    }
+    (bins, lists)
+}
 
 fn tile_words(s: &SceneData) -> u64 {
     let p = &s.volumes.params;
@@ -63,7 +137,17 @@ impl Pass for SplatSort {
         "volumes::splat::splat_ball_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, LIGHTS, LIGHT_MAPS, SHADOW_MAPS, VOLUMES_PARAMS, VOLUMES, METABALLS]
+        resources![
+            COMMON,
+            LIGHTS,
+            LIGHT_MAPS,
+            SHADOW_MAPS,
+            VOLUMES_PARAMS,
+            VOLUMES,
+            METABALLS,
+            SPLAT_LIGHT_BINS,
+            SPLAT_LIGHT_LISTS
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SPLATS, SPLAT_ORDER]
@@ -75,11 +159,14 @@ impl Pass for SplatSort {
         if let Some(skip) = skip(scene) {
             return skip;
         }
-        let n = scene.volumes.params.ball_count as u64;
+        let v = &scene.volumes;
+        let n = v.params.ball_count as u64;
+        let binned = v.light_bins.iter().filter(|b| b.nx > 0).count();
         Plan::run(
             format!(
-                "{n} metaballs: the light at each centre through all billboards toward {} light(s), and the order from the eye",
-                scene.lights.len()
+                "{n} metaballs: the light at each centre through the billboards toward {} light(s) ({binned} binned, {} entries), and the order from the eye",
+                scene.lights.len(),
+                v.light_lists.len()
             ),
             n,
         )
@@ -91,7 +178,18 @@ impl Pass for SplatSort {
         let splats: Vec<SplatBall> = (0..n as u32)
             .into_par_iter()
             .map(|j| {
-                let s = splat_ball(j, common, &v.params, &v.volumes, &v.balls, &scene.lights, &scene.light_map, shadow);
+                let s = splat_ball(
+                    j,
+                    common,
+                    &v.params,
+                    &v.volumes,
+                    &v.balls,
+                    &scene.lights,
+                    &scene.light_map,
+                    shadow,
+                    &v.light_bins,
+                    &v.light_lists,
+                );
                 progress.inc(1);
                 s
             })

@@ -14,6 +14,10 @@ use crate::scene::SceneData;
 /// in `host/spirv/` (the build script warns when they are older than the sources).
 pub const SPIRV: &[u8] = include_bytes!("../spirv/slicelight_shaders.spv");
 
+/// What the error of a buffer too large for the device says (the benches
+/// leave such a configuration out of that backend's sweep).
+pub const TOO_LARGE: &str = "more than this device binds in one buffer";
+
 /// wgpu cannot bind an empty buffer, nor one smaller than one element of the
 /// array the kernel declares; a stand-in as large as the largest element type
 /// (`GpuLight`) is never read because the matching count is 0.
@@ -179,12 +183,13 @@ impl GpuContext {
         self.pipelines.lock().map(|p| p.keys().copied().collect()).unwrap_or_default()
     }
 
-    /// A storage buffer of `bytes` bytes; wgpu zero-fills it.
+    /// A storage buffer of `bytes` bytes; wgpu zero-fills it. Larger than
+    /// the device binds: an error that says `TOO_LARGE`.
     fn allocate(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
         let size = bytes.max(MIN_BUFFER_BYTES).next_multiple_of(4);
         if size > self.max_binding_bytes {
             bail!(
-                "{label} needs {} MiB, more than this device binds in one buffer ({} MiB); lower the resolution",
+                "{label} needs {} MiB, {TOO_LARGE} ({} MiB); lower the resolution",
                 size >> 20,
                 self.max_binding_bytes >> 20
             );

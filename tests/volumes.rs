@@ -587,6 +587,9 @@ fn bad_automata_name_the_field() {
     for (automaton, field) in [
         (format!("cells = [0, 4, 4], steps = 1, {e}"), "volume[0].automaton.cells"),
         (format!("cells = [4, 4, 4], steps = 0, {e}"), "volume[0].automaton.steps"),
+        // Over the most a frame may run: refused, not clamped (2^31 once ran
+        // 100 000 steps for minutes).
+        (format!("cells = [4, 4, 4], steps = 2147483648, {e}"), "volume[0].automaton.steps"),
         (format!("cells = [4, 4, 4], steps = 1, smoothing = 9, {e}"), "smoothing"),
         (format!("cells = [4, 4, 4], steps = 1, wind = [9.0, 0.0], {e}"), "wind"),
         (format!("cells = [4, 4, 4], steps = 1, ball_radius = 0.1, {e}"), "ball_radius"),

@@ -138,9 +138,21 @@ pub fn configure_at(field: &str, index: usize, s: &Settings, lo: Vec3, hi: Vec3,
     if !(rate.is_finite() && (0.0..=1000.0).contains(&rate)) {
         bail!(invalid(&format!("{field}.automaton.steps_per_second"), "a rate in [0, 1000] steps per second", rate));
     }
-    let extra = (rate as f64 * time).round();
+    // The count asked for is checked before the clock adds to it (a
+    // clamp here once turned `steps = 2^31` into 100 000 silent steps).
+    if !(1..=MAX_STEPS).contains(&s.steps) {
+        bail!(invalid(&format!("{field}.automaton.steps"), &format!("a step count in 1..={MAX_STEPS}"), s.steps));
+    }
+    let total = s.steps as f64 + (rate as f64 * time).round();
+    if total > MAX_STEPS as f64 {
+        bail!(invalid(
+            &format!("{field}.automaton.steps_per_second"),
+            &format!("at most {MAX_STEPS} steps in all at t = {time} s (steps + steps_per_second x t)"),
+            total
+        ));
+    }
     let mut s = s.clone();
-    s.steps = (s.steps as f64 + extra).min(MAX_STEPS as f64) as u32;
+    s.steps = total as u32;
     configure(field, index, &s, lo, hi)
 }
 

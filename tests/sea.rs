@@ -606,6 +606,7 @@ fn the_rough_reflection_matches_the_f64_reference() {
                 slope,
                 p.roughness.truncate().as_dvec3(),
                 p.extinction.w as f64,
+                glam::DVec3::ONE,
             );
             let got = reflection[i as usize].truncate().as_dvec3();
             Some((i, ((got - want).length() / want.length().max(1e-300))))

@@ -755,6 +755,87 @@ fn clouds_shade_the_sea() {
     assert!(rms < 0.03 && worst < 0.2, "rms {rms}, worst {worst}");
 }
 
+/// The clouds' shadow on the sun reflected by the sea: a flat sea whose
+/// mirror image of the sun (a 3-degree disk, so that it covers pixels) lies
+/// in view, a metaball (optical depth ~2 through its centre) 300 m up the
+/// sun's ray from the mirror point. On 12 of the pixels where the reflected
+/// sun is brightest, the image with the ball against the f64 reference,
+/// which shades the reflected sun by its own march toward the sun (without
+/// the ball the two agree within 0.01 %, held to 1 %). Unshaded, the
+/// method's reflected sun there would be about 7 times the reference's.
+/// The density grid and transmittance volume are finer than their defaults
+/// (2.5 m cells, 128^3 nodes): at the defaults the small ball's optical
+/// depth comes out 8 % low and the shaded sun 18 % bright (a leftover of
+/// issue 23: the defaults' footprint rule), which is not what this test is
+/// about. Measured: 0.85 % RMS, 1.12 % at worst; bounds 3 % and 6 %.
+#[test]
+fn clouds_shade_the_suns_reflection() {
+    let scene = |ball_z: f32| {
+        common::scene_from_str(&format!(
+            r#"
+            [camera]
+            position = [0.0, 10.0, 0.0]
+            look_at = [0.0, 0.0, -100.0]
+            vfov_deg = 12.0
+            resolution = [48, 32]
+            exposure = 0.5
+            [sky]
+            sun_zenith_deg = 84.2894
+            sun_azimuth_deg = 180.0
+            sun_angular_radius_deg = 3.0
+            [sea]
+            water = "clear-ocean"
+            [[volume]]
+            min = [-60.0, 0.0, {lo}]
+            max = [60.0, 80.0, {hi}]
+            sigma_s = [0.04, 0.04, 0.04]
+            sigma_t = [0.05, 0.05, 0.05]
+            metaballs = [[0.0, 29.85, {ball_z}, 40.0, 1.0]]
+            resolution = [48, 32, 48]
+            [volumes]
+            scattering = "single"
+            light_grid = [128, 128, 128]
+            "#,
+            lo = ball_z - 60.0,
+            hi = ball_z + 60.0
+        ))
+    };
+    let data = scene(-398.5);
+    // The ball far behind the camera: the same sky, an open sun.
+    let open = cpu_image(&scene(5000.0));
+    let shaded = cpu_image(&data);
+    let brightest = open.iter().map(|p| p.x).fold(0.0f32, f32::max);
+    let glint: Vec<u32> = (0..open.len() as u32).filter(|&i| open[i as usize].x > 0.2 * brightest).collect();
+    assert!(glint.len() >= 4, "the reflected sun covers {} pixels", glint.len());
+    let glint: Vec<u32> = glint.iter().copied().step_by(glint.len().div_ceil(12)).collect();
+    let (reference, _) = slicelight::reference::render_converged_at(&data, &glint, 2e-4);
+    let (open_reference, _) = slicelight::reference::render_converged_at(&scene(5000.0), &glint, 2e-4);
+    // Without the ball the method's reflected sun is the reference's.
+    for (k, &i) in glint.iter().enumerate() {
+        let e = (open[i as usize].x as f64 - open_reference[k].x).abs() / open_reference[k].x;
+        assert!(e < 0.01, "pixel {i}, open sea: {} against {}", open[i as usize].x, open_reference[k].x);
+    }
+    let (mut sum2, mut worst, mut dimmed) = (0.0f64, 0.0f64, 0.0f64);
+    for (k, &i) in glint.iter().enumerate() {
+        let got = shaded[i as usize].x as f64;
+        let want = reference[k].x;
+        let e = (got - want).abs() / want;
+        sum2 += e * e;
+        worst = worst.max(e);
+        dimmed = dimmed.max(got / open[i as usize].x as f64);
+    }
+    let rms = (sum2 / glint.len() as f64).sqrt();
+    println!(
+        "the sun's reflection under a ball: {} pixels, against the f64 reference {:.2} % RMS, {:.2} % at worst; at most {:.3} of the open sea",
+        glint.len(),
+        100.0 * rms,
+        100.0 * worst,
+        dimmed
+    );
+    assert!(dimmed < 0.5, "the ball's shadow does not dim the reflected sun: {dimmed}");
+    assert!(rms < 0.03 && worst < 0.06, "rms {rms}, worst {worst}");
+}
+
 /// The volumes' shadows in the fog: a puff high over a floor in a
 /// scattering medium under the directional light (single scattering), seen
 /// from the side, where view rays cross the puff's shadow without crossing

@@ -380,6 +380,16 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let n = p.extinction.w as f64;
     let cos_i = -d.dot(normal);
     let sky_reference = SkyReference::new(&data.sky.params, SKY_TOLERANCE);
+    // The clouds' shadow at the surface point (the sun's transmittance
+    // through the volumes, marched in f64): on the light below and on the
+    // sun reflected there.
+    let clouds = match p.sun_light {
+        0 => DVec3::ONE,
+        l => {
+            let (_, to_light, distance) = toward_light(&data.lights[l as usize - 1], hit);
+            crate::volumes::reference::transmittance_toward(data, hit, to_light, distance)
+        }
+    };
     // Waves: the map's slope at the hit, roughened by the unresolved waves
     // (`crate::sea::reference::rough_reflection`); the light below is taken
     // along the view refracted at the map's normal, times the mean
@@ -387,13 +397,15 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let (sky, r) = if p.waves == slicelight_shaders::sea::WAVES_NORMAL_MAP {
         let slope = glam::DVec2::new(-normal.x / normal.y, -normal.z / normal.y);
         let rough = p.roughness.truncate().as_dvec3();
-        let (light, r) = crate::sea::reference::rough_reflection(&sky_reference, &data.sky.params, d, slope, rough, n);
+        let (light, r) =
+            crate::sea::reference::rough_reflection(&sky_reference, &data.sky.params, d, slope, rough, n, clouds);
         (light / r.max(1e-300), r)
     } else {
         let r = optics::reflectance(cos_i, 1.0 / n);
         let reflected = d + normal * (2.0 * cos_i);
         let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
-        (sky_reference.radiance(reflected), r)
+        let without_sun = sky_reference.sky_without_sun(reflected);
+        (without_sun + (sky_reference.radiance(reflected) - without_sun) * clouds, r)
     };
     // Snell: the refracted ray, reversed, is the direction light leaves the water toward the eye.
     let eta = 1.0 / n;
@@ -420,15 +432,6 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         SeaReference::new(p, SEA_HEIGHT_FIELD_TOLERANCE).order2_over(&field, (hit.x, hit.z), view)
     } else {
         sea.order2(view)
-    };
-    // The clouds' shadow on the water at the surface point (the sun's
-    // transmittance through the volumes, marched in f64).
-    let clouds = match p.sun_light {
-        0 => DVec3::ONE,
-        l => {
-            let (_, to_light, distance) = toward_light(&data.lights[l as usize - 1], hit);
-            crate::volumes::reference::transmittance_toward(data, hit, to_light, distance)
-        }
     };
     let below = (sea.order1(view) + second + bottom) * clouds;
     sky * r + below * ((1.0 - r) / (n * n))

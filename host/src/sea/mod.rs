@@ -965,7 +965,18 @@ impl Pass for SeaReflection {
         "sea::reflection_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW, SEA_PARAMS, SEA_WAVES]
+        resources![
+            COMMON,
+            GBUFFER,
+            SKY_PARAMS,
+            SKY_TRANSMITTANCE,
+            SKY_VIEW,
+            SEA_PARAMS,
+            SEA_WAVES,
+            LIGHTS,
+            crate::volumes::LIGHT_GRIDS,
+            crate::volumes::OPTICAL_DEPTHS
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_REFLECTION]
@@ -980,7 +991,7 @@ impl Pass for SeaReflection {
         if let Some(skip) = skip_without_sea(scene) {
             return skip;
         }
-        Plan::run("the sky and the sun reflected at the surface (Fresnel)", 0)
+        Plan::run("the sky and the sun reflected at the surface (Fresnel), the sun through the volumes' shadow", 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, sky) = (&scene.sea.params, &scene.sky.params);
@@ -989,9 +1000,11 @@ impl Pass for SeaReflection {
             let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
             let sky_view = frame.get::<Vec4>(&SKY_VIEW);
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            let lit = crate::common::light_inputs(scene, frame);
+            let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
             for_each_invocation(out, common.band_start, progress, |i, v| {
                 let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-                *v = reflection_pixel(i, common, p, &scene.sea.waves, sky, transmittance, sky_view, texel);
+                *v = reflection_pixel(i, common, p, &scene.sea.waves, sky, transmittance, sky_view, texel, &clouds);
             });
         });
     }

@@ -452,7 +452,9 @@ pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
 /// (8 rings x 16 sectors of equal solid angle): each direction of the disk
 /// is mirrored by the facet whose normal is the half vector, of density
 /// `p(s_h)` per unit slope, `1/(4 (v.h) h_y^3)` per unit of solid angle.
-/// Returns the reflected radiance and the mean reflectance.
+/// `sun_shade` multiplies the sun's light (the volumes' shadow at the
+/// point). Returns the reflected radiance and the mean reflectance.
+#[allow(clippy::too_many_arguments)]
 pub fn rough_reflection(
     sky: &crate::sky::reference::SkyReference,
     sun: &slicelight_shaders::sky::SkyParams,
@@ -460,6 +462,7 @@ pub fn rough_reflection(
     mean: glam::DVec2,
     cov: DVec3,
     n: f64,
+    sun_shade: DVec3,
 ) -> (DVec3, f64) {
     use glam::DVec2;
     use slicelight_shaders::optics::reflectance;
@@ -522,7 +525,7 @@ pub fn rough_reflection(
             let t = if to_sun.y.abs() < 0.9 { DVec3::Y.cross(to_sun) } else { DVec3::X.cross(to_sun) }.normalize();
             (t, to_sun.cross(t))
         };
-        let irradiance = sun.sun_irradiance.truncate().as_dvec3() * sky.sun_at_observer();
+        let irradiance = sun.sun_irradiance.truncate().as_dvec3() * sky.sun_at_observer() * sun_shade;
         let (rings, sectors) = (8, 16);
         let cell = 2.0 * PI * (1.0 - cos_radius) / (rings * sectors) as f64;
         for i in 0..rings {

@@ -850,14 +850,15 @@ pub fn reflection_pixel(
     transmittance: &[Vec4],
     sky_view: &[Vec4],
     texel: &GBufferTexel,
+    clouds: &CloudShadow,
 ) -> Vec4 {
     if p.waves != WAVES_NORMAL_MAP {
         let v = sea_view(index, common, p, waves, texel);
         if !v.hit {
             return Vec4::ZERO;
         }
-        let sky_light =
-            sky_radiance(sky, transmittance, sky_view, v.reflected) + sun_disk(sky, transmittance, v.reflected);
+        let sun = sun_disk(sky, transmittance, v.reflected) * clouds.at(p, v.point);
+        let sky_light = sky_radiance(sky, transmittance, sky_view, v.reflected) + sun;
         return (sky_light * v.reflectance).extend(0.0);
     }
     let v = sea_hit(index, common, p, waves, texel);
@@ -866,8 +867,10 @@ pub fn reflection_pixel(
     }
     // Waves: the sky (and, by the turned-away share, the sun's disk)
     // reflected by each facet of the slope rule (`surface::SlopeRule`), and
-    // the sun's glint in closed form.
+    // the sun's glint in closed form; the sun's light through the volumes'
+    // shadow at the point (`CloudShadow`).
     let n = p.extinction.w;
+    let shade = clouds.at(p, v.point);
     let mut light = Vec3::ZERO;
     let mut k = 0;
     while k < surface::SLOPE_NODES {
@@ -875,12 +878,12 @@ pub fn reflection_pixel(
         let reflected = reflected_skyward(v.dir, facet.normal);
         let mut sky_light = sky_radiance(sky, transmittance, sky_view, reflected);
         if k + 1 == surface::SLOPE_NODES {
-            sky_light += sun_disk(sky, transmittance, reflected);
+            sky_light += sun_disk(sky, transmittance, reflected) * shade;
         }
         light += sky_light * (facet.weight * reflectance(facet.cos_i, 1.0 / n));
         k += 1;
     }
-    light += surface::sun_glint(sky, transmittance, &v.rule, &v.slopes, n);
+    light += surface::sun_glint(sky, transmittance, &v.rule, &v.slopes, n) * shade;
     light.extend(0.0)
 }
 
@@ -888,7 +891,8 @@ pub fn reflection_pixel(
 /// to a point of the surface (`volumes::light_transmittance`), which
 /// multiplies the sunlight below the surface there (orders 1 and 2 and the
 /// bottom; locally, as if the shadow were wide against the light's depth in
-/// the water). The reflected sky and sun are not shaded.
+/// the water) and the sun reflected there (its disk and glint). The
+/// reflected sky is not shaded (nor are the clouds themselves reflected).
 pub struct CloudShadow<'a> {
     pub lights: &'a [GpuLight],
     pub grids: &'a [LightGrid],
@@ -1122,11 +1126,15 @@ pub fn reflection_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] sky_view: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 23)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
+        let clouds = CloudShadow { lights, grids, depths };
         radiance[index as usize] = reflection_pixel(
             common.band_start + index,
             common,
@@ -1136,6 +1144,7 @@ pub fn reflection_kernel(
             transmittance,
             sky_view,
             &gbuffer[index as usize],
+            &clouds,
         );
     }
 }

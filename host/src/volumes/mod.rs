@@ -768,6 +768,19 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
     })
 }
 
+/// The scattering a volume renderer's plan names: single, or the octaves
+/// and their factors.
+fn scattering_label(p: &VolumesParams) -> String {
+    if p.octaves > 1 {
+        format!(
+            "multiple scattering ({} octaves, a {} b {} c {})",
+            p.octaves, p.octave_scattering, p.octave_extinction, p.octave_phase
+        )
+    } else {
+        "single scattering".to_string()
+    }
+}
+
 fn skip_without_volumes(scene: &SceneData) -> Option<Plan> {
     (!scene.volumes.enabled).then(|| Plan::skip("no [[volume]]"))
 }
@@ -959,18 +972,14 @@ impl Pass for Volumes {
         if p.method == METHOD_SPLATTING {
             return Plan::skip("the volumes are splatted (volume_splats)");
         }
-        let scattering = if p.octaves > 1 {
-            format!(
-                "multiple scattering ({} octaves, a {} b {} c {})",
-                p.octaves, p.octave_scattering, p.octave_extinction, p.octave_phase
-            )
-        } else {
-            "single scattering".to_string()
-        };
         Plan::run(
             format!(
-                "{} volume(s), {scattering} on {} planes over depths {:.3}..{:.3} m",
-                p.volume_count, p.plane_count, p.depth_near, p.depth_far
+                "{} volume(s), {} on {} planes over depths {:.3}..{:.3} m",
+                p.volume_count,
+                scattering_label(p),
+                p.plane_count,
+                p.depth_near,
+                p.depth_far
             ),
             0,
         )

@@ -18,7 +18,9 @@ use slicelight_shaders::volumes::splat::{splat_ball, splat_pixel, splat_tile, Li
 use slicelight_shaders::volumes::GpuMetaball;
 use slicelight_shaders::volumes::METHOD_SPLATTING;
 
-use super::{clear, compare_layers, per_pixel_layers, METABALLS, VOLUMES, VOLUMES_PARAMS};
+use super::{
+    clear, compare_layers, per_pixel_layers, scattering_label, skip_without_volumes, METABALLS, VOLUMES, VOLUMES_PARAMS,
+};
 use crate::passes::*;
 use crate::scene::SceneData;
 
@@ -121,10 +123,9 @@ fn tile_words(s: &SceneData) -> u64 {
 
 /// Why a splatting pass does not run, if it does not.
 fn skip(scene: &SceneData) -> Option<Plan> {
-    if !scene.volumes.enabled {
-        return Some(Plan::skip("no [[volume]]"));
-    }
-    (scene.volumes.params.method != METHOD_SPLATTING).then(|| Plan::skip("the volumes are drawn by slices"))
+    skip_without_volumes(scene).or_else(|| {
+        (scene.volumes.params.method != METHOD_SPLATTING).then(|| Plan::skip("the volumes are drawn by slices"))
+    })
 }
 
 pub struct SplatSort;
@@ -319,12 +320,7 @@ impl Pass for Splats {
             return skip;
         }
         let p = &scene.volumes.params;
-        let scattering = if p.octaves > 1 {
-            format!("multiple scattering ({} octaves)", p.octaves)
-        } else {
-            "single scattering".to_string()
-        };
-        Plan::run(format!("{} billboards blended front to back, {scattering}", p.ball_count), 0)
+        Plan::run(format!("{} billboards blended front to back, {}", p.ball_count, scattering_label(p)), 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let v = &scene.volumes;

@@ -907,12 +907,7 @@ impl CloudShadow<'_> {
             return Vec3::ONE;
         }
         let l = (p.sun_light - 1) as usize;
-        #[cfg(target_arch = "spirv")]
-        let copy = self.lights[l];
-        #[cfg(target_arch = "spirv")]
-        let light = &copy;
-        #[cfg(not(target_arch = "spirv"))]
-        let light = &self.lights[l];
+        light_ref!(light = self.lights, l);
         light_transmittance(self.grids, self.depths, light, l, point).xyz()
     }
 }

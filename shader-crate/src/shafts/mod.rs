@@ -522,17 +522,7 @@ pub fn shafts_pixel<const PAPER: bool, const PACKED: bool>(
     let mut samples = 0u32;
     let mut l = 0;
     while l < common.light_count as usize {
-        // A GPU keeps a copy of the light in registers; on the CPU the copy
-        // is a 144-byte memcpy per pixel and light that stalls the loads
-        // after it, so the light is read in place there (measured: Fig. 6
-        // shafts 39 -> 36 ms on the CPU, 103 -> 154 ms on lavapipe reading
-        // in place).
-        #[cfg(target_arch = "spirv")]
-        let copy = lights[l];
-        #[cfg(target_arch = "spirv")]
-        let light = &copy;
-        #[cfg(not(target_arch = "spirv"))]
-        let light = &lights[l];
+        light_ref!(light = lights, l);
         let directional = light.kind == LIGHT_DIRECTIONAL;
         let packed = PACKED && light.kind != LIGHT_POINT;
         let culled = l < 32 && lit & (1 << l) == 0;

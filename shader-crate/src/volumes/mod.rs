@@ -655,12 +655,7 @@ fn in_scattered(common: &CommonParams, inputs: &VolumeInputs, p: Vec3, d: Vec3) 
     let mut source = Vec4::ZERO;
     let mut l = 0;
     while l < common.light_count as usize {
-        #[cfg(target_arch = "spirv")]
-        let copy = inputs.lights[l];
-        #[cfg(target_arch = "spirv")]
-        let light = &copy;
-        #[cfg(not(target_arch = "spirv"))]
-        let light = &inputs.lights[l];
+        light_ref!(light = inputs.lights, l);
         let (e, travel) = light_at(common, light, inputs.light_map, inputs.shadow, p);
         if e.x > 0.0 || e.y > 0.0 || e.z > 0.0 {
             let (tau, through) = light_optical_depths(light, &inputs.grids[l], inputs.depths, p);

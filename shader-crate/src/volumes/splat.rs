@@ -243,12 +243,7 @@ pub fn splat_ball(
     let mut light = Vec4::ZERO;
     let mut l = 0;
     while l < common.light_count as usize {
-        #[cfg(target_arch = "spirv")]
-        let copy = lights[l];
-        #[cfg(target_arch = "spirv")]
-        let source = &copy;
-        #[cfg(not(target_arch = "spirv"))]
-        let source = &lights[l];
+        light_ref!(source = lights, l);
         let (e, travel) = light_at(common, source, light_map, shadow, c);
         if e.x > 0.0 || e.y > 0.0 || e.z > 0.0 {
             let t_max = if source.kind == LIGHT_DIRECTIONAL { f32::MAX } else { (source.position.xyz() - c).length() };

@@ -78,12 +78,45 @@ fn every_pass_binds_what_its_kernel_declares() {
             assert!(!used.is_empty(), "{variant} binds nothing");
         }
     }
-    // Every entry point belongs to a registered pass.
-    let kernels: BTreeSet<_> =
-        PASSES.iter().flat_map(|p| std::iter::once(p.kernel()).chain(p.variants().iter().copied())).collect();
+    // Every entry point belongs to a registered pass or to a family's own kernels.
+    let own: Vec<_> = slicelight::passes::families().iter().flat_map(|f| f.kernels.iter()).collect();
+    let kernels: BTreeSet<_> = PASSES
+        .iter()
+        .flat_map(|p| std::iter::once(p.kernel()).chain(p.variants().iter().copied()))
+        .chain(own.iter().map(|k| k.name))
+        .collect();
     for name in declared.keys() {
-        assert!(kernels.contains(name.as_str()), "entry point {name} is not registered as a pass");
+        assert!(kernels.contains(name.as_str()), "entry point {name} is not registered as a pass or a family's kernel");
     }
+}
+
+/// A family's own kernels (a simulation's step, dispatched outside the
+/// frame's passes) bind exactly what their SPIR-V declares, and their
+/// bindings name no frame resource.
+#[test]
+fn every_family_kernel_binds_what_its_entry_point_declares() {
+    let declared = declared_bindings();
+    let frame: BTreeSet<u32> =
+        PASSES.iter().flat_map(|p| p.reads().iter().chain(p.writes())).map(|r| r.binding).collect();
+    let mut count = 0;
+    for family in slicelight::passes::families() {
+        for k in family.kernels {
+            let used = declared.get(k.name).unwrap_or_else(|| panic!("{}: no entry point {}", family.name, k.name));
+            let mut host = BTreeMap::new();
+            for b in k.reads {
+                host.insert(*b, false);
+            }
+            for b in k.writes {
+                assert!(host.insert(*b, true).is_none(), "{}: binding {b} both read and written", k.name);
+            }
+            assert_eq!(&host, used, "{}: host bindings (binding -> written) differ from the SPIR-V's", k.name);
+            for b in host.keys() {
+                assert!(!frame.contains(b), "{}: binding {b} is also a frame resource's", k.name);
+            }
+            count += 1;
+        }
+    }
+    assert!(count >= 20, "the fluid's kernels are registered ({count} found)");
 }
 
 #[test]

@@ -217,8 +217,8 @@ fn continuing_a_kept_simulation_gives_the_same_state_as_starting_again() {
     let cells = vec![1u32; 12 * 12 * 12];
     let hidden = ProgressBar::hidden();
     let dt = c.params.dt as f64;
-    let _ten = smoke::simulate(&c, cells.clone(), 10.0 * dt, &hidden);
-    let continued = smoke::simulate(&c, cells.clone(), 20.0 * dt, &hidden);
+    let _ten = smoke::simulate(&c, cells.clone(), 10.0 * dt, &hidden).expect("the CPU steps");
+    let continued = smoke::simulate(&c, cells.clone(), 20.0 * dt, &hidden).expect("the CPU steps");
     let mut fresh = c.start(cells);
     for _ in 0..20 {
         fresh.step();

@@ -125,18 +125,32 @@ impl GpuContext {
     /// resources the pass declares, the same for all its entry points (a
     /// variant may leave some unused).
     fn pipeline(&self, pass: &dyn Pass, kernel: &'static str) -> Result<wgpu::ComputePipeline> {
+        let bindings: Vec<_> = pass
+            .reads()
+            .iter()
+            .map(|r| (r.binding, true))
+            .chain(pass.writes().iter().map(|r| (r.binding, false)))
+            .collect();
+        self.built_pipeline(pass.name(), kernel, &bindings)
+    }
+
+    /// The pipeline of entry point `kernel` with storage buffers at
+    /// `bindings` (binding, read-only), built on first use and kept.
+    fn built_pipeline(
+        &self,
+        label: &str,
+        kernel: &'static str,
+        bindings: &[(u32, bool)],
+    ) -> Result<wgpu::ComputePipeline> {
         let mut built = self.pipelines.lock().map_err(|_| anyhow!("a thread building a pipeline panicked"))?;
         if let Some(p) = built.get(kernel) {
             return Ok(p.clone());
         }
         let pipeline = checked(&self.device, &format!("building the kernel {kernel}"), || {
-            let entries: Vec<_> = pass
-                .reads()
+            let entries: Vec<_> = bindings
                 .iter()
-                .map(|r| (r, true))
-                .chain(pass.writes().iter().map(|r| (r, false)))
-                .map(|(r, read_only)| wgpu::BindGroupLayoutEntry {
-                    binding: r.binding,
+                .map(|&(binding, read_only)| wgpu::BindGroupLayoutEntry {
+                    binding,
                     visibility: wgpu::ShaderStages::COMPUTE,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Storage { read_only },
@@ -146,12 +160,11 @@ impl GpuContext {
                     count: None,
                 })
                 .collect();
-            let group = self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(pass.name()),
-                entries: &entries,
-            });
+            let group = self
+                .device
+                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
             let layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(pass.name()),
+                label: Some(label),
                 bind_group_layouts: &[Some(&group)],
                 immediate_size: 0,
             });
@@ -466,5 +479,207 @@ impl GpuFrame<'_> {
     pub fn read(&self, r: &Resource, bytes: u64) -> Result<Buffer> {
         let buffer = self.buffers.get(&r.binding).ok_or_else(|| anyhow!("{} is not bound in this frame", r.name))?;
         Ok(Buffer::from_bytes(&self.ctx.read_buffer(buffer, bytes)?))
+    }
+}
+
+/// A kernel a family dispatches itself, outside a frame's passes (a
+/// simulation's step: the fluid solver): its entry point, the bindings it
+/// reads and those it writes. Families list theirs in `Family::kernels`; a
+/// test checks them against the SPIR-V as it checks the passes.
+pub struct Kernel {
+    pub name: &'static str,
+    pub reads: &'static [u32],
+    pub writes: &'static [u32],
+}
+
+/// Dispatches of `Kernel`s, copies and clears, recorded in order and run
+/// as one submission (`GpuContext::batch`). Each dispatch binds its own
+/// buffers (the same binding may be `u` in one and the temperature in the
+/// next) and its own parameter block, which the batch packs into one
+/// buffer at the device's offset alignment.
+pub struct Batch<'a> {
+    ctx: &'a GpuContext,
+    params: Vec<u8>,
+    commands: Vec<Command>,
+}
+
+enum Command {
+    Dispatch {
+        kernel: &'static Kernel,
+        params_binding: u32,
+        params: std::ops::Range<u64>,
+        buffers: Vec<(u32, wgpu::Buffer)>,
+        invocations: u32,
+    },
+    Copy {
+        from: wgpu::Buffer,
+        to: wgpu::Buffer,
+        bytes: u64,
+    },
+    Clear(wgpu::Buffer),
+}
+
+impl GpuContext {
+    /// A storage buffer holding `contents` (at least one element long).
+    pub fn array(&self, label: &str, contents: &[u8]) -> Result<wgpu::Buffer> {
+        self.storage(label, contents)
+    }
+
+    /// A zero-filled storage buffer of `bytes`.
+    pub fn zeroed(&self, label: &str, bytes: u64) -> Result<wgpu::Buffer> {
+        self.allocate(label, bytes)
+    }
+
+    /// Overwrites the start of `buffer` with `contents` (before the next submission's work).
+    pub fn upload(&self, buffer: &wgpu::Buffer, contents: &[u8]) {
+        if !contents.is_empty() {
+            self.queue.write_buffer(buffer, 0, contents);
+        }
+    }
+
+    /// The first `bytes` of `buffer`.
+    pub fn download(&self, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
+        self.read_buffer(buffer, bytes)
+    }
+
+    /// An empty batch of kernel dispatches.
+    pub fn batch(&self) -> Batch<'_> {
+        Batch { ctx: self, params: Vec::new(), commands: Vec::new() }
+    }
+
+    /// The pipeline of a family's own kernel, built on first use; its
+    /// layout from the kernel's reads and writes.
+    fn kernel_pipeline(&self, kernel: &Kernel) -> Result<wgpu::ComputePipeline> {
+        let bindings: Vec<_> =
+            kernel.reads.iter().map(|b| (*b, true)).chain(kernel.writes.iter().map(|b| (*b, false))).collect();
+        self.built_pipeline(kernel.name, kernel.name, &bindings)
+    }
+}
+
+impl Batch<'_> {
+    /// Dispatches `kernel` over `invocations` with `params` at
+    /// `params_binding` and `buffers` at the other bindings it declares.
+    pub fn dispatch<P: bytemuck::Pod>(
+        &mut self,
+        kernel: &'static Kernel,
+        params_binding: u32,
+        params: &P,
+        buffers: &[(u32, &wgpu::Buffer)],
+        invocations: u32,
+    ) {
+        let align = self.ctx.device.limits().min_storage_buffer_offset_alignment.max(4) as usize;
+        let start = self.params.len().next_multiple_of(align);
+        self.params.resize(start, 0);
+        self.params.extend_from_slice(bytemuck::bytes_of(params));
+        self.commands.push(Command::Dispatch {
+            kernel,
+            params_binding,
+            params: start as u64..self.params.len() as u64,
+            buffers: buffers.iter().map(|(b, buf)| (*b, (*buf).clone())).collect(),
+            invocations,
+        });
+    }
+
+    /// Copies the first `bytes` of `from` over `to`.
+    pub fn copy(&mut self, from: &wgpu::Buffer, to: &wgpu::Buffer, bytes: u64) {
+        self.commands.push(Command::Copy { from: from.clone(), to: to.clone(), bytes: bytes.next_multiple_of(4) });
+    }
+
+    /// Fills `buffer` with zeros.
+    pub fn clear(&mut self, buffer: &wgpu::Buffer) {
+        self.commands.push(Command::Clear(buffer.clone()));
+    }
+
+    /// Runs what was recorded, in order, and waits.
+    pub fn submit(self) -> Result<()> {
+        let ctx = self.ctx;
+        if self.commands.is_empty() {
+            return Ok(());
+        }
+        let arena = ctx.storage("kernel parameters", &self.params)?;
+        let max = ctx.device.limits().max_compute_workgroups_per_dimension;
+        // Every binding given before anything is created.
+        for c in &self.commands {
+            if let Command::Dispatch { kernel, params_binding, buffers, .. } = c {
+                for b in kernel.reads.iter().chain(kernel.writes).filter(|b| **b != *params_binding) {
+                    if !buffers.iter().any(|(k, _)| k == b) {
+                        bail!("{}: nothing bound at binding {b}", kernel.name);
+                    }
+                }
+                for (b, _) in buffers {
+                    if !kernel.reads.contains(b) && !kernel.writes.contains(b) {
+                        bail!("{}: binding {b} given, but the kernel declares no such binding", kernel.name);
+                    }
+                }
+            }
+        }
+        let pipelines = self
+            .commands
+            .iter()
+            .map(|c| match c {
+                Command::Dispatch { kernel, .. } => ctx.kernel_pipeline(kernel).map(Some),
+                _ => Ok(None),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let groups = checked(&ctx.device, "binding a batch of kernels", || {
+            self.commands
+                .iter()
+                .zip(pipelines)
+                .map(|(c, pipeline)| {
+                    let (Command::Dispatch { kernel, params_binding, params, buffers, .. }, Some(pipeline)) =
+                        (c, pipeline)
+                    else {
+                        return None;
+                    };
+                    let mut entries = vec![wgpu::BindGroupEntry {
+                        binding: *params_binding,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &arena,
+                            offset: params.start,
+                            size: std::num::NonZeroU64::new(params.end - params.start),
+                        }),
+                    }];
+                    for b in kernel.reads.iter().chain(kernel.writes).filter(|b| **b != *params_binding) {
+                        let (_, buffer) = buffers.iter().find(|(k, _)| k == b).expect("checked above");
+                        entries.push(wgpu::BindGroupEntry { binding: *b, resource: buffer.as_entire_binding() });
+                    }
+                    let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some(kernel.name),
+                        layout: &pipeline.get_bind_group_layout(0),
+                        entries: &entries,
+                    });
+                    Some((pipeline, group))
+                })
+                .collect::<Vec<_>>()
+        })?;
+        checked(&ctx.device, "running a batch of kernels", || {
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            for (c, bound) in self.commands.iter().zip(&groups) {
+                match (c, bound) {
+                    (Command::Dispatch { kernel, invocations, .. }, Some((pipeline, group))) => {
+                        if *invocations == 0 {
+                            continue;
+                        }
+                        let n = invocations.div_ceil(WORKGROUP_SIZE);
+                        let gx = n.min(max);
+                        let mut cpass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                            label: Some(kernel.name),
+                            timestamp_writes: None,
+                        });
+                        cpass.set_pipeline(pipeline);
+                        cpass.set_bind_group(0, group, &[]);
+                        cpass.dispatch_workgroups(gx, n.div_ceil(gx), 1);
+                    }
+                    (Command::Copy { from, to, bytes }, _) => {
+                        let size = (*bytes).min(from.size()).min(to.size());
+                        encoder.copy_buffer_to_buffer(from, 0, to, 0, size);
+                    }
+                    (Command::Clear(buffer), _) => encoder.clear_buffer(buffer, 0, None),
+                    _ => {}
+                }
+            }
+            ctx.queue.submit([encoder.finish()]);
+        })?;
+        ctx.wait("running a batch of kernels")
     }
 }

@@ -32,10 +32,12 @@ macro_rules! resources {
 
 use crate::{caustics, common, desert, sea, shafts, sky, smoke, volumes};
 
-/// A family: its passes (in the order they run) and its bench sweep.
+/// A family: its passes (in the order they run), the kernels it
+/// dispatches itself (a simulation's step), and its bench sweep.
 pub struct Family {
     pub name: &'static str,
     pub passes: &'static [&'static dyn Pass],
+    pub kernels: &'static [&'static crate::gpu::Kernel],
     pub bench: Option<&'static dyn crate::bench::Sweep>,
 }
 

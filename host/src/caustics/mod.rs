@@ -25,7 +25,8 @@ use crate::passes::*;
 pub static PASSES: &[&dyn Pass] = &[&CausticsTable, &CausticsLookup, &CausticsMaps, &Caustics];
 
 /// The family, as `passes::FAMILIES` registers it.
-pub static FAMILY: Family = Family { name: "caustics", passes: PASSES, bench: Some(&bench::CausticsSweep) };
+pub static FAMILY: Family =
+    Family { name: "caustics", passes: PASSES, kernels: &[], bench: Some(&bench::CausticsSweep) };
 use crate::cpu::{for_each_index, for_each_invocation};
 use crate::scene::{invalid, SceneData};
 use rayon::prelude::*;

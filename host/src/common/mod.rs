@@ -15,7 +15,7 @@ pub static PASSES: &[&dyn Pass] = &[&shadow_maps::ShadowMaps, &surface::Surface,
 
 /// The family, as `passes::FAMILIES` registers it (no bench sweep of its
 /// own: the shafts sweep times the whole frame).
-pub static FAMILY: Family = Family { name: "common", passes: PASSES, bench: None };
+pub static FAMILY: Family = Family { name: "common", passes: PASSES, kernels: &[], bench: None };
 
 /// What the lights' terms read on the CPU (`LightInputs`): the light maps,
 /// this frame's shadow maps, and the lights' transmittance volumes through

@@ -23,7 +23,7 @@ pub(crate) mod reference;
 
 static PASSES: &[&dyn Pass] = &[&dunes::Dunes];
 
-pub static FAMILY: Family = Family { name: "desert", passes: PASSES, bench: Some(&bench::DesertSweep) };
+pub static FAMILY: Family = Family { name: "desert", passes: PASSES, kernels: &[], bench: Some(&bench::DesertSweep) };
 
 /// A `[[terrain]]`: a height field over the rectangle `min .. min + size`
 /// (x, z; metres), its height 0 at `elevation` (y), from exactly one of

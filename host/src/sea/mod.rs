@@ -46,7 +46,7 @@ pub static PASSES: &[&dyn Pass] = &[
 ];
 
 /// The family, as `passes::FAMILIES` registers it.
-pub static FAMILY: Family = Family { name: "sea", passes: PASSES, bench: Some(&bench::SeaSweep) };
+pub static FAMILY: Family = Family { name: "sea", passes: PASSES, kernels: &[], bench: Some(&bench::SeaSweep) };
 use crate::cpu::for_each_invocation;
 use crate::scene::{invalid, validate, SceneData};
 

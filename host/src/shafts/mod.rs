@@ -20,7 +20,7 @@ use crate::passes::*;
 pub static PASSES: &[&dyn Pass] = &[&ShaftsTiles, &Shafts];
 
 /// The family, as `passes::FAMILIES` registers it.
-pub static FAMILY: Family = Family { name: "shafts", passes: PASSES, bench: Some(&bench::ShaftsSweep) };
+pub static FAMILY: Family = Family { name: "shafts", passes: PASSES, kernels: &[], bench: Some(&bench::ShaftsSweep) };
 use crate::cpu::for_each_invocation;
 use crate::scene::{invalid, SceneData};
 

@@ -22,7 +22,7 @@ use crate::passes::*;
 pub static PASSES: &[&dyn Pass] = &[&SkyTransmittance, &SkyView, &SkyIrradiance, &Sky, &SkyLight, &Aerial];
 
 /// The family, as `passes::FAMILIES` registers it.
-pub static FAMILY: Family = Family { name: "sky", passes: PASSES, bench: Some(&bench::SkySweep) };
+pub static FAMILY: Family = Family { name: "sky", passes: PASSES, kernels: &[], bench: Some(&bench::SkySweep) };
 use crate::cpu::for_each_invocation;
 use crate::scene::validate::positive;
 use crate::scene::{invalid, validate, SceneData};

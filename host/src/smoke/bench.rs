@@ -8,7 +8,8 @@
 //!   out with `--quick`) for each advection scheme; time per step against
 //!   the effective viscosity's error, % of the given one;
 //! - `step`: a hot plume in a box of 32^3, 64^3 (and 128^3 without
-//!   `--quick`) cells, each scheme: the median time of 5 steps after 5,
+//!   `--quick`) cells, each scheme, on each backend (the fluid's kernels on
+//!   the device, or their CPU twins): the median time of 5 steps after 5,
 //!   the projection's iterations and the divergence it left (no error
 //!   column: the plume has no closed form);
 //! - `frame`: the scene rendered on each backend (the fluid runs at load,
@@ -67,10 +68,10 @@ impl crate::bench::Sweep for SmokeSweep {
 const SCHEMES: [(Advection, &str); 2] =
     [(Advection::SemiLagrangian, "semi-lagrangian"), (Advection::Maccormack, "maccormack")];
 
-fn fluid_row(series: &'static str, advection: &'static str, size: u32) -> Row {
+fn fluid_row(series: &'static str, backend: &'static str, advection: &'static str, size: u32) -> Row {
     Row {
         scene: "-".into(),
-        backend: "cpu",
+        backend,
         series,
         advection,
         size,
@@ -84,8 +85,8 @@ fn fluid_row(series: &'static str, advection: &'static str, size: u32) -> Row {
 }
 
 /// The median step time, the most iterations and the worst divergence of
-/// a hot plume on `n^3` cells (5 steps timed after 5).
-fn plume(n: u32, advection: &str) -> Result<(f64, u32, f64)> {
+/// a hot plume on `n^3` cells (5 steps timed after 5) on `backend`.
+fn plume(n: u32, advection: &str, backend: &crate::render::Backend) -> Result<(f64, u32, f64)> {
     let size = 0.1 * n as f32;
     let body = format!(
         "cells = [{n}, {n}, {n}]\nadvection = \"{advection}\"\nwind = [0.5, 0.0, 0.0]\n[[source]]\nposition = [{c}, {y}, {c}]\nradius = {r}\nrate = 10.0\ntemperature = 600.0\nvelocity = [0.0, 1.0, 0.0]",
@@ -96,13 +97,26 @@ fn plume(n: u32, advection: &str) -> Result<(f64, u32, f64)> {
     let s: super::Settings = toml::from_str(&body)?;
     let c = configure("bench", &s, Vec3::ZERO, Vec3::splat(size))?;
     let mut f = c.start(vec![1; c.params.cells as usize]);
+    let mut device = match backend {
+        crate::render::Backend::Gpu(ctx) => Some(super::gpu::GpuFluid::new(ctx, &f)?),
+        crate::render::Backend::Cpu => None,
+    };
+    let mut step = |f: &mut super::fluid::Fluid| -> Result<()> {
+        match &mut device {
+            Some(d) => d.step(f),
+            None => {
+                f.step();
+                Ok(())
+            }
+        }
+    };
     for _ in 0..5 {
-        f.step();
+        step(&mut f)?;
     }
     let (mut times, mut iterations, mut divergence) = (Vec::new(), 0, 0.0f64);
     for _ in 0..5 {
         let t = std::time::Instant::now();
-        f.step();
+        step(&mut f)?;
         times.push(t.elapsed().as_secs_f64());
         iterations = iterations.max(f.last.solve.iterations);
         divergence = divergence.max(f.last.divergence);
@@ -120,7 +134,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
     for &(scheme, name) in &SCHEMES {
         for &n in sizes {
             let tg = taylor_green(n, nu, scheme, 1.0);
-            let mut row = fluid_row("taylor-green", name, n);
+            let mut row = fluid_row("taylor-green", "cpu", name, n);
             row.seconds_per_step = Some(tg.seconds_per_step);
             row.error_percent = Some(100.0 * (tg.viscosity - nu as f64).abs() / nu as f64);
             row.divergence = Some(tg.divergence);
@@ -133,15 +147,18 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
             rows.push(row);
         }
         for &n in if quick { &[32u32, 64][..] } else { &[32, 64, 128][..] } {
-            let (seconds, iterations, divergence) = plume(n, name)?;
-            let mut row = fluid_row("step", name, n);
-            row.seconds_per_step = Some(seconds);
-            row.iterations = Some(iterations);
-            row.divergence = Some(divergence);
-            eprintln!(
-                "plume        {name:>15} {n:>4}^3 {seconds:>9.5} s/step  {iterations} iterations, divergence {divergence:.1e}"
-            );
-            rows.push(row);
+            for backend in backends {
+                let (seconds, iterations, divergence) = plume(n, name, backend)?;
+                let mut row = fluid_row("step", backend.name(), name, n);
+                row.seconds_per_step = Some(seconds);
+                row.iterations = Some(iterations);
+                row.divergence = Some(divergence);
+                eprintln!(
+                    "plume {:>4} {name:>15} {n:>4}^3 {seconds:>9.5} s/step  {iterations} iterations, divergence {divergence:.1e}",
+                    backend.name()
+                );
+                rows.push(row);
+            }
         }
     }
     for BenchScene { path, name, data } in scenes {

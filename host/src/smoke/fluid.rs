@@ -11,9 +11,31 @@ use slicelight_shaders::volumes::automaton::random;
 use crate::cpu::{for_each_invocation, for_each_invocation2};
 
 /// Red-black Gauss-Seidel sweeps before and after the coarse correction.
-const SMOOTHING_SWEEPS: u32 = 2;
+pub(crate) const SMOOTHING_SWEEPS: u32 = 2;
 /// Symmetric sweep pairs on the coarsest level (a few cells a side).
-const COARSE_SWEEPS: u32 = 16;
+pub(crate) const COARSE_SWEEPS: u32 = 16;
+
+/// The sums of `partial`s, in order, in f64: `(sum a b, max |a|, sum a, count)`.
+pub fn sum_partials(partials: &[glam::Vec4]) -> [f64; 4] {
+    partials.iter().fold([0.0, 0.0, 0.0, 0.0], |s, q| {
+        [s[0] + q.x as f64, s[1].max(q.y as f64), s[2] + q.z as f64, s[3] + q.w as f64]
+    })
+}
+
+/// `sum_partials` of `a` and `b` (the last two over `fluid`'s cells where
+/// given): the same groups and order as the GPU's `fluid_partials`.
+pub fn reduce(a: &[f32], b: &[f32], fluid: Option<&[u32]>) -> [f64; 4] {
+    let count = a.len() as u32;
+    let mut partials = vec![glam::Vec4::ZERO; partial_groups(count) as usize];
+    let (flags, use_fluid) = match fluid {
+        Some(f) => (f, true),
+        None => (&[][..], false),
+    };
+    for_each_invocation(&mut partials, 0, &ProgressBar::hidden(), |g, out| {
+        *out = partial(a, b, flags, use_fluid, count, g)
+    });
+    sum_partials(&partials)
+}
 
 /// One multigrid level: its cells, which are fluid, and its work arrays.
 #[derive(Debug, Clone)]
@@ -89,22 +111,24 @@ impl Poisson {
         &self.levels[0].fluid
     }
 
+    /// Each level's cells, fluid flags and stencils (the GPU's copy of them).
+    pub fn levels(&self) -> Vec<(UVec3, &[u32], &[u32])> {
+        self.levels.iter().map(|l| (l.n, &l.fluid[..], &l.stencils[..])).collect()
+    }
+
     /// Removes the mean over the fluid cells (the singular case's null space).
     fn remove_mean(&self, v: &mut [f32]) {
         if !self.singular {
             return;
         }
         let fluid = self.fluid();
-        let (sum, count) =
-            v.iter().zip(fluid).filter(|(_, f)| **f != 0).fold((0.0f64, 0u64), |(s, c), (x, _)| (s + *x as f64, c + 1));
-        if count == 0 {
+        let [_, _, sum, count] = reduce(v, v, Some(fluid));
+        if count <= 0.0 {
             return;
         }
-        let mean = (sum / count as f64) as f32;
+        let mean = (sum / count) as f32;
         for (x, f) in v.iter_mut().zip(fluid) {
-            if *f != 0 {
-                *x -= mean;
-            }
+            *x = less_mean(*x, *f, mean);
         }
     }
 
@@ -177,8 +201,8 @@ impl Poisson {
         self.apply(phi, &mut ap);
         let mut r: Vec<f32> = b.iter().zip(&ap).map(|(b, a)| b - a).collect();
         self.remove_mean(&mut r);
-        let max_abs = |v: &[f32]| v.iter().fold(0.0f64, |m, x| m.max(x.abs() as f64));
-        let dot = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum::<f64>();
+        let max_abs = |v: &[f32]| reduce(v, v, None)[1];
+        let dot = |a: &[f32], b: &[f32]| reduce(a, b, None)[0];
         let mut residual = max_abs(&r);
         if residual <= stop {
             return Solve { iterations: 0, relative_divergence: residual * scale, converged: true };
@@ -194,8 +218,7 @@ impl Poisson {
             }
             let alpha = (rz / pap) as f32;
             for i in 0..cells {
-                phi[i] += alpha * p[i];
-                r[i] -= alpha * ap[i];
+                (phi[i], r[i]) = cg_update(phi[i], r[i], p[i], ap[i], alpha);
             }
             residual = max_abs(&r);
             if residual <= stop {
@@ -206,7 +229,7 @@ impl Poisson {
             let beta = (rz_next / rz) as f32;
             rz = rz_next;
             for i in 0..cells {
-                p[i] = z[i] + beta * p[i];
+                p[i] = cg_direction(z[i], p[i], beta);
             }
         }
         Solve { iterations: max_iterations, relative_divergence: residual * scale, converged: false }
@@ -528,7 +551,47 @@ impl Fluid {
         self.last.advect_seconds = advect_seconds;
         self.last.forces_seconds = forces_seconds;
         self.last.project_seconds = clock.elapsed().as_secs_f64() - advect_seconds - forces_seconds;
-        self.move_puffs();
+        let p = self.params;
+        let vel = Velocity { u: &self.u, v: &self.v, w: &self.w };
+        let traced = self.puffs.iter().map(|puff| trace(&p, vel, self.to_cells(puff.position), -1.0)).collect();
+        self.finish_step(traced);
+    }
+
+    /// The multigrid levels of the pressure solver (cells, fluid flags, stencils).
+    pub fn solver_levels(&self) -> Vec<(UVec3, &[u32], &[u32])> {
+        self.poisson.levels()
+    }
+
+    /// Whether the pressure equation is singular (a closed box).
+    pub fn solver_singular(&self) -> bool {
+        self.poisson.singular
+    }
+
+    /// What the sources hold fixed each step, per array (u, v, w,
+    /// temperature, smoke): `(element, value)`, each element once, the
+    /// last source's value where sources overlap (as `apply_sources`).
+    pub fn held_values(&self) -> [Vec<(u32, f32)>; 5] {
+        let mut maps: [std::collections::BTreeMap<u32, f32>; 5] = Default::default();
+        for s in &self.sources {
+            for &c in &s.cells {
+                if self.fluid[c as usize] != 0 {
+                    maps[3].insert(c, s.temperature);
+                    maps[4].insert(c, s.density);
+                }
+            }
+            for (k, (faces, speed)) in s.faces.iter().zip(s.velocity.to_array()).enumerate() {
+                for &f in faces {
+                    maps[k].insert(f, speed);
+                }
+            }
+        }
+        maps.map(|m| m.into_iter().collect())
+    }
+
+    /// Ends a step: the puffs moved to `traced` (cells, one per puff, the
+    /// projected field's RK2 trace), aged, thinned and emitted; the step counted.
+    pub fn finish_step(&mut self, traced: Vec<Vec3>) {
+        self.move_puffs(traced);
         self.params.step += 1;
     }
 
@@ -552,17 +615,17 @@ impl Fluid {
         }
     }
 
-    /// Moves the puffs `dt` on through the projected field (RK2), ages
-    /// them, drops those that left the box or faded, and emits new ones.
-    fn move_puffs(&mut self) {
+    /// Moves the puffs to `traced` (their RK2 trace `dt` on through the
+    /// projected field), ages them, drops those that left the box or
+    /// faded, and emits new ones.
+    fn move_puffs(&mut self, traced: Vec<Vec3>) {
         let p = self.params;
         let n = p.dims().as_vec3();
-        let vel = Velocity { u: &self.u, v: &self.v, w: &self.w };
         let origin = self.origin;
         let rules = &self.rules;
+        let mut traced = traced.into_iter();
         self.puffs.retain_mut(|puff| {
-            let x = (puff.position - origin) / p.h;
-            let next = trace(&p, vel, x, -1.0);
+            let next = traced.next().expect("one traced position per puff");
             puff.position = origin + next * p.h;
             puff.age += p.dt;
             let inside = next.cmpge(Vec3::ZERO).all() && next.cmple(n).all();

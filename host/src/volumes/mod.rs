@@ -44,7 +44,7 @@ pub static PASSES: &[&dyn Pass] = &[
 ];
 
 /// The family, as `passes::FAMILIES` registers it.
-pub static FAMILY: Family = Family { name: "volumes", passes: PASSES, bench: Some(&bench::VolumesSweep) };
+pub static FAMILY: Family = Family { name: "volumes", passes: PASSES, kernels: &[], bench: Some(&bench::VolumesSweep) };
 
 pub static VOLUMES_PARAMS: Resource = Resource {
     binding: 40,
@@ -463,7 +463,7 @@ fn smoke_volume(
         vec![1; config.params.cells as usize]
     };
     let progress = crate::smoke::progress_bar(field);
-    let fluid = crate::smoke::simulate(&config, cells, config.seconds as f64 + data.time, &progress);
+    let fluid = crate::smoke::simulate(&config, cells, config.seconds as f64 + data.time, &progress)?;
     let mut plain = v.clone();
     plain.smoke = None;
     match config.render {

@@ -31,6 +31,8 @@
 use crate::glam::{UVec3, Vec3};
 use crate::volumes::automaton::random;
 
+pub mod kernels;
+
 /// Quantities, by what they are sampled as.
 pub const KIND_U: u32 = 0;
 pub const KIND_V: u32 = 1;
@@ -675,6 +677,96 @@ pub fn project_face(p: &FluidParams, kind: u32, flat: u32, q: f32, phi: &[f32], 
     };
     let after = if along < axis_size { phi[index(n, c.x, c.y, c.z)] } else { 0.0 };
     q - (after - before) / p.h
+}
+
+/// Elements of a vector per partial sum (`partial`): one invocation sums
+/// them in order, so both backends add in the same order and the host adds
+/// the partials in f64.
+pub const PARTIAL_SPAN: u32 = 256;
+
+/// The partial reductions of elements `group * PARTIAL_SPAN ..` (up to
+/// `count`) of `a` and `b`: `(sum a b, max |a|, sum a, count)`, the last two
+/// over the cells `fluid` marks (when `fluid` is given: the mean the
+/// singular case removes) or over all elements. The conjugate gradients'
+/// dot products, its stopping test's `max |r|` and the measured speed and
+/// divergence are these summed over groups.
+pub fn partial(a: &[f32], b: &[f32], fluid: &[u32], use_fluid: bool, count: u32, group: u32) -> crate::glam::Vec4 {
+    let start = group * PARTIAL_SPAN;
+    let end = if start + PARTIAL_SPAN < count { start + PARTIAL_SPAN } else { count };
+    let (mut dot, mut max, mut sum, mut n) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let mut i = start;
+    while i < end {
+        let x = a[i as usize];
+        dot += x * b[i as usize];
+        let m = x.abs();
+        if m > max {
+            max = m;
+        }
+        if !use_fluid || fluid[i as usize] != 0 {
+            sum += x;
+            n += 1.0;
+        }
+        i += 1;
+    }
+    crate::glam::Vec4::new(dot, max, sum, n)
+}
+
+/// The partial groups of a vector of `count` elements.
+pub fn partial_groups(count: u32) -> u32 {
+    count.div_ceil(PARTIAL_SPAN)
+}
+
+/// One conjugate-gradient update of element `i`: `phi + alpha p` and
+/// `r - alpha A p`.
+pub fn cg_update(phi: f32, r: f32, p: f32, ap: f32, alpha: f32) -> (f32, f32) {
+    (phi + alpha * p, r - alpha * ap)
+}
+
+/// The next search direction's element: `z + beta p`.
+pub fn cg_direction(z: f32, p: f32, beta: f32) -> f32 {
+    z + beta * p
+}
+
+/// A fluid cell's value less the mean over the fluid cells (the singular
+/// case's null space); solid cells keep theirs.
+pub fn less_mean(x: f32, fluid: u32, mean: f32) -> f32 {
+    if fluid != 0 {
+        x - mean
+    } else {
+        x
+    }
+}
+
+/// What a fluid kernel's dispatch needs besides the fluid's parameters:
+/// which quantity (`KIND_*`), the red-black colour, the advection's
+/// direction, a scalar (a diffusion weight, a conjugate-gradient `alpha` or
+/// `beta`, a mean), a multigrid level's cells, and the invocations.
+#[repr(C)]
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct FluidDispatch {
+    pub fluid: FluidParams,
+    pub kind: u32,
+    pub colour: u32,
+    pub direction: f32,
+    pub scalar: f32,
+    pub nx: u32,
+    pub ny: u32,
+    pub nz: u32,
+    pub count: u32,
+}
+
+#[cfg(not(target_arch = "spirv"))]
+mod dispatch_pod {
+    // SAFETY: `repr(C)` of 4-byte scalars and `FluidParams` (the same), no padding.
+    unsafe impl bytemuck::Zeroable for super::FluidDispatch {}
+    unsafe impl bytemuck::Pod for super::FluidDispatch {}
+}
+
+impl FluidDispatch {
+    /// The multigrid level's cells.
+    pub fn level(&self) -> UVec3 {
+        UVec3::new(self.nx, self.ny, self.nz)
+    }
 }
 
 #[cfg(test)]

@@ -343,6 +343,11 @@ impl GpuContext {
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
+        self.map_staging(&staging, bytes)
+    }
+
+    /// The first `bytes` of a mappable buffer whose copy has been submitted.
+    fn map_staging(&self, staging: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
         let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -592,10 +597,31 @@ impl Batch<'_> {
 
     /// Runs what was recorded, in order, and waits.
     pub fn submit(self) -> Result<()> {
+        self.run(None).map(|_| ())
+    }
+
+    /// Runs what was recorded, then reads the first `bytes` of `buffer`,
+    /// in the same submission (a reduction's partial sums).
+    pub fn submit_reading(self, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
+        self.run(Some((buffer, bytes)))
+    }
+
+    fn run(self, read: Option<(&wgpu::Buffer, u64)>) -> Result<Vec<u8>> {
         let ctx = self.ctx;
         if self.commands.is_empty() {
-            return Ok(());
+            return match read {
+                Some((buffer, bytes)) => ctx.read_buffer(buffer, bytes),
+                None => Ok(Vec::new()),
+            };
         }
+        let staging = read.map(|(_, bytes)| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("readback"),
+                size: bytes.next_multiple_of(4).max(4),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
         let arena = ctx.storage("kernel parameters", &self.params)?;
         let max = ctx.device.limits().max_compute_workgroups_per_dimension;
         // Every binding given before anything is created.
@@ -678,8 +704,15 @@ impl Batch<'_> {
                     _ => {}
                 }
             }
+            if let (Some((buffer, _)), Some(staging)) = (read, &staging) {
+                encoder.copy_buffer_to_buffer(buffer, 0, staging, 0, staging.size().min(buffer.size()));
+            }
             ctx.queue.submit([encoder.finish()]);
         })?;
-        ctx.wait("running a batch of kernels")
+        ctx.wait("running a batch of kernels")?;
+        match (read, staging) {
+            (Some((_, bytes)), Some(staging)) => ctx.map_staging(&staging, bytes),
+            _ => Ok(Vec::new()),
+        }
     }
 }

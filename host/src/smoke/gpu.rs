@@ -360,9 +360,8 @@ impl<'a> GpuFluid<'a> {
 
     /// Submits `batch` and sums the partials of each range in `ranges`.
     fn reduce(&self, batch: Batch, ranges: &[std::ops::Range<u32>]) -> Result<Vec<[f64; 4]>> {
-        batch.submit()?;
         let end = ranges.iter().map(|r| r.end).max().unwrap_or(0);
-        let bytes = self.ctx.download(&self.partials, end as u64 * 16)?;
+        let bytes = batch.submit_reading(&self.partials, end as u64 * 16)?;
         let all: &[Vec4] = bytemuck::cast_slice(&bytes);
         Ok(ranges.iter().map(|r| sum_partials(&all[r.start as usize..r.end as usize])).collect())
     }
@@ -372,17 +371,19 @@ impl<'a> GpuFluid<'a> {
         Ok(self.reduce(batch, std::slice::from_ref(&(0..end)))?[0])
     }
 
-    /// The largest face velocity (m/s), recorded after what `batch` holds.
-    fn max_speed(&self, mut batch: Batch, p: &FluidParams) -> Result<f64> {
-        let mut ranges = Vec::new();
-        let mut offset = 0;
+    /// The largest face velocity (m/s), recorded after what `batch` holds,
+    /// and the largest `|a|` of the partials `before` that `batch` wrote.
+    fn max_speed(&self, mut batch: Batch, p: &FluidParams, before: std::ops::Range<u32>) -> Result<(f64, f64)> {
+        let mut ranges = vec![before.clone()];
+        let mut offset = before.end;
         for (k, &kind) in KINDS[..3].iter().enumerate() {
             let count = len(extent(p, kind));
             let end = self.partials(&mut batch, &self.q[k], &self.q[k], count, false, offset);
             ranges.push(offset..end);
             offset = end;
         }
-        Ok(self.reduce(batch, &ranges)?.iter().fold(0.0f64, |m, s| m.max(s[1])))
+        let sums = self.reduce(batch, &ranges)?;
+        Ok((sums[0][1], sums[1..].iter().fold(0.0f64, |m, s| m.max(s[1]))))
     }
 
     /// `Fluid::project` on the device.
@@ -392,7 +393,7 @@ impl<'a> GpuFluid<'a> {
         let mut batch = self.ctx.batch();
         let d = FluidDispatch { scalar: -p.h, ..at(&p, KIND_TEMPERATURE, p.cells) };
         batch.dispatch(&DIVERGENCE, P, &d, &[vel[0], vel[1], vel[2], (FLAGS, &self.fluid), (OUT, &self.rhs)], p.cells);
-        let speed = self.max_speed(batch, &p)?.max(1e-30);
+        let speed = self.max_speed(batch, &p, 0..0)?.1.max(1e-30);
         let stop = f.tolerance * p.h as f64 * speed;
         let solve = self.solve(&p, stop, 1.0 / (p.h as f64 * speed), f.max_iterations)?;
         let mut batch = self.ctx.batch();
@@ -415,16 +416,16 @@ impl<'a> GpuFluid<'a> {
             p.cells,
         );
         let end = self.partials(&mut batch, &self.work[0], &self.work[0], p.cells, false, 0);
-        let divergence = self.reduce_one(batch, end)?[1];
-        let max_speed = self.max_speed(self.ctx.batch(), &p)?;
+        let (divergence, max_speed) = self.max_speed(batch, &p, 0..end)?;
         Ok(StepStats { solve, divergence: divergence / max_speed.max(1e-30), max_speed, ..Default::default() })
     }
 
-    /// Removes the mean over the fluid cells from `v` (the singular case).
-    fn remove_mean(&self, batch: Batch, p: &FluidParams, v: &Buf) -> Result<Batch<'a>> {
+    /// Removes the mean over the fluid cells from `v` (the singular case:
+    /// `batch` runs, the mean is read, and the returned batch subtracts
+    /// it); otherwise `batch` unchanged.
+    fn remove_mean(&self, batch: Batch<'a>, p: &FluidParams, v: &Buf) -> Result<Batch<'a>> {
         if !self.singular {
-            batch.submit()?;
-            return Ok(self.ctx.batch());
+            return Ok(batch);
         }
         let mut batch = batch;
         let end = self.partials(&mut batch, v, v, p.cells, true, 0);
@@ -437,14 +438,16 @@ impl<'a> GpuFluid<'a> {
         Ok(next)
     }
 
-    /// `Poisson::solve` on the device: `phi` from `rhs`.
+    /// `Poisson::solve` on the device: `phi` from `rhs`. Two readbacks an
+    /// iteration: `p . Ap` for `alpha`, then `max |r|` and `r . z` together
+    /// (the preconditioner runs before the stop is known, one V-cycle more
+    /// on the last iteration than the CPU, whose results it does not change).
     fn solve(&self, p: &FluidParams, stop: f64, scale: f64, max_iterations: u32) -> Result<Solve> {
         let cells = p.cells;
         let l0 = &self.levels[0];
         let d = at(p, 0, cells);
         let level = FluidDispatch { nx: l0.n.x, ny: l0.n.y, nz: l0.n.z, ..d };
-        let batch = self.remove_mean(self.ctx.batch(), p, &self.rhs)?;
-        let mut batch = batch;
+        let mut batch = self.remove_mean(self.ctx.batch(), p, &self.rhs)?;
         batch.dispatch(
             &RESIDUAL,
             P,
@@ -452,19 +455,16 @@ impl<'a> GpuFluid<'a> {
             &[(A, &self.rhs), (B, &self.phi), (FLAGS, &l0.stencils), (OUT, &self.r)],
             cells,
         );
-        let mut batch = self.remove_mean(batch, p, &self.r)?;
-        let end = self.partials(&mut batch, &self.r, &self.r, cells, false, 0);
-        let mut residual = self.reduce_one(batch, end)?[1];
+        let batch = self.remove_mean(batch, p, &self.r)?;
+        let mut batch = self.precondition(batch, p)?;
+        let end = self.partials(&mut batch, &self.r, &self.z, cells, false, 0);
+        let [mut rz, mut residual, ..] = self.reduce_one(batch, end)?;
         if residual <= stop {
             return Ok(Solve { iterations: 0, relative_divergence: residual * scale, converged: true });
         }
-        let batch = self.precondition(p)?;
-        let mut batch = batch;
+        let mut batch = self.ctx.batch();
         batch.copy(&self.z, &self.p, cells as u64 * 4);
-        let end = self.partials(&mut batch, &self.r, &self.z, cells, false, 0);
-        let mut rz = self.reduce_one(batch, end)?[0];
         for k in 1..=max_iterations {
-            let mut batch = self.ctx.batch();
             batch.dispatch(&APPLY, P, &level, &[(A, &self.p), (FLAGS, &l0.stencils), (OUT, &self.ap)], cells);
             let end = self.partials(&mut batch, &self.p, &self.ap, cells, false, 0);
             let pap = self.reduce_one(batch, end)?[0];
@@ -472,26 +472,24 @@ impl<'a> GpuFluid<'a> {
                 return Ok(Solve { iterations: k, relative_divergence: residual * scale, converged: false });
             }
             let alpha = (rz / pap) as f32;
-            let mut batch = self.ctx.batch();
-            let update = FluidDispatch { scalar: alpha, ..d };
-            batch.dispatch(
+            let mut update = self.ctx.batch();
+            update.dispatch(
                 &CG_UPDATE,
                 P,
-                &update,
+                &FluidDispatch { scalar: alpha, ..d },
                 &[(A, &self.p), (B, &self.ap), (OUT, &self.phi), (OUT2, &self.r)],
                 cells,
             );
-            let end = self.partials(&mut batch, &self.r, &self.r, cells, false, 0);
-            residual = self.reduce_one(batch, end)?[1];
+            let mut update = self.precondition(update, p)?;
+            let end = self.partials(&mut update, &self.r, &self.z, cells, false, 0);
+            let [rz_next, r_max, ..] = self.reduce_one(update, end)?;
+            residual = r_max;
             if residual <= stop {
                 return Ok(Solve { iterations: k, relative_divergence: residual * scale, converged: true });
             }
-            let mut batch = self.precondition(p)?;
-            let end = self.partials(&mut batch, &self.r, &self.z, cells, false, 0);
-            let rz_next = self.reduce_one(batch, end)?[0];
             let beta = (rz_next / rz) as f32;
             rz = rz_next;
-            let mut batch = self.ctx.batch();
+            batch = self.ctx.batch();
             batch.dispatch(
                 &CG_DIRECTION,
                 P,
@@ -499,15 +497,13 @@ impl<'a> GpuFluid<'a> {
                 &[(A, &self.z), (OUT, &self.p)],
                 cells,
             );
-            batch.submit()?;
         }
         Ok(Solve { iterations: max_iterations, relative_divergence: residual * scale, converged: false })
     }
 
-    /// `z = M^-1 r` (one V-cycle, then the mean removed); returns a batch
-    /// that may hold the last of that work.
-    fn precondition(&self, p: &FluidParams) -> Result<Batch<'a>> {
-        let mut batch = self.ctx.batch();
+    /// Appends `z = M^-1 r` (one V-cycle, then the mean removed) to `batch`.
+    fn precondition(&self, batch: Batch<'a>, p: &FluidParams) -> Result<Batch<'a>> {
+        let mut batch = batch;
         let bytes = p.cells as u64 * 4;
         batch.copy(&self.r, &self.levels[0].b, bytes);
         self.v_cycle(&mut batch, p, 0);
@@ -515,18 +511,21 @@ impl<'a> GpuFluid<'a> {
         self.remove_mean(batch, p, &self.z)
     }
 
-    /// One Gauss-Seidel sweep of `colour` on level `l`.
-    fn sweep(&self, batch: &mut Batch, p: &FluidParams, l: usize, colour: u32) {
+    /// Two Gauss-Seidel sweeps on level `l`, colour `first` then the
+    /// other: `x` into `scratch` and back (each sweep writes every cell,
+    /// the other colour's unchanged, so no copy is needed between them).
+    fn sweep_pair(&self, batch: &mut Batch, p: &FluidParams, l: usize, first: u32) {
         let lv = &self.levels[l];
-        let d = FluidDispatch { colour, nx: lv.n.x, ny: lv.n.y, nz: lv.n.z, ..at(p, 0, lv.cells) };
-        batch.dispatch(
-            &GAUSS_SEIDEL,
-            P,
-            &d,
-            &[(A, &lv.b), (B, &lv.x), (FLAGS, &lv.stencils), (OUT, &lv.scratch)],
-            lv.cells,
-        );
-        batch.copy(&lv.scratch, &lv.x, lv.cells as u64 * 4);
+        let d = FluidDispatch { nx: lv.n.x, ny: lv.n.y, nz: lv.n.z, ..at(p, 0, lv.cells) };
+        for (colour, from, to) in [(first, &lv.x, &lv.scratch), (1 - first, &lv.scratch, &lv.x)] {
+            batch.dispatch(
+                &GAUSS_SEIDEL,
+                P,
+                &FluidDispatch { colour, ..d },
+                &[(A, &lv.b), (B, from), (FLAGS, &lv.stencils), (OUT, to)],
+                lv.cells,
+            );
+        }
     }
 
     /// `Poisson::v_cycle` from level `l`.
@@ -535,18 +534,15 @@ impl<'a> GpuFluid<'a> {
         batch.clear(&lv.x);
         if l + 1 == self.levels.len() {
             for _ in 0..COARSE_SWEEPS {
-                self.sweep(batch, p, l, 0);
-                self.sweep(batch, p, l, 1);
+                self.sweep_pair(batch, p, l, 0);
             }
             for _ in 0..COARSE_SWEEPS {
-                self.sweep(batch, p, l, 1);
-                self.sweep(batch, p, l, 0);
+                self.sweep_pair(batch, p, l, 1);
             }
             return;
         }
         for _ in 0..SMOOTHING_SWEEPS {
-            self.sweep(batch, p, l, 0);
-            self.sweep(batch, p, l, 1);
+            self.sweep_pair(batch, p, l, 0);
         }
         let fine = FluidDispatch { nx: lv.n.x, ny: lv.n.y, nz: lv.n.z, ..at(p, 0, lv.cells) };
         batch.dispatch(
@@ -569,8 +565,7 @@ impl<'a> GpuFluid<'a> {
         );
         batch.copy(&lv.scratch, &lv.x, lv.cells as u64 * 4);
         for _ in 0..SMOOTHING_SWEEPS {
-            self.sweep(batch, p, l, 1);
-            self.sweep(batch, p, l, 0);
+            self.sweep_pair(batch, p, l, 1);
         }
     }
 

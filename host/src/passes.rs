@@ -479,6 +479,22 @@ pub fn count_differences(gpu: &[f32], cpu: &[f32], tol: impl Fn(f32) -> f32) -> 
 /// Compares two tables or layers of `Vec4`s (rgb) within `rel` of the
 /// CPU's peak per value, `allowed` values free to differ (pixels that
 /// flip across an edge); the callers say why their `rel` is what it is.
+/// For comparisons of exact records (indices, lists, automaton cells):
+/// how many of the records of `stride` elements differ between the two
+/// backends, and how many records there are; unequal lengths are an error
+/// naming `what`.
+pub fn differing_records<T: PartialEq>(
+    what: &str,
+    gpu: &[T],
+    cpu: &[T],
+    stride: usize,
+) -> anyhow::Result<(usize, usize)> {
+    anyhow::ensure!(gpu.len() == cpu.len(), "{what}: {} and {} elements", gpu.len(), cpu.len());
+    let stride = stride.max(1);
+    let differ = gpu.chunks(stride).zip(cpu.chunks(stride)).filter(|(a, b)| a != b).count();
+    Ok((differ, cpu.len().div_ceil(stride)))
+}
+
 pub fn compare_rgb(what: &str, gpu: &[Vec4], cpu: &[Vec4], rel: f32, allowed: usize) -> anyhow::Result<String> {
     anyhow::ensure!(gpu.len() == cpu.len(), "{what}: {} and {} values", gpu.len(), cpu.len());
     let flat = |v: &[Vec4]| v.iter().flat_map(|p| p.truncate().to_array()).collect::<Vec<f32>>();

@@ -346,9 +346,9 @@ impl Pass for Steps {
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         // Integer rules and a counter-based hash: the same bits, or a bug.
         let (a, b) = (gpu.get::<u32>(&AUTOMATON_NEXT), cpu.get::<u32>(&AUTOMATON_NEXT));
-        let differ = a.iter().zip(b).filter(|(x, y)| x != y).count();
+        let (differ, _) = crate::passes::differing_records("automaton cells", a, b, 1)?;
         let step = (gpu.get::<u32>(&AUTOMATON_NEXT_STEP)[0], cpu.get::<u32>(&AUTOMATON_NEXT_STEP)[0]);
-        if differ > 0 || a.len() != b.len() || step.0 != step.1 {
+        if differ > 0 || step.0 != step.1 {
             bail!("{differ} of {} cells differ; steps {} and {}", a.len(), step.0, step.1);
         }
         let clouds = a.iter().filter(|&&c| c & slicelight_shaders::volumes::automaton::CLD != 0).count();

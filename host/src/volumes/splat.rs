@@ -211,11 +211,10 @@ impl Pass for SplatSort {
         let c = cpu.get::<SplatBall>(&SPLATS);
         let colors = |s: &[SplatBall]| s.iter().map(|b| b.color).collect::<Vec<Vec4>>();
         let a = compare_rgb("splat colours", &colors(g), &colors(c), 1e-4, 0)?;
-        let (go, co) = (gpu.get::<u32>(&SPLAT_ORDER), cpu.get::<u32>(&SPLAT_ORDER));
-        anyhow::ensure!(go.len() == co.len(), "splat order: {} and {} places", go.len(), co.len());
-        let moved = go.iter().zip(co).filter(|(a, b)| a != b).count();
-        anyhow::ensure!(moved <= co.len() / 100, "splat order: {moved} of {} places differ", co.len());
-        Ok(format!("{a}; order: {moved} of {} places differ", co.len()))
+        let (moved, places) =
+            differing_records("splat order", gpu.get::<u32>(&SPLAT_ORDER), cpu.get::<u32>(&SPLAT_ORDER), 1)?;
+        anyhow::ensure!(moved <= places / 100, "splat order: {moved} of {places} places differ");
+        Ok(format!("{a}; order: {moved} of {places} places differ"))
     }
 }
 
@@ -283,9 +282,7 @@ impl Pass for SplatTiles {
         // 1 % of the tiles may differ.
         let stride = scene.volumes.params.tile_capacity as usize + 1;
         let (g, c) = (gpu.get::<u32>(&SPLAT_TILES), cpu.get::<u32>(&SPLAT_TILES));
-        anyhow::ensure!(g.len() == c.len(), "splat tiles: {} and {} words", g.len(), c.len());
-        let tiles = c.len() / stride;
-        let differ = g.chunks(stride).zip(c.chunks(stride)).filter(|(a, b)| a != b).count();
+        let (differ, tiles) = differing_records("splat tiles", g, c, stride)?;
         anyhow::ensure!(differ <= tiles / 100, "splat tiles: {differ} of {tiles} tiles differ");
         Ok(format!("splat tiles: {differ} of {tiles} tiles differ"))
     }

@@ -314,6 +314,36 @@ fn relative_difference(a: &[f32], b: &[f32]) -> f64 {
     }
 }
 
+/// A fluid configured from a `smoke = { ... }` body over a box of 10 cm cells.
+fn fluid_config(name: &str, body: &str) -> slicelight::smoke::Config {
+    let s: slicelight::smoke::Settings = toml::from_str(body).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let hi = glam::UVec3::from(s.cells).as_vec3() * 0.1;
+    slicelight::smoke::configure("volume[0]", &s, glam::Vec3::ZERO, hi).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+/// `steps` steps of `c` with solid cells `cells` on the CPU and with the
+/// kernels on `ctx`, `check(step, cpu, gpu)` after each; both states at the
+/// end (the device's read back).
+fn step_both(
+    ctx: &GpuContext,
+    name: &str,
+    c: &slicelight::smoke::Config,
+    cells: Vec<u32>,
+    steps: u32,
+    mut check: impl FnMut(u32, &slicelight::smoke::Fluid, &slicelight::smoke::Fluid),
+) -> (slicelight::smoke::Fluid, slicelight::smoke::Fluid) {
+    let mut cpu = c.start(cells);
+    let mut gpu = cpu.clone();
+    let mut on_device = slicelight::smoke::gpu::GpuFluid::new(ctx, &gpu).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+    for step in 0..steps {
+        cpu.step();
+        on_device.step(&mut gpu).unwrap_or_else(|e| panic!("{name}: step {step}: {e:#}"));
+        check(step, &cpu, &gpu);
+    }
+    on_device.download(&mut gpu).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+    (cpu, gpu)
+}
+
 /// The fluid's kernels on the device against their CPU twins, step by
 /// step: a plume from a source beside an obstacle through open faces
 /// (MacCormack, turbulence, eddy terms: every stage of a step), the same
@@ -336,7 +366,6 @@ fn relative_difference(a: &[f32], b: &[f32]) -> f64 {
 /// both.
 #[test]
 fn fluid_steps_match_cpu() {
-    use slicelight::smoke::{self, gpu::GpuFluid};
     let ctx = device();
     let plume = "cells = [20, 16, 12]\ndt = 0.05\nturbulence = 2.0\ntemperature_noise = 20.0\neddy_diffusivity = 0.01\neddy_viscosity = 0.005\nwind = [0.5, 0.0, 0.0]\n[[source]]\nposition = [0.5, 0.2, 0.6]\nradius = 0.15\nrate = 8.0\ntemperature = 600.0\nvelocity = [0.0, 1.0, 0.0]";
     let cases = [
@@ -345,10 +374,8 @@ fn fluid_steps_match_cpu() {
         ("closed box", "cells = [12, 12, 12]\ndt = 0.05\nwalls = \"closed\"\n[[source]]\nposition = [0.6, 0.2, 0.6]\nradius = 0.2\nrate = 4.0\ntemperature = 500.0".to_string(), false),
     ];
     for (name, body, obstacle) in cases {
-        let s: smoke::Settings = toml::from_str(&body).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let n = glam::UVec3::from(s.cells);
-        let hi = n.as_vec3() * 0.1;
-        let c = smoke::configure("volume[0]", &s, glam::Vec3::ZERO, hi).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let c = fluid_config(name, &body);
+        let n = c.params.dims();
         let mut cells = vec![1u32; c.params.cells as usize];
         if obstacle {
             // A block downwind of the source.
@@ -359,13 +386,8 @@ fn fluid_steps_match_cpu() {
                 }
             }
         }
-        let mut cpu = c.start(cells);
-        let mut gpu = cpu.clone();
-        let mut on_device = GpuFluid::new(&ctx, &gpu).unwrap_or_else(|e| panic!("{name}: {e:#}"));
         let mut iterations = (0, 0);
-        for step in 0..40 {
-            cpu.step();
-            on_device.step(&mut gpu).unwrap_or_else(|e| panic!("{name}: step {step}: {e:#}"));
+        let (cpu, gpu) = step_both(&ctx, name, &c, cells, 40, |step, cpu, gpu| {
             assert!(
                 cpu.last.divergence <= 1e-5 && gpu.last.divergence <= 1e-5,
                 "{name}: step {step}: {:?} {:?}",
@@ -374,8 +396,7 @@ fn fluid_steps_match_cpu() {
             );
             iterations.0 += cpu.last.solve.iterations;
             iterations.1 += gpu.last.solve.iterations;
-        }
-        on_device.download(&mut gpu).unwrap();
+        });
         let fields = [
             ("u", &cpu.u, &gpu.u),
             ("v", &cpu.v, &gpu.v),
@@ -421,25 +442,17 @@ fn fluid_steps_match_cpu() {
 /// not amplify the backends' rounding differences).
 #[test]
 fn fluid_kernels_hold_at_large_steps_and_thin_grids() {
-    use slicelight::smoke::{self, gpu::GpuFluid};
     let ctx = device();
     let cases = [
         "cells = [16, 16, 16]\ndt = 2.0\n[[source]]\nposition = [0.8, 0.3, 0.8]\nradius = 0.2\nrate = 5.0\ntemperature = 10000.0\nvelocity = [0.0, 3.0, 0.0]",
         "cells = [16, 1, 16]\ndt = 0.05\n[[source]]\nposition = [0.8, 0.05, 0.8]\nradius = 0.2\nrate = 5.0\ntemperature = 600.0",
     ];
     for body in cases {
-        let s: smoke::Settings = toml::from_str(body).unwrap();
-        let hi = glam::UVec3::from(s.cells).as_vec3() * 0.1;
-        let c = smoke::configure("volume[0]", &s, glam::Vec3::ZERO, hi).unwrap();
-        let mut cpu = c.start(vec![1; c.params.cells as usize]);
-        let mut gpu = cpu.clone();
-        let mut on_device = GpuFluid::new(&ctx, &gpu).unwrap();
-        for step in 0..20 {
-            cpu.step();
-            on_device.step(&mut gpu).unwrap_or_else(|e| panic!("step {step}: {e:#}"));
+        let c = fluid_config(body, body);
+        let cells = vec![1; c.params.cells as usize];
+        let (cpu, gpu) = step_both(&ctx, body, &c, cells, 20, |step, _, gpu| {
             assert!(gpu.last.solve.converged && gpu.last.divergence <= 1e-5, "{body}: step {step}: {:?}", gpu.last);
-        }
-        on_device.download(&mut gpu).unwrap();
+        });
         for (a, b) in [(&cpu.u, &gpu.u), (&cpu.v, &gpu.v), (&cpu.w, &gpu.w), (&cpu.smoke, &gpu.smoke)] {
             assert!(b.iter().all(|x| x.is_finite()), "{body}: a value not finite");
             let d = relative_difference(a, b);

@@ -55,6 +55,10 @@ pub struct GpuContext {
     max_binding_bytes: u64,
     /// Largest image band, bytes: `max_binding_bytes` unless lowered.
     band_limit_bytes: u64,
+    /// Offsets of storage-buffer bindings are multiples of this (`Batch`'s parameter blocks).
+    storage_alignment: u64,
+    /// Workgroups per dispatch dimension.
+    max_workgroups: u32,
     /// Whether per-pass times come from timestamp queries.
     timestamps: bool,
 }
@@ -101,6 +105,8 @@ impl GpuContext {
             pipelines: Default::default(),
             max_binding_bytes: limits.max_storage_buffer_binding_size as u64,
             band_limit_bytes: limits.max_storage_buffer_binding_size as u64,
+            storage_alignment: limits.min_storage_buffer_offset_alignment.max(4) as u64,
+            max_workgroups: limits.max_compute_workgroups_per_dimension,
             timestamps,
         })
     }
@@ -334,16 +340,29 @@ impl GpuContext {
         if size == 0 {
             return Ok(Vec::new());
         }
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let staging = self.staging(size);
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
         self.map_staging(&staging, bytes)
+    }
+
+    /// A mappable buffer of `size` bytes to copy a result into.
+    fn staging(&self, size: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// The workgroups `(x, y)` of a dispatch of `invocations`: rows of at
+    /// most the per-dimension limit (the kernels' `flat_index` undoes it).
+    fn workgroups(&self, invocations: u32) -> (u32, u32) {
+        let groups = invocations.div_ceil(WORKGROUP_SIZE);
+        let gx = groups.min(self.max_workgroups).max(1);
+        (gx, groups.div_ceil(gx))
     }
 
     /// The first `bytes` of a mappable buffer whose copy has been submitted.
@@ -437,14 +456,11 @@ impl GpuFrame<'_> {
         passes: &[(&'static dyn Pass, u32)],
         timing: Option<(&wgpu::QuerySet, &wgpu::Buffer)>,
     ) -> Result<()> {
-        let max = self.ctx.device.limits().max_compute_workgroups_per_dimension;
         let names: Vec<_> = passes.iter().map(|(p, _)| p.name()).collect();
         checked(&self.ctx.device, &format!("running {}", names.join(", ")), || {
             let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
             for (k, &(pass, invocations)) in passes.iter().enumerate() {
-                let groups = invocations.div_ceil(WORKGROUP_SIZE);
-                let gx = groups.min(max);
-                let gy = groups.div_ceil(gx);
+                let (gx, gy) = self.ctx.workgroups(invocations);
                 // A stepped pass dispatches once per step, copying what a
                 // step wrote over what the next one reads (`Pass::carry`);
                 // its time spans all steps.
@@ -572,7 +588,7 @@ impl Batch<'_> {
         buffers: &[(u32, &wgpu::Buffer)],
         invocations: u32,
     ) {
-        let align = self.ctx.device.limits().min_storage_buffer_offset_alignment.max(4) as usize;
+        let align = self.ctx.storage_alignment as usize;
         let start = self.params.len().next_multiple_of(align);
         self.params.resize(start, 0);
         self.params.extend_from_slice(bytemuck::bytes_of(params));
@@ -614,16 +630,8 @@ impl Batch<'_> {
                 None => Ok(Vec::new()),
             };
         }
-        let staging = read.map(|(_, bytes)| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("readback"),
-                size: bytes.next_multiple_of(4).max(4),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        });
+        let staging = read.map(|(_, bytes)| ctx.staging(bytes.next_multiple_of(4).max(4)));
         let arena = ctx.storage("kernel parameters", &self.params)?;
-        let max = ctx.device.limits().max_compute_workgroups_per_dimension;
         // Every binding given before anything is created.
         for c in &self.commands {
             if let Command::Dispatch { kernel, params_binding, buffers, .. } = c {
@@ -686,15 +694,14 @@ impl Batch<'_> {
                         if *invocations == 0 {
                             continue;
                         }
-                        let n = invocations.div_ceil(WORKGROUP_SIZE);
-                        let gx = n.min(max);
+                        let (gx, gy) = ctx.workgroups(*invocations);
                         let mut cpass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                             label: Some(kernel.name),
                             timestamp_writes: None,
                         });
                         cpass.set_pipeline(pipeline);
                         cpass.set_bind_group(0, group, &[]);
-                        cpass.dispatch_workgroups(gx, n.div_ceil(gx), 1);
+                        cpass.dispatch_workgroups(gx, gy, 1);
                     }
                     (Command::Copy { from, to, bytes }, _) => {
                         let size = (*bytes).min(from.size()).min(to.size());

@@ -97,26 +97,18 @@ fn plume(n: u32, advection: &str, backend: &crate::render::Backend) -> Result<(f
     let s: super::Settings = toml::from_str(&body)?;
     let c = configure("bench", &s, Vec3::ZERO, Vec3::splat(size))?;
     let mut f = c.start(vec![1; c.params.cells as usize]);
-    let mut device = match backend {
-        crate::render::Backend::Gpu(ctx) => Some(super::gpu::GpuFluid::new(ctx, &f)?),
+    let device = match backend {
+        crate::render::Backend::Gpu(ctx) => Some(&**ctx),
         crate::render::Backend::Cpu => None,
     };
-    let mut step = |f: &mut super::fluid::Fluid| -> Result<()> {
-        match &mut device {
-            Some(d) => d.step(f),
-            None => {
-                f.step();
-                Ok(())
-            }
-        }
-    };
+    let mut stepper = super::gpu::Stepper::new(device, &f)?;
     for _ in 0..5 {
-        step(&mut f)?;
+        stepper.step(&mut f)?;
     }
     let (mut times, mut iterations, mut divergence) = (Vec::new(), 0, 0.0f64);
     for _ in 0..5 {
         let t = std::time::Instant::now();
-        step(&mut f)?;
+        stepper.step(&mut f)?;
         times.push(t.elapsed().as_secs_f64());
         iterations = iterations.max(f.last.solve.iterations);
         divergence = divergence.max(f.last.divergence);

@@ -333,8 +333,10 @@ pub struct Fluid {
     pub last: StepStats,
 }
 
-fn len(e: UVec3) -> usize {
-    (e.x * e.y * e.z) as usize
+/// The elements of the array holding `kind` (faces: one more along its axis).
+pub(crate) fn elements(p: &FluidParams, kind: u32) -> u32 {
+    let e = extent(p, kind);
+    e.x * e.y * e.z
 }
 
 impl Fluid {
@@ -349,9 +351,9 @@ impl Fluid {
             params: p,
             origin,
             advection,
-            u: vec![0.0; len(extent(&p, KIND_U))],
-            v: vec![0.0; len(extent(&p, KIND_V))],
-            w: vec![0.0; len(extent(&p, KIND_W))],
+            u: vec![0.0; elements(&p, KIND_U) as usize],
+            v: vec![0.0; elements(&p, KIND_V) as usize],
+            w: vec![0.0; elements(&p, KIND_W) as usize],
             temperature: vec![p.ambient; cells],
             smoke: vec![0.0; cells],
             phi: vec![0.0; cells],
@@ -569,7 +571,8 @@ impl Fluid {
 
     /// What the sources hold fixed each step, per array (u, v, w,
     /// temperature, smoke): `(element, value)`, each element once, the
-    /// last source's value where sources overlap (as `apply_sources`).
+    /// last source's value where sources overlap. Both backends hold these
+    /// (`apply_sources`, the GPU's `fluid_hold`).
     pub fn held_values(&self) -> [Vec<(u32, f32)>; 5] {
         let mut maps: [std::collections::BTreeMap<u32, f32>; 5] = Default::default();
         for s in &self.sources {
@@ -598,19 +601,11 @@ impl Fluid {
     /// Holds each source's cells at its temperature and density and its
     /// faces at its velocity.
     fn apply_sources(&mut self) {
-        for s in &self.sources {
-            for &c in &s.cells {
-                if self.fluid[c as usize] != 0 {
-                    self.temperature[c as usize] = s.temperature;
-                    self.smoke[c as usize] = s.density;
-                }
-            }
-            for (q, (faces, speed)) in
-                [&mut self.u, &mut self.v, &mut self.w].into_iter().zip(s.faces.iter().zip(s.velocity.to_array()))
-            {
-                for &f in faces {
-                    q[f as usize] = speed;
-                }
+        let held = self.held_values();
+        let arrays = [&mut self.u, &mut self.v, &mut self.w, &mut self.temperature, &mut self.smoke];
+        for (q, list) in arrays.into_iter().zip(held) {
+            for (i, value) in list {
+                q[i as usize] = value;
             }
         }
     }

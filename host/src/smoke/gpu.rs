@@ -10,7 +10,7 @@ use glam::{UVec3, Vec3, Vec4};
 use slicelight_shaders::smoke::*;
 use std::time::Instant;
 
-use super::fluid::{sum_partials, Advection, Fluid, Solve, StepStats, COARSE_SWEEPS, SMOOTHING_SWEEPS};
+use super::fluid::{elements, sum_partials, Advection, Fluid, Solve, StepStats, COARSE_SWEEPS, SMOOTHING_SWEEPS};
 use crate::gpu::{Batch, GpuContext, Kernel};
 
 // The kernels' bindings (`shader-crate/src/smoke/kernels.rs`).
@@ -92,12 +92,11 @@ struct Hold {
 /// `download` reads it back; `step` advances both).
 pub struct GpuFluid<'a> {
     ctx: &'a GpuContext,
-    /// The velocity, temperature, smoke and `phi`, and where a step's
-    /// advection writes them.
+    /// The velocity, temperature and smoke (`KINDS`' order), and where a
+    /// step's advection writes them.
     q: [Buf; 5],
     next: [Buf; 5],
     phi: Buf,
-    fluid: Buf,
     /// Departure points and four work arrays, each as long as the longest array.
     from: Buf,
     work: [Buf; 4],
@@ -111,16 +110,12 @@ pub struct GpuFluid<'a> {
     partials: Buf,
     /// Per array (u, v, w, temperature, smoke), the source values held.
     holds: [Option<Hold>; 5],
+    /// The puffs' positions and their traces (grown as puffs are emitted).
     points: Buf,
     points_out: Buf,
-    points_capacity: usize,
 }
 
 const KINDS: [u32; 5] = [KIND_U, KIND_V, KIND_W, KIND_TEMPERATURE, KIND_SMOKE];
-
-fn len(e: UVec3) -> u32 {
-    e.x * e.y * e.z
-}
 
 fn f32s(v: &[f32]) -> &[u8] {
     bytemuck::cast_slice(v)
@@ -131,7 +126,7 @@ impl<'a> GpuFluid<'a> {
     pub fn new(ctx: &'a GpuContext, f: &Fluid) -> Result<GpuFluid<'a>> {
         let p = &f.params;
         let cells = p.cells;
-        let longest = KINDS.iter().map(|k| len(extent(p, *k))).max().unwrap_or(1);
+        let longest = KINDS.iter().map(|k| elements(p, *k)).max().unwrap_or(1);
         let fields = [&f.u, &f.v, &f.w, &f.temperature, &f.smoke];
         let mut q = Vec::new();
         let mut next = Vec::new();
@@ -144,7 +139,7 @@ impl<'a> GpuFluid<'a> {
             .solver_levels()
             .into_iter()
             .map(|(n, fluid, stencils)| {
-                let c = len(n);
+                let c = n.x * n.y * n.z;
                 Ok(Level {
                     n,
                     cells: c,
@@ -174,7 +169,6 @@ impl<'a> GpuFluid<'a> {
             q: q.try_into().map_err(|_| anyhow::anyhow!("five fields"))?,
             next: next.try_into().map_err(|_| anyhow::anyhow!("five fields"))?,
             phi: ctx.array("fluid phi", f32s(&f.phi))?,
-            fluid: ctx.array("fluid cells", bytemuck::cast_slice(&f.fluid))?,
             from: ctx.zeroed("departure points", longest as u64 * 16)?,
             work: [
                 zeroed("fluid work 0", longest)?,
@@ -193,8 +187,18 @@ impl<'a> GpuFluid<'a> {
             holds,
             points: ctx.zeroed("puffs", 16)?,
             points_out: ctx.zeroed("puffs traced", 16)?,
-            points_capacity: 0,
         })
+    }
+
+    /// The fluid cells' flags (the finest multigrid level's).
+    fn fluid(&self) -> &Buf {
+        &self.levels[0].fluid
+    }
+
+    /// A dispatch over the cells of multigrid level `l`.
+    fn on_level(&self, p: &FluidParams, l: usize) -> FluidDispatch {
+        let lv = &self.levels[l];
+        FluidDispatch { nx: lv.n.x, ny: lv.n.y, nz: lv.n.z, ..at(p, 0, lv.cells) }
     }
 
     /// Reads the fields back into `f`.
@@ -223,7 +227,7 @@ impl<'a> GpuFluid<'a> {
 
         let mut batch = self.ctx.batch();
         for (k, &kind) in KINDS[..3].iter().enumerate() {
-            let count = len(extent(&p, kind));
+            let count = elements(&p, kind);
             batch.dispatch(&FORCE, P, &at(&p, kind, count), &[(A, &self.next[3]), (OUT, &self.next[k])], count);
         }
         for k in 0..3 {
@@ -250,7 +254,7 @@ impl<'a> GpuFluid<'a> {
             &SOLIDS,
             P,
             &at(&p, KIND_TEMPERATURE, p.cells),
-            &[(FLAGS, &self.fluid), (OUT, &self.q[3]), (OUT2, &self.q[4])],
+            &[(FLAGS, self.fluid()), (OUT, &self.q[3]), (OUT2, &self.q[4])],
             p.cells,
         );
         batch.submit()?;
@@ -274,7 +278,7 @@ impl<'a> GpuFluid<'a> {
     /// Component `k`'s advection into `next[k]` (MacCormack or semi-Lagrangian).
     fn advect(&self, batch: &mut Batch, p: &FluidParams, advection: Advection, k: usize) {
         let kind = KINDS[k];
-        let count = len(extent(p, kind));
+        let count = elements(p, kind);
         let d = at(p, kind, count);
         if advection == Advection::SemiLagrangian {
             batch.dispatch(&ADVECT, P, &d, &self.with_velocity(&[(A, &self.q[k]), (OUT, &self.next[k])]), count);
@@ -328,13 +332,13 @@ impl<'a> GpuFluid<'a> {
     /// iterations, into `q[k]` (as `Fluid::diffused`: `x` starts at `b`).
     fn diffuse(&self, batch: &mut Batch, p: &FluidParams, k: usize, weight: f32, iterations: u32) {
         let kind = KINDS[k];
-        let count = len(extent(p, kind));
+        let count = elements(p, kind);
         let bytes = count as u64 * 4;
         let (mut x, mut next) = (&self.q[k], &self.work[0]);
         batch.copy(&self.next[k], x, bytes);
         let d = FluidDispatch { scalar: weight, ..at(p, kind, count) };
         for _ in 0..iterations {
-            batch.dispatch(&DIFFUSE, P, &d, &[(A, &self.next[k]), (B, x), (FLAGS, &self.fluid), (OUT, next)], count);
+            batch.dispatch(&DIFFUSE, P, &d, &[(A, &self.next[k]), (B, x), (FLAGS, self.fluid()), (OUT, next)], count);
             std::mem::swap(&mut x, &mut next);
         }
         if !std::ptr::eq(x, &self.q[k]) {
@@ -352,7 +356,7 @@ impl<'a> GpuFluid<'a> {
             &PARTIALS_KERNEL,
             P,
             &d,
-            &[(A, a), (B, b), (FLAGS, &self.fluid), (PARTIALS, &self.partials)],
+            &[(A, a), (B, b), (FLAGS, self.fluid()), (PARTIALS, &self.partials)],
             groups,
         );
         offset + groups
@@ -377,7 +381,7 @@ impl<'a> GpuFluid<'a> {
         let mut ranges = vec![before.clone()];
         let mut offset = before.end;
         for (k, &kind) in KINDS[..3].iter().enumerate() {
-            let count = len(extent(p, kind));
+            let count = elements(p, kind);
             let end = self.partials(&mut batch, &self.q[k], &self.q[k], count, false, offset);
             ranges.push(offset..end);
             offset = end;
@@ -389,21 +393,20 @@ impl<'a> GpuFluid<'a> {
     /// `Fluid::project` on the device.
     fn project(&mut self, f: &Fluid) -> Result<StepStats> {
         let p = f.params;
-        let vel = [(U, &self.q[0]), (V, &self.q[1]), (W, &self.q[2])];
         let mut batch = self.ctx.batch();
         let d = FluidDispatch { scalar: -p.h, ..at(&p, KIND_TEMPERATURE, p.cells) };
-        batch.dispatch(&DIVERGENCE, P, &d, &[vel[0], vel[1], vel[2], (FLAGS, &self.fluid), (OUT, &self.rhs)], p.cells);
+        batch.dispatch(&DIVERGENCE, P, &d, &self.with_velocity(&[(FLAGS, self.fluid()), (OUT, &self.rhs)]), p.cells);
         let speed = self.max_speed(batch, &p, 0..0)?.1.max(1e-30);
         let stop = f.tolerance * p.h as f64 * speed;
         let solve = self.solve(&p, stop, 1.0 / (p.h as f64 * speed), f.max_iterations)?;
         let mut batch = self.ctx.batch();
         for (k, &kind) in KINDS[..3].iter().enumerate() {
-            let count = len(extent(&p, kind));
+            let count = elements(&p, kind);
             batch.dispatch(
                 &PROJECT,
                 P,
                 &at(&p, kind, count),
-                &[(A, &self.phi), (FLAGS, &self.fluid), (OUT, &self.q[k])],
+                &[(A, &self.phi), (FLAGS, self.fluid()), (OUT, &self.q[k])],
                 count,
             );
         }
@@ -412,7 +415,7 @@ impl<'a> GpuFluid<'a> {
             &DIVERGENCE,
             P,
             &d,
-            &[vel[0], vel[1], vel[2], (FLAGS, &self.fluid), (OUT, &self.work[0])],
+            &self.with_velocity(&[(FLAGS, self.fluid()), (OUT, &self.work[0])]),
             p.cells,
         );
         let end = self.partials(&mut batch, &self.work[0], &self.work[0], p.cells, false, 0);
@@ -433,7 +436,7 @@ impl<'a> GpuFluid<'a> {
         let mut next = self.ctx.batch();
         if s[3] > 0.0 {
             let d = FluidDispatch { scalar: (s[2] / s[3]) as f32, ..at(p, 0, p.cells) };
-            next.dispatch(&LESS_MEAN, P, &d, &[(FLAGS, &self.fluid), (OUT, v)], p.cells);
+            next.dispatch(&LESS_MEAN, P, &d, &[(FLAGS, self.fluid()), (OUT, v)], p.cells);
         }
         Ok(next)
     }
@@ -446,7 +449,7 @@ impl<'a> GpuFluid<'a> {
         let cells = p.cells;
         let l0 = &self.levels[0];
         let d = at(p, 0, cells);
-        let level = FluidDispatch { nx: l0.n.x, ny: l0.n.y, nz: l0.n.z, ..d };
+        let level = self.on_level(p, 0);
         let mut batch = self.remove_mean(self.ctx.batch(), p, &self.rhs)?;
         batch.dispatch(
             &RESIDUAL,
@@ -516,7 +519,7 @@ impl<'a> GpuFluid<'a> {
     /// the other colour's unchanged, so no copy is needed between them).
     fn sweep_pair(&self, batch: &mut Batch, p: &FluidParams, l: usize, first: u32) {
         let lv = &self.levels[l];
-        let d = FluidDispatch { nx: lv.n.x, ny: lv.n.y, nz: lv.n.z, ..at(p, 0, lv.cells) };
+        let d = self.on_level(p, l);
         for (colour, from, to) in [(first, &lv.x, &lv.scratch), (1 - first, &lv.scratch, &lv.x)] {
             batch.dispatch(
                 &GAUSS_SEIDEL,
@@ -544,7 +547,7 @@ impl<'a> GpuFluid<'a> {
         for _ in 0..SMOOTHING_SWEEPS {
             self.sweep_pair(batch, p, l, 0);
         }
-        let fine = FluidDispatch { nx: lv.n.x, ny: lv.n.y, nz: lv.n.z, ..at(p, 0, lv.cells) };
+        let fine = self.on_level(p, l);
         batch.dispatch(
             &RESIDUAL,
             P,
@@ -571,36 +574,60 @@ impl<'a> GpuFluid<'a> {
 
     /// The puffs' positions `dt` on (cells), traced through the projected field.
     fn trace_puffs(&mut self, f: &Fluid) -> Result<Vec<Vec3>> {
-        let p = f.params;
         let points: Vec<Vec4> = f.puffs.iter().map(|puff| f.to_cells(puff.position).extend(0.0)).collect();
         if points.is_empty() {
             return Ok(Vec::new());
         }
-        if points.len() > self.points_capacity {
-            self.points_capacity = points.len().next_power_of_two();
-            self.points = self.ctx.zeroed("puffs", self.points_capacity as u64 * 16)?;
-            self.points_out = self.ctx.zeroed("puffs traced", self.points_capacity as u64 * 16)?;
+        let bytes = points.len() as u64 * 16;
+        if bytes > self.points.size() {
+            let capacity = bytes.next_power_of_two();
+            self.points = self.ctx.zeroed("puffs", capacity)?;
+            self.points_out = self.ctx.zeroed("puffs traced", capacity)?;
         }
         self.ctx.upload(&self.points, bytemuck::cast_slice(&points));
         let n = points.len() as u32;
-        let d = FluidDispatch { direction: -1.0, ..at(&p, 0, n) };
+        let d = FluidDispatch { direction: -1.0, ..at(&f.params, 0, n) };
         let mut batch = self.ctx.batch();
-        batch.dispatch(
-            &TRACE,
-            P,
-            &d,
-            &[
-                (U, &self.q[0]),
-                (V, &self.q[1]),
-                (W, &self.q[2]),
-                (POINTS, &self.points),
-                (POINTS_OUT, &self.points_out),
-            ],
-            n,
-        );
-        batch.submit()?;
-        let bytes = self.ctx.download(&self.points_out, n as u64 * 16)?;
-        Ok(bytemuck::cast_slice::<u8, Vec4>(&bytes).iter().map(|x| x.truncate()).collect())
+        let bound = self.with_velocity(&[(POINTS, &self.points), (POINTS_OUT, &self.points_out)]);
+        batch.dispatch(&TRACE, P, &d, &bound, n);
+        let traced = batch.submit_reading(&self.points_out, bytes)?;
+        Ok(bytemuck::cast_slice::<u8, Vec4>(&traced).iter().map(|x| x.truncate()).collect())
+    }
+}
+
+/// Steps a `Fluid` on the CPU, or with its kernels on a device (its
+/// fields read back by `finish`).
+pub enum Stepper<'a> {
+    Cpu,
+    Device(Box<GpuFluid<'a>>),
+}
+
+impl<'a> Stepper<'a> {
+    /// On `device` if given (uploading `f`), else on the CPU.
+    pub fn new(device: Option<&'a GpuContext>, f: &Fluid) -> Result<Stepper<'a>> {
+        Ok(match device {
+            Some(ctx) => Stepper::Device(Box::new(GpuFluid::new(ctx, f)?)),
+            None => Stepper::Cpu,
+        })
+    }
+
+    /// One step of `f`.
+    pub fn step(&mut self, f: &mut Fluid) -> Result<()> {
+        match self {
+            Stepper::Device(d) => d.step(f),
+            Stepper::Cpu => {
+                f.step();
+                Ok(())
+            }
+        }
+    }
+
+    /// Brings `f`'s fields up to date (a device's read back).
+    pub fn finish(&self, f: &mut Fluid) -> Result<()> {
+        match self {
+            Stepper::Device(d) => d.download(f),
+            Stepper::Cpu => Ok(()),
+        }
     }
 }
 

@@ -383,8 +383,8 @@ static KEPT: Mutex<Vec<(String, Fluid)>> = Mutex::new(Vec::new());
 
 /// Where fluids step (`simulate_on`): the CPU unless a caller chose otherwise.
 static STEPPER: Mutex<crate::render::BackendChoice> = Mutex::new(crate::render::BackendChoice::Cpu);
-/// The device fluids step on, opened on first use (`None`: `auto` found none).
-static DEVICE: std::sync::OnceLock<Option<crate::gpu::GpuContext>> = std::sync::OnceLock::new();
+/// The device fluids step on, opened on first use (or why there is none).
+static DEVICE: std::sync::OnceLock<std::result::Result<crate::gpu::GpuContext, String>> = std::sync::OnceLock::new();
 
 /// Chooses where `simulate` steps fluids: the CLI passes its `--backend`
 /// (the GPU's kernels, the CPU's rayon loop over the same functions, or
@@ -402,18 +402,15 @@ pub fn stepping_device() -> Result<Option<&'static crate::gpu::GpuContext>> {
     if choice == BackendChoice::Cpu {
         return Ok(None);
     }
-    let device = DEVICE.get_or_init(|| crate::gpu::GpuContext::new().ok());
-    match (device, choice) {
+    let device = DEVICE.get_or_init(|| crate::gpu::GpuContext::new().map_err(|e| format!("{e:#}")));
+    match (device.as_ref(), choice) {
         // `auto` on a device that is itself the CPU (lavapipe): the CPU
         // steps faster (smoke_chimney's 160 steps: 7 s against 23 s on the
         // 2-core development machine), so the fluid stays there.
-        (Some(d), BackendChoice::Auto) if d.adapter.device_type == wgpu::DeviceType::Cpu => Ok(None),
-        (Some(d), _) => Ok(Some(d)),
-        (None, BackendChoice::Gpu) => Err(crate::gpu::GpuContext::new()
-            .err()
-            .unwrap_or_else(|| anyhow::anyhow!("the Vulkan device went away"))
-            .context("stepping the fluid on the GPU")),
-        (None, _) => Ok(None),
+        (Ok(d), BackendChoice::Auto) if d.adapter.device_type == wgpu::DeviceType::Cpu => Ok(None),
+        (Ok(d), _) => Ok(Some(d)),
+        (Err(e), BackendChoice::Gpu) => bail!("stepping the fluid on the GPU: {e}"),
+        (Err(_), _) => Ok(None),
     }
 }
 
@@ -466,21 +463,13 @@ pub fn simulate(
     let first = fluid.params.step as u64;
     progress.set_length(steps);
     progress.set_position(first);
-    match device {
-        Some(ctx) if (fluid.params.step as u64) < steps => {
-            let mut on_device = gpu::GpuFluid::new(ctx, &fluid)?;
-            while (fluid.params.step as u64) < steps {
-                on_device.step(&mut fluid)?;
-                progress.inc(1);
-            }
-            on_device.download(&mut fluid)?;
+    if (fluid.params.step as u64) < steps {
+        let mut stepper = gpu::Stepper::new(device, &fluid)?;
+        while (fluid.params.step as u64) < steps {
+            stepper.step(&mut fluid)?;
+            progress.inc(1);
         }
-        _ => {
-            while (fluid.params.step as u64) < steps {
-                fluid.step();
-                progress.inc(1);
-            }
-        }
+        stepper.finish(&mut fluid)?;
     }
     progress.finish_and_clear();
     if let (Some(dir), true) = (&dir, steps > first) {

@@ -471,8 +471,8 @@ fn render_command(args: RenderArgs) -> Result<()> {
                 .collect()
         }
     };
-    // A fluid steps where the frame renders (its kernels, or their CPU twins).
-    slicelight::smoke::simulate_on(backend);
+    // Simulations step where the frame renders (their kernels, or their CPU twins).
+    render::simulate_on(backend);
     let base = scene::load(&scene)?;
     for (_, outs, st) in &jobs {
         check_outputs(outs)?;
@@ -621,7 +621,7 @@ fn view_command(args: ViewArgs) -> Result<()> {
     if !(1..=scene::MAX_SAMPLES_PER_PIXEL).contains(&spp) {
         return Err(anyhow!("command line: --spp: expected 1 to {}, got {spp}", scene::MAX_SAMPLES_PER_PIXEL));
     }
-    slicelight::smoke::simulate_on(backend);
+    render::simulate_on(backend);
     let Some(frames) = headless else {
         return slicelight::view::run(slicelight::view::Options { scene, backend, samples: spp, size, output_dir });
     };

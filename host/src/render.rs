@@ -29,6 +29,24 @@ pub enum BackendChoice {
     Auto,
 }
 
+/// Where the simulations a scene runs at load step (a smoke volume's
+/// fluid): the CPU unless the caller chose otherwise. The CLI passes its
+/// `--backend` before it loads a scene (`simulate_on`).
+static SIMULATION_BACKEND: std::sync::Mutex<BackendChoice> = std::sync::Mutex::new(BackendChoice::Cpu);
+
+/// Chooses where simulations step: a device's kernels, their CPU twins,
+/// or `auto` (the family decides which is faster for its device).
+pub fn simulate_on(choice: BackendChoice) {
+    if let Ok(mut s) = SIMULATION_BACKEND.lock() {
+        *s = choice;
+    }
+}
+
+/// See `simulate_on`.
+pub fn simulation_backend() -> BackendChoice {
+    SIMULATION_BACKEND.lock().map(|c| *c).unwrap_or(BackendChoice::Cpu)
+}
+
 pub enum Backend {
     Cpu,
     Gpu(Box<GpuContext>),

@@ -381,24 +381,15 @@ pub fn voxelise(scene: &SceneData, p: &FluidParams, origin: Vec3) -> Vec<u32> {
 /// (deterministic), so the state at a step does not depend on the path.
 static KEPT: Mutex<Vec<(String, Fluid)>> = Mutex::new(Vec::new());
 
-/// Where fluids step (`simulate_on`): the CPU unless a caller chose otherwise.
-static STEPPER: Mutex<crate::render::BackendChoice> = Mutex::new(crate::render::BackendChoice::Cpu);
 /// The device fluids step on, opened on first use (or why there is none).
 static DEVICE: std::sync::OnceLock<std::result::Result<crate::gpu::GpuContext, String>> = std::sync::OnceLock::new();
 
-/// Chooses where `simulate` steps fluids: the CLI passes its `--backend`
-/// (the GPU's kernels, the CPU's rayon loop over the same functions, or
-/// `auto`: a GPU if there is one that is not a CPU device).
-pub fn simulate_on(choice: crate::render::BackendChoice) {
-    if let Ok(mut s) = STEPPER.lock() {
-        *s = choice;
-    }
-}
-
-/// The device `simulate` steps on, if any.
+/// The device `simulate` steps on, if any, by `render::simulation_backend`:
+/// `gpu` a device (an error without one), `cpu` none, `auto` a device
+/// unless it is itself a CPU device.
 pub fn stepping_device() -> Result<Option<&'static crate::gpu::GpuContext>> {
     use crate::render::BackendChoice;
-    let choice = STEPPER.lock().map(|c| *c).unwrap_or(BackendChoice::Cpu);
+    let choice = crate::render::simulation_backend();
     if choice == BackendChoice::Cpu {
         return Ok(None);
     }

@@ -102,6 +102,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.depth_table",
         "sea.bottom_correction",
         "sea.surface",
+        "sea.water",
         "sea.reflection",
         "sea.order1",
         "sea.order2",
@@ -414,7 +415,8 @@ fn bad_sea_settings_name_the_field() {
             &["sea.depth_table", "MiB", "512"],
         ),
         ("depth_m = 12.0", "depth_m = 12.0\ng = 1.0", &["sea.g"]),
-        ("depth_m = 12.0", "depth_m = 12.0\nlevel_m = 20.0", &["sea.level_m", "below the camera"]),
+        // An eye under the water needs its bottom below it.
+        ("depth_m = 12.0", "depth_m = 12.0\nlevel_m = 40.0", &["sea.depth_m", "below the camera"]),
         (
             "depth_m = 12.0",
             "depth_m = 12.0\nwaves = { kind = \"spectrum\", wind_m_s = 5.0, size_m = 50.0, resolution = 100 }",

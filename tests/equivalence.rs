@@ -101,6 +101,8 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("sea_open", sky("sea_open", 180, 120)),
         ("sea_calm_noon", sky("sea_calm_noon", 180, 120)),
         ("sea_shore", sky("sea_shore", 180, 120)),
+        ("sea_diver", sky("sea_diver", 180, 120)),
+        ("under a shore, a sphere in the water", under_a_shore()),
         ("caustics_ball", traced("caustics_ball", 160, 120)),
         ("caustics_torus, turned", turned_torus()),
         ("cloud_cumulus", sky("cloud_cumulus", 160, 120)),
@@ -110,6 +112,24 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("cloud_sea", sky("cloud_sea", 160, 120)),
         ("dunes, 32x32 cells, 60 steps", small_dunes()),
     ]
+}
+
+/// `sea_diver` 1 m down over `sea_shore`'s rising bottom, looking down
+/// the slope at a sphere in the water (the water's pass on its light).
+fn under_a_shore() -> SceneData {
+    let text = std::fs::read_to_string(common::root().join("scenes/sea_diver.toml")).unwrap();
+    let text = text
+        .replace("resolution = [720, 480]", "resolution = [120, 80]")
+        .replace("position = [0.0, -5.0, 0.0]", "position = [0.0, -1.0, 0.0]")
+        .replace("look_at = [5.0, 0.8, -8.66]", "look_at = [-4.0, -3.0, -8.0]")
+        .replace(
+            "depth_m = 12.0",
+            "bottom = { kind = \"shore\", slope = 0.12, shallow_m = 0.3, deep_m = 40.0, direction_deg = 270.0, offset_m = -8.0 }",
+        )
+        + "\n[[object]]\ntype = \"sphere\"\ncenter = [-2.0, -3.0, -6.0]\nradius = 1.0\nalbedo = [0.7, 0.6, 0.5]\n";
+    let data = common::scene_from_str(&text);
+    assert!(data.sea.params.underwater != 0 && data.sea.params.bottom_nx >= 2 && data.has_geometry());
+    data
 }
 
 /// `desert_dunes` with a small field and few steps (each step is eight

@@ -225,7 +225,7 @@ fn stress_image_sizes() {
     let n = 8192u32;
     for (x, y) in [(0, 0), (n - 1, 0), (0, n - 1), (n - 1, n - 1), (n / 2, n / 2), (n / 2, n - 1), (0, n / 2)] {
         let i = y * n + x;
-        let seen = slicelight_shaders::sea::surface_pixel(i, &big.common, p, waves, &blank);
+        let seen = slicelight_shaders::sea::surface_pixel(i, &big.common, p, waves, &[0.0], &blank);
         assert!(seen.is_finite() && seen.w >= 0.0, "pixel ({x}, {y}): surface {seen}");
         for v in [
             slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &clouds),

@@ -568,6 +568,7 @@ fn reference_command(args: ReferenceArgs) -> Result<()> {
     }
     let mut data = scene::load(&scene)?;
     set_spp(&mut data, spp)?;
+    reference::supports(&data).map_err(|e| anyhow!("{}: {e}", scene.display()))?;
     let t = Instant::now();
     let (mut image, samples) = reference::render_converged(&data, tolerance);
     if data.scatters() || data.volumes.enabled {

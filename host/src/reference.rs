@@ -256,6 +256,23 @@ pub(crate) fn falloff(light: &GpuLight, distance: f64) -> f64 {
     }
 }
 
+/// Whether the reference renders what the scene holds: an error naming
+/// the part it leaves out.
+pub fn supports(data: &SceneData) -> anyhow::Result<()> {
+    let p = &data.sea.params;
+    if data.sea.enabled && p.underwater != 0 {
+        if data.has_geometry() {
+            anyhow::bail!(
+                "reference: objects seen from under the water are not in the reference (its sea is the water alone)"
+            );
+        }
+        if p.bottom_nx >= 2 {
+            anyhow::bail!("reference: an eye under the water over a varying bottom (sea.bottom) is not in the reference; use depth_m");
+        }
+    }
+    Ok(())
+}
+
 /// Attenuated surface radiance at one sub-pixel sample, and the distance to
 /// the surface (infinite where the ray meets none), f64.
 fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3, f64) {
@@ -263,6 +280,9 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
     let Some((o, d)) = camera_ray(data, x, y, sample) else {
         return (DVec3::ZERO, f64::INFINITY);
     };
+    if data.sea.enabled && data.sea.params.underwater != 0 {
+        return (sea_radiance_under(data, o, d), f64::INFINITY);
+    }
     let Some(hit) = nearest(data, o, d, 0.0, f64::INFINITY) else {
         if data.sea.enabled && d.y < 0.0 {
             return (sea_radiance(data, o, d), f64::INFINITY);
@@ -435,6 +455,77 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     };
     let below = (sea.order1(view) + second + bottom) * clouds;
     sky * r + below * ((1.0 - r) / (n * n))
+}
+
+/// The sea seen by an eye under it along the view ray `(o, d)`, f64, over
+/// a flat bottom, without objects (`supports`): orders 1 and 2 gathered
+/// along the ray by quadrature (`SeaReference::order1_segment`,
+/// `order2_segment`), and at its end, attenuated, the bottom lit by the
+/// refracted sun, or the surface from below at the scene's normal (the
+/// wave map's at the point, or up): the sky and sun through it (the sky's
+/// reference, `(1 - R) n^2`) and the water below reflected (`R` times the
+/// sea's quadrature toward the surface, as an eye above the water sees it).
+pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
+    let p = &data.sea.params;
+    let z_e = (p.level as f64 - o.y).max(0.0);
+    let n = p.extinction.w as f64;
+    let sea = SeaReference::new(p, SEA_TOLERANCE);
+    let deep = p.depth >= slicelight_shaders::sea::DEEP;
+    let length = if d.y > 0.0 {
+        z_e / d.y
+    } else if d.y < 0.0 && !deep {
+        (p.depth as f64 - z_e) / -d.y
+    } else {
+        f64::INFINITY
+    };
+    let clouds_at = |point: DVec3| match p.sun_light {
+        0 => DVec3::ONE,
+        l => {
+            let (_, to_light, distance) = toward_light(&data.lights[l as usize - 1], point);
+            crate::volumes::reference::transmittance_toward(data, point, to_light, distance)
+        }
+    };
+    let above = DVec3::new(o.x, p.level as f64, o.z);
+    let mut along = sea.order1_segment(z_e, d, length);
+    if data.sea.second_order {
+        along += sea.order2_segment(z_e, d, length);
+    }
+    let mut light = along * clouds_at(above);
+    if !length.is_finite() {
+        return light;
+    }
+    let att = (-sea.c * length).exp();
+    let end = o + d * length;
+    let end_above = DVec3::new(end.x, p.level as f64, end.z);
+    if d.y < 0.0 {
+        return light + sea.bottom_leaving(p.depth as f64, sea.mu_s) * att * clouds_at(end_above);
+    }
+    let mut normal =
+        slicelight_shaders::sea::surface_normal(p, &data.sea.waves, end.x as f32, end.z as f32).as_dvec3().normalize();
+    if normal.dot(d) <= 0.0 {
+        normal = DVec3::Y;
+    }
+    let cos_i = d.dot(normal);
+    let r = optics::reflectance(cos_i, n);
+    if r < 1.0 {
+        // Snell from the water side: the ray leaves toward the sky.
+        let (cos_t, _) = optics::transmitted_cosine(cos_i, n);
+        let out = (d * n + (-normal) * (n * cos_i - cos_t)).normalize();
+        let out = DVec3::new(out.x, out.y.abs(), out.z).normalize();
+        let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE);
+        let without_sun = sky.sky_without_sun(out);
+        let air = without_sun + (sky.radiance(out) - without_sun) * clouds_at(end);
+        light += air * ((1.0 - r) * n * n) * att;
+    }
+    let mut up = -(d - normal * (2.0 * d.dot(normal)));
+    if up.y < 1e-4 {
+        up = DVec3::new(up.x, 1e-4, up.z).normalize();
+    }
+    let mut below = sea.order1(up) + sea.bottom(up);
+    if data.sea.second_order {
+        below += sea.order2(up);
+    }
+    light + below * r * att * clouds_at(end)
 }
 
 /// Attenuated surface radiance of one pixel (the mean over its sub-pixel samples), f64.

@@ -500,8 +500,13 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         }
         None => Default::default(),
     };
-    // The sea covers every downward view; the sky pass leaves it to the sea passes.
-    sky.params.sea = sea.enabled as u32;
+    // The sea covers every downward view (and every view from under the
+    // water); the sky pass leaves it to the sea passes.
+    sky.params.sea = match (sea.enabled, sea.params.underwater != 0) {
+        (false, _) => slicelight_shaders::sky::SEA_NONE,
+        (true, false) => slicelight_shaders::sky::SEA_BELOW,
+        (true, true) => slicelight_shaders::sky::SEA_AROUND,
+    };
     // The sun lights the scene's surfaces as a directional light of its
     // colour after the air it crosses to the observer.
     let mut directionals: Vec<DirectionalLight> = Vec::new();

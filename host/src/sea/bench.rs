@@ -176,24 +176,37 @@ pub struct SeaSweep;
 
 impl crate::bench::Sweep for SeaSweep {
     fn default_scenes(&self) -> &'static [&'static str] {
-        &["sea_open", "sea_calm_noon"]
+        &["sea_open", "sea_calm_noon", "sea_diver"]
     }
     fn takes(&self, s: &SceneData) -> bool {
         s.sea.enabled && s.glass_vertices.is_empty()
     }
     fn run(&self, scenes: &[BenchScene], opts: &Options) -> Result<Vec<PathBuf>> {
+        // An eye under the water has its own sweep (`bench_under`).
+        let (under, above): (Vec<&BenchScene>, Vec<&BenchScene>) =
+            scenes.iter().partition(|s| s.data.sea.params.underwater != 0);
+        let mut outputs = Vec::new();
+        if !under.is_empty() {
+            // Its reference costs ~0.25 s a pixel: at least every 40th.
+            let (backends, stride) = (&opts.backends, opts.stride.max(40));
+            outputs.extend(super::bench_under::run(&under, backends, opts.repeats, stride, opts.quick, &opts.out_dir)?);
+        }
+        if above.is_empty() {
+            return Ok(outputs);
+        }
         // The sea's reference costs ~0.2 s a pixel: at least every 40th.
-        run(scenes, &opts.backends, opts.repeats, opts.stride.max(40), opts.quick, &opts.out_dir)?;
-        let mut outputs = [
-            "sea_bench.csv",
-            "sea_time_vs_error_*.png",
-            "sea_convergence.csv",
-            "sea_fig7_planes.png",
-            "sea_fig8_directions.png",
-        ]
-        .map(|f| opts.out_dir.join(f))
-        .to_vec();
-        outputs.extend(super::bench_waves::run(scenes, &opts.backends, opts.repeats, opts.quick, &opts.out_dir)?);
+        run(&above, &opts.backends, opts.repeats, opts.stride.max(40), opts.quick, &opts.out_dir)?;
+        outputs.extend(
+            [
+                "sea_bench.csv",
+                "sea_time_vs_error_*.png",
+                "sea_convergence.csv",
+                "sea_fig7_planes.png",
+                "sea_fig8_directions.png",
+            ]
+            .map(|f| opts.out_dir.join(f)),
+        );
+        outputs.extend(super::bench_waves::run(&above, &opts.backends, opts.repeats, opts.quick, &opts.out_dir)?);
         Ok(outputs)
     }
 }
@@ -202,7 +215,7 @@ impl crate::bench::Sweep for SeaSweep {
 /// `sea_time_vs_error_<scene>_<backend>.png`, `sea_convergence.csv`,
 /// `sea_fig7_planes.png` and `sea_fig8_directions.png` into `out_dir`.
 pub fn run(
-    scenes: &[BenchScene],
+    scenes: &[&BenchScene],
     backends: &[Backend],
     repeats: usize,
     stride: u32,
@@ -211,7 +224,7 @@ pub fn run(
 ) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
     let mut curves = Vec::new();
-    for BenchScene { path, name, data } in scenes {
+    for BenchScene { path, name, data } in scenes.iter().copied() {
         anyhow::ensure!(
             data.sea.enabled && data.sea.second_order,
             "{}: no [sea] with second-order scattering to benchmark",

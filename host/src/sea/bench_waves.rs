@@ -60,7 +60,7 @@ pub fn first_sea_row(seen: &[Vec4], width: u32, height: u32) -> Option<u32> {
 /// Runs the sweep over the scenes with waves; writes `sea_wave_filter.csv`
 /// and `sea_wave_filter_<scene>_<backend>.png` into `out_dir`.
 pub fn run(
-    scenes: &[BenchScene],
+    scenes: &[&BenchScene],
     backends: &[Backend],
     repeats: usize,
     quick: bool,
@@ -68,7 +68,7 @@ pub fn run(
 ) -> Result<Vec<PathBuf>> {
     let mut rows = Vec::new();
     let reference_spp = if quick { 64 } else { REFERENCE_SPP };
-    for BenchScene { name, data, .. } in scenes {
+    for BenchScene { name, data, .. } in scenes.iter().copied() {
         if data.sea.params.waves != slicelight_shaders::sea::WAVES_NORMAL_MAP {
             continue;
         }

@@ -6,6 +6,7 @@
 //! Over a varying bottom, `table.rs` adds the depth table (5.4).
 
 pub mod bench;
+pub mod bench_under;
 pub mod bench_waves;
 pub mod reference;
 pub mod table;
@@ -39,6 +40,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &table::SeaDepthTable,
     &table::SeaBottomCorrection,
     &SeaSurface,
+    &SeaWater,
     &SeaReflection,
     &SeaOrder1,
     &SeaOrder2,
@@ -483,13 +485,9 @@ pub fn configure(
     if !s.level_m.is_finite() {
         bail!(invalid("sea.level_m", "a finite height in m", s.level_m));
     }
-    if camera_y <= s.level_m {
-        bail!(invalid(
-            "sea.level_m",
-            "a level below the camera (views from under the water are not rendered)",
-            s.level_m
-        ));
-    }
+    // An eye at the level or below it is under water (`under`).
+    let camera_depth = (s.level_m - camera_y).max(0.0);
+    let underwater = camera_y <= s.level_m;
     if s.depth_m.is_some() && s.bottom.is_some() {
         bail!(invalid("sea.bottom", "either depth_m or bottom, not both", "both"));
     }
@@ -506,6 +504,13 @@ pub fn configure(
         Some(d) => {
             if !(d.is_finite() && d > 0.0 && d <= 1e6) {
                 bail!(invalid("sea.depth_m", "a depth in (0, 1e6] m (leave it out for no bottom)", d));
+            }
+            if underwater && d <= camera_depth {
+                bail!(invalid(
+                    "sea.depth_m",
+                    &format!("a bottom below the camera, which is {camera_depth} m under the water"),
+                    d
+                ));
             }
             d
         }
@@ -573,7 +578,9 @@ pub fn configure(
         polar: polar.unwrap_or(8),
         azimuths: polar.unwrap_or(8),
         map_width: size[0],
-        map_height: size[1],
+        // Under water the maps hold every direction toward the eye, not
+        // only upward ones: twice the rows, at the same spacing.
+        map_height: if underwater { 2 * size[1] - 1 } else { size[1] },
         waves: waves_kind,
         wave_resolution,
         wave_size,
@@ -585,12 +592,33 @@ pub fn configure(
         bottom_nz: grid.as_ref().map_or(0, |g| g.size[1]),
         layers: if grid.is_some() { s.depth_layers } else { 1 },
         shallow: grid.as_ref().map_or(0.0, |g| g.shallow),
-        table_width: if grid.is_some() && s.second_order { s.depth_table } else { 0 },
-        table_height: if grid.is_some() && s.second_order { table_rows(s.depth_table, common) } else { 0 },
+        // The depth table corrects views from above the water.
+        table_width: if grid.is_some() && s.second_order && !underwater { s.depth_table } else { 0 },
+        table_height: if grid.is_some() && s.second_order && !underwater {
+            table_rows(s.depth_table, common)
+        } else {
+            0
+        },
         roughness,
         sun_light: 0,
         wave_filter,
+        camera_depth,
+        underwater: underwater as u32,
+        pad0: 0,
+        pad1: 0,
     };
+    if underwater && grid.is_some() {
+        let p = &params;
+        let (x, z) = (common.camera_position.x, common.camera_position.z);
+        let under = slicelight_shaders::sea::bottom_depth(p, grid.as_ref().map_or(&[][..], |g| &g.depths), x, z);
+        if under <= camera_depth {
+            bail!(invalid(
+                "sea.bottom",
+                &format!("a bottom below the camera, which is {camera_depth} m under the water"),
+                format!("{under} m deep under the camera")
+            ));
+        }
+    }
     let sampling = if s.second_order { choose_sampling(&mut params, s.planes, polar) } else { Vec::new() };
     check_table_size(&params, s.depth_table)?;
     Ok(Setup {
@@ -912,7 +940,7 @@ impl Pass for SeaSurface {
         "sea::surface_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES]
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_WAVES, SEA_BOTTOM_GRID]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_SURFACE]
@@ -925,6 +953,15 @@ impl Pass for SeaSurface {
             return skip;
         }
         let p = &scene.sea.params;
+        if p.underwater != 0 {
+            return Plan::run(
+                format!(
+                    "the eye is {} m under the water: where each view ray ends (surface, bottom, objects), Fresnel from below",
+                    p.camera_depth
+                ),
+                0,
+            );
+        }
         if p.waves != slicelight_shaders::sea::WAVES_NORMAL_MAP {
             return Plan::run("the flat surface: Fresnel and Snell per pixel", 0);
         }
@@ -942,7 +979,7 @@ impl Pass for SeaSurface {
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
             for_each_invocation(out, common.band_start, progress, |i, v| {
                 let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-                *v = slicelight_shaders::sea::surface_pixel(i, common, p, &scene.sea.waves, texel);
+                *v = slicelight_shaders::sea::surface_pixel(i, common, p, &scene.sea.waves, &scene.sea.bottom, texel);
             });
         });
     }
@@ -952,6 +989,69 @@ impl Pass for SeaSurface {
         let g = gpu.get::<Vec4>(&SEA_SURFACE);
         let flat = |v: &[Vec4]| v.iter().flat_map(|p| p.to_array()).collect::<Vec<f32>>();
         compare_values("sea surface", &flat(g), &flat(c), 1e-3, c.len() * 4 / 1000 + 1)
+    }
+}
+
+/// The water between an eye under it and the objects it sees.
+pub static SEA_WATER: Resource = Resource {
+    binding: 76,
+    name: "sea water transmittance",
+    kind: ResourceKind::PerPixel { blank: || bytemuck::bytes_of(&Vec4::ONE).to_vec() },
+};
+
+/// `sea.water`: for an eye under water, what the water does to the light
+/// of the objects it sees (`under::water_transmittance`), which the
+/// framework applies to the layers before it (the objects' light); the
+/// later sea passes attenuate their own.
+pub struct SeaWater;
+
+impl Pass for SeaWater {
+    fn name(&self) -> &'static str {
+        "sea.water"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::water_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_SURFACE]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_WATER]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn transmittance_layer(&self) -> Option<&'static Resource> {
+        Some(&SEA_WATER)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sea(scene) {
+            return skip;
+        }
+        if scene.sea.params.underwater == 0 {
+            return Plan::skip("the eye is above the water");
+        }
+        if !scene.has_geometry() {
+            return Plan::skip("no objects under the water");
+        }
+        Plan::run("the water between the eye and the objects, and above them (the sunlight on them)", 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        let blank = slicelight_shaders::common::surface::no_surface();
+        frame.write_all::<Vec4>(&SEA_WATER, common.band_pixels as usize, |frame, out| {
+            let surface = frame.get::<Vec4>(&SEA_SURFACE);
+            let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            for_each_invocation(out, common.band_start, progress, |i, v| {
+                let k = (i - common.band_start) as usize;
+                let seen = surface.get(k).copied().unwrap_or(Vec4::ZERO);
+                *v = slicelight_shaders::sea::water_pixel(i, common, p, seen, gbuffer.get(k).unwrap_or(&blank));
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // exp of a distance from the G-buffer: 1e-3 like the other terms.
+        compare_layer("sea water", &SEA_WATER, gpu, cpu)
     }
 }
 
@@ -975,7 +1075,8 @@ impl Pass for SeaReflection {
             SEA_WAVES,
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
-            crate::volumes::OPTICAL_DEPTHS
+            crate::volumes::OPTICAL_DEPTHS,
+            SEA_SURFACE
         ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
@@ -991,6 +1092,9 @@ impl Pass for SeaReflection {
         if let Some(skip) = skip_without_sea(scene) {
             return skip;
         }
+        if scene.sea.params.underwater != 0 {
+            return Plan::run("the sky and the sun through Snell's window (Fresnel from below), attenuated", 0);
+        }
         Plan::run("the sky and the sun reflected at the surface (Fresnel), the sun through the volumes' shadow", 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
@@ -1000,11 +1104,15 @@ impl Pass for SeaReflection {
             let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
             let sky_view = frame.get::<Vec4>(&SKY_VIEW);
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            let surface = frame.get::<Vec4>(&SEA_SURFACE);
             let lit = crate::common::light_inputs(scene, frame);
             let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
             for_each_invocation(out, common.band_start, progress, |i, v| {
-                let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-                *v = reflection_pixel(i, common, p, &scene.sea.waves, sky, transmittance, sky_view, texel, &clouds);
+                let k = (i - common.band_start) as usize;
+                let texel = gbuffer.get(k).unwrap_or(&blank);
+                let seen = surface.get(k).copied().unwrap_or(Vec4::ZERO);
+                let waves = &scene.sea.waves;
+                *v = reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds);
             });
         });
     }
@@ -1024,20 +1132,31 @@ fn run_term(
     frame: &mut Frame,
     progress: &ProgressBar,
     out: &Resource,
-    term: impl Fn(u32, Vec4, &[Vec4], &[Vec4], &CloudShadow) -> Vec4 + Sync,
+    term: impl Fn(u32, Vec4, &TermInputs) -> Vec4 + Sync,
 ) {
     frame.write_all::<Vec4>(out, common.band_pixels as usize, |frame, values| {
-        let maps = frame.get::<Vec4>(&SEA_ACCUMULATED_MAP);
-        let correction = frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION);
-        let surface = frame.get::<Vec4>(&SEA_SURFACE);
-        // The clouds' shadow where the volumes' transmittance volumes ran.
         let lit = crate::common::light_inputs(scene, frame);
-        let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
+        let inputs = TermInputs {
+            maps: frame.get::<Vec4>(&SEA_SCATTERING_MAPS),
+            accumulated: frame.get::<Vec4>(&SEA_ACCUMULATED_MAP),
+            correction: frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION),
+            // The clouds' shadow where the volumes' transmittance volumes ran.
+            clouds: CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths },
+        };
+        let surface = frame.get::<Vec4>(&SEA_SURFACE);
         for_each_invocation(values, common.band_start, progress, |i, v| {
             let seen = surface.get((i - common.band_start) as usize).copied().unwrap_or(Vec4::ZERO);
-            *v = term(i, seen, maps, correction, &clouds);
+            *v = term(i, seen, &inputs);
         });
     });
+}
+
+/// What the per-pixel terms read besides the sample's `sea.surface` value.
+struct TermInputs<'a> {
+    maps: &'a [Vec4],
+    accumulated: &'a [Vec4],
+    correction: &'a [Vec4],
+    clouds: CloudShadow<'a>,
 }
 
 pub struct SeaOrder1;
@@ -1084,7 +1203,9 @@ impl Pass for SeaOrder1 {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
-        run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, _, _, c| order1_pixel(i, common, p, t, bottom, c));
+        run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, x| {
+            order1_pixel(i, common, p, t, bottom, &x.clouds)
+        });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea order 1", &SEA_ORDER1, gpu, cpu)
@@ -1105,6 +1226,7 @@ impl Pass for SeaOrder2 {
             COMMON,
             SEA_PARAMS,
             SEA_SURFACE,
+            SEA_SCATTERING_MAPS,
             SEA_ACCUMULATED_MAP,
             SEA_BOTTOM_GRID,
             SEA_BOTTOM_CORRECTION,
@@ -1135,12 +1257,18 @@ impl Pass for SeaOrder2 {
                 0,
             );
         }
+        if scene.sea.params.underwater != 0 {
+            return Plan::run(
+                "second-order scattering: the maps' source gathered along the view ray, the surface's reflection of the accumulated map",
+                0,
+            );
+        }
         Plan::run("second-order scattering, looked up in the accumulated map", 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
-        run_term(scene, common, frame, progress, &SEA_ORDER2, |i, t, maps, correction, c| {
-            order2_pixel(i, common, p, t, bottom, maps, correction, c)
+        run_term(scene, common, frame, progress, &SEA_ORDER2, |i, t, x| {
+            order2_pixel(i, common, p, t, bottom, x.maps, x.accumulated, x.correction, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
@@ -1203,7 +1331,9 @@ impl Pass for SeaBottom {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
-        run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, _, _, c| bottom_pixel(i, common, p, t, bottom, c));
+        run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, x| {
+            bottom_pixel(i, common, p, t, bottom, &x.clouds)
+        });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         compare_layer("sea bottom", &SEA_BOTTOM, gpu, cpu)

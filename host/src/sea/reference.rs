@@ -206,18 +206,7 @@ impl SeaReference {
     /// `int_0^end f(z) dz` in pieces graded toward the surface (cut where
     /// 60 optical depths of the clearest channel are reached).
     fn over_depth_to(&self, f: &dyn Fn(f64) -> DVec3, end: f64) -> DVec3 {
-        let reach = self.reach().min(end);
-        if reach <= 0.0 {
-            return DVec3::ZERO;
-        }
-        let mut cuts = vec![0.0];
-        let mut x = reach / 4096.0;
-        while x < reach {
-            cuts.push(x);
-            x *= 4.0;
-        }
-        cuts.push(reach);
-        cuts.windows(2).map(|w| integrate(f, w[0], w[1], self.tolerance, 0.0, 24)).sum()
+        graded(f, self.reach().min(end), self.tolerance)
     }
 
     /// The order-2 source at depth `z` toward `view`: `int b p(w . view) L1(z, w) dw`,
@@ -279,6 +268,58 @@ impl SeaReference {
             self.source2_with(view, &l1) * att / mu_v
         };
         self.over_depth_to(&f, end)
+    }
+
+    /// Order 1 gathered toward an eye at depth `z_e` (m) along its view ray
+    /// `d` (unit, any way) over `length` m (`f64::INFINITY` in open
+    /// water): `int b p(sun . -d) E_w e^(-c z(t)/mu_s) e^(-c t) dt`,
+    /// `z(t) = z_e - t d_y`, by quadrature (not the method's closed form).
+    pub fn order1_segment(&self, z_e: f64, d: DVec3, length: f64) -> DVec3 {
+        let beta = self.b * self.hg(-self.sun.dot(d));
+        let f = |t: f64| {
+            let z = (z_e - t * d.y).max(0.0);
+            let c = self.c;
+            beta * self.beam
+                * DVec3::new(
+                    (-c.x * (z / self.mu_s + t)).exp(),
+                    (-c.y * (z / self.mu_s + t)).exp(),
+                    (-c.z * (z / self.mu_s + t)).exp(),
+                )
+        };
+        self.along(&f, length)
+    }
+
+    /// Order 2 gathered toward an eye at depth `z_e` along `d` over
+    /// `length` m: `int J2(z(t), -d) e^(-c t) dt` with `J2` the order-2
+    /// source by quadrature over the sphere (`source2`), no planes, no maps.
+    pub fn order2_segment(&self, z_e: f64, d: DVec3, length: f64) -> DVec3 {
+        let f = |t: f64| {
+            let z = (z_e - t * d.y).max(0.0);
+            let c = self.c;
+            self.source2(z, -d) * DVec3::new((-c.x * t).exp(), (-c.y * t).exp(), (-c.z * t).exp())
+        };
+        self.along(&f, length)
+    }
+
+    /// `int_0^length f(t) dt` in pieces graded from the eye (cut at 60
+    /// optical lengths of the clearest channel).
+    fn along(&self, f: &dyn Fn(f64) -> DVec3, length: f64) -> DVec3 {
+        let c = self.c.min_element();
+        let reach = if c > 0.0 { length.min(60.0 / c) } else { length.min(1e9) };
+        graded(f, reach, self.tolerance)
+    }
+
+    /// The Lambertian bottom at depth `depth` lit by the refracted sun,
+    /// seen from right above it (eq. 9 without the way up), with cosine
+    /// `cos_gamma` between its normal and the beam.
+    pub fn bottom_leaving(&self, depth: f64, cos_gamma: f64) -> DVec3 {
+        let c = self.c;
+        let att = DVec3::new(
+            (-c.x * depth / self.mu_s).exp(),
+            (-c.y * depth / self.mu_s).exp(),
+            (-c.z * depth / self.mu_s).exp(),
+        );
+        self.beam * att * cos_gamma.max(0.0) * self.albedo / PI
     }
 
     /// The bottom's reflection of the direct sun along `view` (eq. 9 with `1/pi`), closed form.
@@ -412,6 +453,22 @@ impl SeaReference {
         }
         out
     }
+}
+
+/// `int_0^reach f(x) dx` by adaptive quadrature in pieces growing fourfold
+/// from `reach / 4096` (the integrands fall off exponentially from 0).
+fn graded(f: &dyn Fn(f64) -> DVec3, reach: f64, tolerance: f64) -> DVec3 {
+    if reach <= 0.0 {
+        return DVec3::ZERO;
+    }
+    let mut cuts = vec![0.0];
+    let mut x = reach / 4096.0;
+    while x < reach {
+        cuts.push(x);
+        x *= 4.0;
+    }
+    cuts.push(reach);
+    cuts.windows(2).map(|w| integrate(f, w[0], w[1], tolerance, 0.0, 24)).sum()
 }
 
 /// Nodes and weights of `n`-point Gauss-Legendre on (-1, 1), by Newton's

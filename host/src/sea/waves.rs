@@ -80,8 +80,8 @@ fn grid() -> u32 {
 
 impl Spectrum {
     fn validate(&self) -> Result<()> {
-        if !(self.wind_m_s.is_finite() && self.wind_m_s > 0.0 && self.wind_m_s <= 60.0) {
-            bail!(invalid("sea.waves.wind_m_s", "a wind speed in (0, 60] m/s", self.wind_m_s));
+        if !(self.wind_m_s.is_finite() && self.wind_m_s > 0.0 && self.wind_m_s <= 100.0) {
+            bail!(invalid("sea.waves.wind_m_s", "a wind speed in (0, 100] m/s", self.wind_m_s));
         }
         if !(self.fetch_m.is_finite() && self.fetch_m >= 100.0 && self.fetch_m <= 1e7) {
             bail!(invalid("sea.waves.fetch_m", "a fetch in [100, 1e7] m", self.fetch_m));

@@ -735,6 +735,9 @@ impl Pass for Aerial {
         if !scene.sky.aerial {
             return Plan::skip("aerial_perspective = false");
         }
+        if scene.sky.params.sea == slicelight_shaders::sky::SEA_AROUND {
+            return Plan::skip("the eye is under the water");
+        }
         if !scene.has_geometry() {
             return Plan::skip("no surfaces in front of the sky");
         }

@@ -53,6 +53,7 @@
 
 pub mod surface;
 pub mod table;
+pub mod under;
 
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
@@ -134,10 +135,16 @@ pub struct SeaParams {
     /// 1: the wave slopes are filtered over each sample's footprint
     /// (`surface::footprint`); 0: read at the sample's point.
     pub wave_filter: u32,
+    /// The eye's depth below the level, m, when it is under water
+    /// (`underwater` 1: `under`); 0 above.
+    pub camera_depth: f32,
+    pub underwater: u32,
+    pub pad0: u32,
+    pub pad1: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
-// SAFETY: `repr(C)`, ten `Vec4`s and twenty 4-byte scalars, no padding; any bits are valid.
+// SAFETY: `repr(C)`, ten `Vec4`s and twenty-four 4-byte scalars, no padding; any bits are valid.
 unsafe impl bytemuck::Zeroable for SeaParams {}
 #[cfg(not(target_arch = "spirv"))]
 unsafe impl bytemuck::Pod for SeaParams {}
@@ -273,10 +280,8 @@ pub fn order1_radiance(p: &SeaParams, view: Vec3, depth: f32, c: Vec3) -> Vec3 {
 /// seen along the upward `view` (W/(m^2 sr), below the surface):
 /// `E_w e^(-c d/mu_s) cos(gamma) (albedo/pi) e^(-c d/mu_v)`.
 pub fn bottom_radiance(p: &SeaParams, view: Vec3, depth: f32, cos_gamma: f32) -> Vec3 {
-    let c = p.extinction.xyz();
     let mu_v = view.y.max(1e-6);
-    let path = depth * (1.0 / p.sun_in_water.w + 1.0 / mu_v);
-    p.beam_irradiance.xyz() * (-c * path).exp() * cos_gamma.max(0.0) * p.bottom_albedo.xyz() * FRAC_1_PI
+    under::bottom_leaving(p, depth, cos_gamma) * (-p.extinction.xyz() * (depth / mu_v)).exp()
 }
 
 /// Depth of sampling plane `k` per channel, m, from the surface down to
@@ -382,13 +387,25 @@ fn layer_radiance_map_texel(index: u32, p: &SeaParams) -> Vec4 {
     (beta * p.beam_irradiance.xyz() * order1_path(plane_depth(p, k), dir.y, p)).extend(0.0)
 }
 
-/// The unit upward direction of travel (toward the eye) that scattering map
+/// The largest zenith angle of the direction toward the eye that the
+/// scattering maps hold: just above the horizontal for an eye above the
+/// water (light reaches it travelling up); just short of the nadir for an
+/// eye under it (light reaches it from every direction, `under`).
+pub fn map_zenith(p: &SeaParams) -> f32 {
+    if p.underwater != 0 {
+        PI - 1e-3
+    } else {
+        FRAC_PI_2 - 1e-3
+    }
+}
+
+/// The unit direction of travel (toward the eye) that scattering map
 /// texel `(col, row)` stands for: azimuth `pi col/(w-1)` from the refracted
-/// sun's, zenith angle `(pi/2) row/(h-1)` (the last row just above the
-/// horizontal).
+/// sun's, zenith angle `map_zenith row/(h-1)` (the last row just above the
+/// horizontal, or under water just short of straight down).
 pub fn map_direction(p: &SeaParams, col: u32, row: u32) -> Vec3 {
     let azimuth = PI * col as f32 / (p.map_width - 1) as f32;
-    let zenith = (FRAC_PI_2 - 1e-3) * row as f32 / (p.map_height - 1) as f32;
+    let zenith = map_zenith(p) * row as f32 / (p.map_height - 1) as f32;
     let (t, u) = sun_azimuth_frame(p);
     let horizontal = t * azimuth.cos() + u * azimuth.sin();
     (horizontal * zenith.sin() + Vec3::Y * zenith.cos()).normalize()
@@ -492,7 +509,7 @@ pub fn set_weight(ps: f32, pv: f32, h: f32, set: u32) -> f32 {
     own / (a_s * a_s + a_v * a_v + uniform * uniform)
 }
 
-/// Where unit upward `view` falls in a scattering map: the lower-left texel
+/// Where unit `view` (upward, or any way under water) falls in a scattering map: the lower-left texel
 /// and the bilinear weights, the same for every plane.
 #[derive(Copy, Clone)]
 pub struct MapCoords {
@@ -508,7 +525,7 @@ pub fn map_coords(p: &SeaParams, view: Vec3) -> MapCoords {
     let azimuth = if x * x + y * y > 1e-24 { y.atan2(x) } else { 0.0 };
     let zenith = view.y.clamp(-1.0, 1.0).acos();
     let fx = (azimuth / PI).clamp(0.0, 1.0) * (p.map_width - 1) as f32;
-    let fy = (zenith / (FRAC_PI_2 - 1e-3)).clamp(0.0, 1.0) * (p.map_height - 1) as f32;
+    let fy = (zenith / map_zenith(p)).clamp(0.0, 1.0) * (p.map_height - 1) as f32;
     let (col, row) = ((fx as u32).min(p.map_width - 2), (fy as u32).min(p.map_height - 2));
     MapCoords { col, row, ax: fx - col as f32, ay: fy - row as f32 }
 }
@@ -801,8 +818,19 @@ pub fn reflected_skyward(dir: Vec3, normal: Vec3) -> Vec3 {
 /// Per-pixel kernel, `sea.surface`: what the terms below the surface need
 /// of it, computed once: the direction light leaves the water toward the
 /// eye (xyz) and the transmission `(1 - R)/n^2` (w); zero where the sample
-/// does not see the sea.
-pub fn surface_pixel(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> Vec4 {
+/// does not see the sea. For an eye under water, where its view ray ends
+/// (`under::UnderView::encode`; `grid` the bottom's depths).
+pub fn surface_pixel(
+    index: u32,
+    common: &CommonParams,
+    p: &SeaParams,
+    waves: &[Vec4],
+    grid: &[f32],
+    texel: &GBufferTexel,
+) -> Vec4 {
+    if p.underwater != 0 {
+        return under::under_ray(index, common, p, waves, grid, texel).encode();
+    }
     let v = sea_view(index, common, p, waves, texel);
     if !v.hit {
         return Vec4::ZERO;
@@ -839,7 +867,10 @@ pub fn view_in_water(dir: Vec3, normal: Vec3, n: f32) -> Vec3 {
 }
 
 /// Per-pixel kernel, `sea.reflection`: the sky and the sun reflected at the
-/// surface, `R (L_sky + L_sun)` along the reflected ray.
+/// surface, `R (L_sky + L_sun)` along the reflected ray. For an eye under
+/// water, the sky and the sun through Snell's window,
+/// `e^(-c l) (1 - R) n^2 (L_sky + L_sun)` along the ray refracted out
+/// (`under::through_window`; `surface`: the sample's `sea.surface` value).
 #[allow(clippy::too_many_arguments)]
 pub fn reflection_pixel(
     index: u32,
@@ -850,8 +881,23 @@ pub fn reflection_pixel(
     transmittance: &[Vec4],
     sky_view: &[Vec4],
     texel: &GBufferTexel,
+    surface: Vec4,
     clouds: &CloudShadow,
 ) -> Vec4 {
+    if p.underwater != 0 {
+        let v = under::decode(index, common, p, surface);
+        if v.end != under::END_SURFACE {
+            return Vec4::ZERO;
+        }
+        let (out, factor) = under::through_window(p, &v);
+        if factor <= 0.0 {
+            return Vec4::ZERO;
+        }
+        let point = v.end_point();
+        let light =
+            sky_radiance(sky, transmittance, sky_view, out) + sun_disk(sky, transmittance, out) * clouds.at(p, point);
+        return (light * factor * under::attenuation(p, &v)).extend(0.0);
+    }
     if p.waves != WAVES_NORMAL_MAP {
         let v = sea_view(index, common, p, waves, texel);
         if !v.hit {
@@ -914,7 +960,9 @@ impl CloudShadow<'_> {
 
 /// Per-pixel kernel, `sea.order1`: single scattering down to where the
 /// view ray meets the bottom (section 5.4: eq. 5 with `z_Q` for `z_d`), above
-/// the surface.
+/// the surface. Under water, eq. 5 along the view ray
+/// (`under::order1_segment`) and, where the ray meets the surface, the
+/// single scattering the surface reflects toward the eye, attenuated.
 pub fn order1_pixel(
     index: u32,
     common: &CommonParams,
@@ -923,13 +971,28 @@ pub fn order1_pixel(
     bottom: &[f32],
     clouds: &CloudShadow,
 ) -> Vec4 {
+    let c1 = p.order1_extinction.xyz();
+    if p.underwater != 0 {
+        let v = under::decode(index, common, p, surface);
+        if v.end == under::END_NONE {
+            return Vec4::ZERO;
+        }
+        let above = Vec3::new(v.origin.x, p.level, v.origin.z);
+        let mut light = under::order1_segment(p, v.dir, p.camera_depth, v.length, c1) * clouds.at(p, above);
+        if v.end == under::END_SURFACE {
+            let (depth, _) = under::reflected_bottom(p, bottom, &v);
+            let up = order1_radiance(p, v.up, depth, c1) * clouds.at(p, v.end_point());
+            light += up * v.reflectance * under::attenuation(p, &v);
+        }
+        return light.extend(0.0);
+    }
     let v = seen_from(index, common, p, surface);
     if !v.hit {
         return Vec4::ZERO;
     }
     let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
     let shade = clouds.at(p, v.point);
-    (order1_radiance(p, v.view, depth, p.order1_extinction.xyz()) * v.transmission * shade).extend(0.0)
+    (order1_radiance(p, v.view, depth, c1) * v.transmission * shade).extend(0.0)
 }
 
 /// The weight of layer `j + 1` for a bottom at `depth` between layers `j`
@@ -962,29 +1025,15 @@ fn lagrange4(x: f32, xs: [f32; 4], ys: [f32; 4], fallback: f32) -> f32 {
     l0 * ys[0] + l1 * ys[1] + l2 * ys[2] + l3 * ys[3]
 }
 
-/// Per-pixel kernel, `sea.order2`: second-order scattering, the
-/// accumulated map looked up toward the eye (between the two layers whose
-/// bottoms bracket the depth under the pixel, for a varying bottom), above
-/// the surface.
-#[allow(clippy::too_many_arguments)]
-pub fn order2_pixel(
-    index: u32,
-    common: &CommonParams,
-    p: &SeaParams,
-    surface: Vec4,
-    bottom: &[f32],
-    accumulated: &[Vec4],
-    correction: &[Vec4],
-    clouds: &CloudShadow,
-) -> Vec4 {
-    let v = seen_from(index, common, p, surface);
-    if !v.hit {
-        return Vec4::ZERO;
-    }
-    let at = map_coords(p, v.view);
+/// The order-2 radiance arriving at the surface from below along upward
+/// `view` (the accumulated map; over a varying bottom between the layers
+/// whose bottoms bracket `depth`, the bottom's depth along the view ray:
+/// linear, or a cubic in each channel's saturation where four layers
+/// surround it).
+pub fn accumulated_toward(p: &SeaParams, accumulated: &[Vec4], depth: f32, view: Vec3) -> Vec3 {
+    let at = map_coords(p, view);
     let mut value = scattering_map_lookup(p, accumulated, 0, at);
     if p.layers > 1 {
-        let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
         let (j, w) = layer_at(p, depth);
         let (a, b) = (scattering_map_lookup(p, accumulated, j, at), scattering_map_lookup(p, accumulated, j + 1, at));
         let linear = saturation_weight(p, depth, j, w);
@@ -1018,19 +1067,64 @@ pub fn order2_pixel(
             );
             value = cubic.max(Vec3::ZERO);
         }
-        if p.table_width > 0 {
-            // Section 5.4: the depth table's correction for the bottom along
-            // every sampling ray rather than flat under the view ray.
-            let offset = sample_offset(common.sample_index, common.samples_per_pixel);
-            let position = Vec2::new((index % common.width) as f32, (index / common.width) as f32) + offset;
-            value = (value + crate::sea::table::correction_at(p, common, correction, position)).max(Vec3::ZERO);
+    }
+    value
+}
+
+/// Per-pixel kernel, `sea.order2`: second-order scattering, the
+/// accumulated map looked up toward the eye (between the two layers whose
+/// bottoms bracket the depth under the pixel, for a varying bottom), above
+/// the surface. Under water, the scattering maps' source gathered along
+/// the view ray (`under::order2_segment`) and, where it meets the surface,
+/// the order-2 light the surface reflects toward the eye, attenuated.
+#[allow(clippy::too_many_arguments)]
+pub fn order2_pixel(
+    index: u32,
+    common: &CommonParams,
+    p: &SeaParams,
+    surface: Vec4,
+    bottom: &[f32],
+    maps: &[Vec4],
+    accumulated: &[Vec4],
+    correction: &[Vec4],
+    clouds: &CloudShadow,
+) -> Vec4 {
+    if p.underwater != 0 {
+        let v = under::decode(index, common, p, surface);
+        if v.end == under::END_NONE {
+            return Vec4::ZERO;
         }
+        let above = Vec3::new(v.origin.x, p.level, v.origin.z);
+        let under_eye = under::depth_under(p, bottom, v.origin);
+        let mut light =
+            under::order2_segment(p, maps, v.dir, p.camera_depth, v.length, under_eye) * clouds.at(p, above);
+        if v.end == under::END_SURFACE {
+            let (depth, _) = under::reflected_bottom(p, bottom, &v);
+            let up = accumulated_toward(p, accumulated, depth, v.up) * clouds.at(p, v.end_point());
+            light += up * v.reflectance * under::attenuation(p, &v);
+        }
+        return light.extend(0.0);
+    }
+    let v = seen_from(index, common, p, surface);
+    if !v.hit {
+        return Vec4::ZERO;
+    }
+    let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
+    let mut value = accumulated_toward(p, accumulated, depth, v.view);
+    if p.layers > 1 && p.table_width > 0 {
+        // Section 5.4: the depth table's correction for the bottom along
+        // every sampling ray rather than flat under the view ray.
+        let offset = sample_offset(common.sample_index, common.samples_per_pixel);
+        let position = Vec2::new((index % common.width) as f32, (index / common.width) as f32) + offset;
+        value = (value + crate::sea::table::correction_at(p, common, correction, position)).max(Vec3::ZERO);
     }
     (value * v.transmission * clouds.at(p, v.point)).extend(0.0)
 }
 
 /// Per-pixel kernel, `sea.bottom`: the bottom's reflection of the refracted
-/// sunlight (eq. 9 with `1/pi`) where the view ray meets it, above the surface.
+/// sunlight (eq. 9 with `1/pi`) where the view ray meets it, above the
+/// surface. Under water, where the view ray meets the bottom
+/// (`under::bottom_leaving`) or its reflection in the surface, attenuated.
 pub fn bottom_pixel(
     index: u32,
     common: &CommonParams,
@@ -1039,6 +1133,21 @@ pub fn bottom_pixel(
     bottom: &[f32],
     clouds: &CloudShadow,
 ) -> Vec4 {
+    if p.underwater != 0 {
+        let v = under::decode(index, common, p, surface);
+        let light = if v.end == under::END_BOTTOM {
+            let (depth, cos_gamma) = under::bottom_at(p, bottom, &v);
+            under::bottom_leaving(p, depth, cos_gamma)
+        } else if v.end == under::END_SURFACE {
+            let (depth, cos_gamma) = under::reflected_bottom(p, bottom, &v);
+            bottom_radiance(p, v.up, depth, cos_gamma) * v.reflectance
+        } else {
+            return Vec4::ZERO;
+        };
+        let point = v.end_point();
+        let above = Vec3::new(point.x, p.level, point.z);
+        return (light * under::attenuation(p, &v) * clouds.at(p, above)).extend(0.0);
+    }
     let v = seen_from(index, common, p, surface);
     if !v.hit {
         return Vec4::ZERO;
@@ -1091,6 +1200,7 @@ pub fn accumulated_map_kernel(
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn surface_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
@@ -1099,13 +1209,14 @@ pub fn surface_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
         surface[index as usize] =
-            surface_pixel(common.band_start + index, common, &params[0], waves, &gbuffer[index as usize]);
+            surface_pixel(common.band_start + index, common, &params[0], waves, bottom, &gbuffer[index as usize]);
     }
 }
 
@@ -1124,6 +1235,7 @@ pub fn reflection_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 23)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
@@ -1139,6 +1251,7 @@ pub fn reflection_kernel(
             transmittance,
             sky_view,
             &gbuffer[index as usize],
+            surface[index as usize],
             &clouds,
         );
     }
@@ -1175,6 +1288,7 @@ pub fn order2_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 22)] maps: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 27)] accumulated: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 38)] correction: &[Vec4],
@@ -1193,6 +1307,7 @@ pub fn order2_kernel(
             &params[0],
             surface[index as usize],
             bottom,
+            maps,
             accumulated,
             correction,
             &clouds,
@@ -1220,6 +1335,30 @@ pub fn bottom_kernel(
         let clouds = CloudShadow { lights, grids, depths };
         radiance[index as usize] =
             bottom_pixel(common.band_start + index, common, &params[0], surface[index as usize], bottom, &clouds);
+    }
+}
+
+/// Per-pixel kernel, `sea.water`: for an eye under water, what the water
+/// does to the light of the object the sample sees (`under::water_transmittance`).
+pub fn water_pixel(index: u32, common: &CommonParams, p: &SeaParams, surface: Vec4, texel: &GBufferTexel) -> Vec4 {
+    under::water_transmittance(p, &under::decode(index, common, p, surface), texel.object != NO_OBJECT)
+}
+
+#[spirv(compute(threads(64)))]
+pub fn water_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 76)] water: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let common = &common[0];
+    if index < common.band_pixels {
+        let i = index as usize;
+        water[i] = water_pixel(common.band_start + index, common, &params[0], surface[i], &gbuffer[i]);
     }
 }
 

@@ -95,7 +95,8 @@ pub struct SkyParams {
     /// `horizon_elevation` of these parameters, radians (set by the host
     /// with that function, so that the per-pixel kernel need not recompute it).
     pub horizon: f32,
-    /// 1 when a sea covers every downward view (the sea passes draw it).
+    /// `SEA_BELOW` when a sea covers every downward view, `SEA_AROUND` when
+    /// the eye is under its surface (the sea passes draw those views).
     pub sea: u32,
     /// Rays per pixel that find how much of the sky a surface sees (the
     /// skylight's shadow, `light::sky_light_pixel`; 0: unshadowed).
@@ -567,6 +568,11 @@ pub fn sky_view_lookup(p: &SkyParams, sky_view: &[Vec4], dir: Vec3) -> Vec3 {
     value.xyz()
 }
 
+/// `SkyParams::sea`: no sea; a sea below the eye; the eye under the water.
+pub const SEA_NONE: u32 = 0;
+pub const SEA_BELOW: u32 = 1;
+pub const SEA_AROUND: u32 = 2;
+
 /// Per-pixel sky kernel: the sky's radiance (rgb, W/(m^2 sr); w = 0) at
 /// pixel `index`'s current sub-pixel sample, where the view ray meets no
 /// scene surface (`texel` is the pixel's G-buffer texel): the in-scattered
@@ -586,7 +592,7 @@ pub fn sky_pixel(
         return Vec4::ZERO;
     }
     let (_, dir) = camera_ray(common, x, y);
-    if p.sea != 0 && dir.y < 0.0 {
+    if p.sea == SEA_AROUND || (p.sea == SEA_BELOW && dir.y < 0.0) {
         return Vec4::ZERO;
     }
     (sky_radiance(p, transmittance, sky_view, dir) + sun_disk(p, transmittance, dir)).extend(0.0)

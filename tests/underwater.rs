@@ -1,0 +1,195 @@
+//! The eye under water (issue 26): the sea passes' underwater terms against
+//! the f64 reference (quadrature along the view ray and toward the surface,
+//! no planes, maps or closed forms), the closed form of flat, deep water,
+//! and the underwater view at the edges of its parameters.
+
+mod common;
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use slicelight::scene::SceneData;
+use slicelight::sea::reference::SeaReference;
+use slicelight_shaders::sea::under;
+
+/// Clear tropical water (scenes/README's preset) over sand, an eye
+/// `depth` m down looking along `look` (from the eye), with extra `[sea]` lines.
+fn under(depth: f32, look: [f32; 3], size: (u32, u32), extra: &str) -> SceneData {
+    common::scene_from_str(&under_text(depth, look, size, 30.0, extra, ""))
+}
+
+/// `under`'s scene text with the sun `sun_zenith` degrees from the zenith
+/// and `more` after the `[sea]` section (objects).
+fn under_text(depth: f32, look: [f32; 3], size: (u32, u32), sun_zenith: f32, extra: &str, more: &str) -> String {
+    format!(
+        r#"
+        [camera]
+        position = [0.0, {y}, 0.0]
+        look_at = [{lx}, {ly}, {lz}]
+        vfov_deg = 100.0
+        resolution = [{w}, {h}]
+        exposure = 6.0
+        [sky]
+        sun_zenith_deg = {sun_zenith}
+        sun_azimuth_deg = 150.0
+        [sea]
+        water = "tropical"
+        g = 0.924
+        {extra}
+        {more}
+        "#,
+        y = -depth,
+        lx = look[0],
+        ly = look[1] - depth,
+        lz = look[2],
+        w = size.0,
+        h = size.1,
+    )
+}
+
+fn render(data: &SceneData) -> slicelight::render::Rendered {
+    let r = slicelight::render::render_layers(data, &slicelight::render::Backend::Cpu, false).unwrap();
+    for (name, values) in
+        std::iter::once(("image", &r.image[..])).chain(r.layers.iter().map(|(n, b)| (*n, b.as_slice::<glam::Vec4>())))
+    {
+        for v in values {
+            assert!(v.is_finite() && v.min_element() >= 0.0, "{name} holds {v}");
+        }
+    }
+    r
+}
+
+/// A flat sea, 5 m down over a bottom 12 m deep, a 100-degree view up
+/// toward the sun's side: Snell's window with the sun's glow, total
+/// internal reflection outside it, the horizontal and the bottom below. The
+/// method's pixel centres against the reference at the same centres.
+#[test]
+fn a_flat_sea_from_below_matches_the_reference() {
+    let data = under(5.0, [0.3, 0.25, -1.0], (12, 8), "depth_m = 12.0\nwaves = { kind = \"flat\" }");
+    let t = std::time::Instant::now();
+    let image = slicelight::metrics::to_f64(&render(&data).image);
+    let method_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let w = data.width();
+    let reference: Vec<DVec3> = (0..data.pixel_count())
+        .into_par_iter()
+        .map(|i| slicelight::reference::surface_pixel(&data, i % w, i / w))
+        .collect();
+    let d = slicelight::metrics::difference(&image, &reference, data.exposure);
+    println!(
+        "method {method_s:.3} s, reference {:.1} s: RMS {:.3} % (8-bit), max {:.2} %, relative RMS {:.2e}, energy {:.4}",
+        t.elapsed().as_secs_f64(),
+        d.rms_8bit_percent,
+        d.max_8bit_percent,
+        d.rms_relative,
+        d.energy_ratio
+    );
+    for y in 0..data.height() {
+        let i = (y * w + w / 2) as usize;
+        println!("row {y}, middle column: method {:.4?} reference {:.4?}", image[i], reference[i]);
+    }
+    // Measured 0.16 % RMS, 0.39 % at most (24x16, 2-core machine). The
+    // method's own approximations here are the maps' planes and direction
+    // sets (chosen by the 1/255 rule, so within 1/255 of their converged
+    // values above the water) and the steps along the view ray: 0.5 % RMS
+    // is under one 8-bit level.
+    assert!(d.rms_8bit_percent < 0.5 && d.max_8bit_percent < 1.5, "{d:?}");
+}
+
+/// Deep, flat water without a bottom, a level view ray: the order-1
+/// source is the same all along it, so the light gathered is
+/// `beta E_w e^(-c z/mu_s) / c` (a closed form); the method's closed form
+/// and the reference's quadrature both give it, at every depth and
+/// whichever way the ray turns about the vertical. Up and down the ray the
+/// two agree with each other.
+#[test]
+fn deep_water_along_a_level_ray_has_the_closed_form() {
+    let data = under(5.0, [0.0, 0.0, -1.0], (4, 4), "");
+    let p = &data.sea.params;
+    assert!(p.depth >= slicelight_shaders::sea::DEEP, "no bottom");
+    let reference = SeaReference::new(p, 1e-7);
+    let (b, c) = (reference.b, reference.c);
+    for depth in [0.0f32, 0.5, 5.0, 40.0] {
+        for azimuth in [0.0f32, 60.0, 150.0, 180.0] {
+            let a = azimuth.to_radians();
+            let dir = Vec3::new(a.sin(), 0.0, -a.cos());
+            let d = dir.as_dvec3();
+            let beta = b * reference.hg(-reference.sun.dot(d));
+            let exact = beta * reference.beam * (-c * (depth as f64 / reference.mu_s)).exp() / c;
+            let method = under::order1_segment(p, dir, depth, slicelight_shaders::sea::DEEP, p.extinction.truncate());
+            let quadrature = reference.order1_segment(depth as f64, d, f64::INFINITY);
+            for (what, v) in [("method", method.as_dvec3()), ("quadrature", quadrature)] {
+                let err = ((v - exact) / exact).abs().max_element();
+                // f32 exps and phase function: 1e-5; the quadrature's 1e-7 tolerance.
+                assert!(err < 2e-5, "{what} at {depth} m, azimuth {azimuth}: {v} against {exact} ({err:e})");
+            }
+        }
+    }
+    for (dy, length) in [(0.6f32, 5.0f32 / 0.6), (-0.3, 30.0), (0.95, 5.0 / 0.95), (-1.0, 100.0)] {
+        let h = (1.0 - dy * dy).sqrt();
+        let dir = Vec3::new(0.4 * h, dy, -(1.0 - 0.16f32).sqrt() * h).normalize();
+        let method = under::order1_segment(p, dir, 5.0, length, p.extinction.truncate()).as_dvec3();
+        let quadrature = reference.order1_segment(5.0, dir.as_dvec3(), length as f64);
+        let err = ((method - quadrature) / quadrature).abs().max_element();
+        assert!(err < 2e-5, "dir {dir}: method {method}, quadrature {quadrature} ({err:e})");
+    }
+}
+
+/// Every underwater variant renders 24x16 through every sea pass with
+/// nothing NaN, infinite or negative (`render` checks each layer); what
+/// the eye cannot be is refused with the field named.
+#[test]
+fn the_view_from_under_the_water_holds_at_its_edges() {
+    let waves = |wind: f32| {
+        format!("waves = {{ kind = \"spectrum\", wind_m_s = {wind}, fetch_m = 50000.0, size_m = 60.0, resolution = 64, seed = 1 }}")
+    };
+    let sphere = "[[object]]\ntype = \"sphere\"\ncenter = [0.0, -6.0, -6.0]\nradius = 1.5\nalbedo = [0.7, 0.7, 0.7]";
+    let shore = "bottom = { kind = \"shore\", slope = 0.12, shallow_m = 0.3, deep_m = 40.0, direction_deg = 270.0, offset_m = -8.0 }";
+    // (what, the eye's depth, where it looks, the sun's zenith angle, [sea] lines, objects)
+    type Case = (&'static str, f32, [f32; 3], f32, String, &'static str);
+    let cases: Vec<Case> = vec![
+        ("the eye at the level", 0.0, [0.0, 0.0, -1.0], 30.0, "depth_m = 12.0".into(), ""),
+        ("the eye just under it", 1e-4, [0.0, 0.3, -1.0], 30.0, format!("depth_m = 12.0\n{}", waves(4.0)), ""),
+        ("the sun at the horizon", 5.0, [0.0, 0.5, -1.0], 89.9, format!("depth_m = 12.0\n{}", waves(4.0)), ""),
+        ("the sun below it", 5.0, [0.0, 0.5, -1.0], 95.0, "depth_m = 12.0".into(), ""),
+        ("100 m/s wind", 5.0, [0.3, 0.6, -1.0], 30.0, format!("depth_m = 12.0\n{}", waves(100.0)), ""),
+        ("100 m/s wind, from above", -10.0, [0.0, -0.3, -1.0], 30.0, format!("depth_m = 12.0\n{}", waves(100.0)), ""),
+        ("no bottom, looking down", 20.0, [0.0, -1.0, -0.2], 30.0, String::new(), ""),
+        ("straight up", 5.0, [0.0, 1.0, -1e-3], 30.0, "depth_m = 12.0".into(), ""),
+        ("200 m down", 200.0, [0.0, 0.2, -1.0], 30.0, String::new(), ""),
+        ("a bottom just under the eye", 5.0, [0.0, -0.5, -1.0], 30.0, "depth_m = 5.001".into(), ""),
+        (
+            "clear water",
+            5.0,
+            [0.0, 0.2, -1.0],
+            30.0,
+            "absorption = [0.0, 0.0, 0.0]\nscattering = [0.0, 0.0, 0.0]\ndepth_m = 12.0".into(),
+            "",
+        ),
+        (
+            "murky water",
+            5.0,
+            [0.0, 0.2, -1.0],
+            30.0,
+            "absorption = [3.0, 2.0, 2.0]\nscattering = [10.0, 10.0, 10.0]\ndepth_m = 12.0".into(),
+            "",
+        ),
+        ("over a shore", 1.0, [0.0, -0.2, -1.0], 30.0, shore.into(), ""),
+        ("a sphere under water", 3.0, [0.0, -0.3, -1.0], 30.0, "depth_m = 12.0".into(), sphere),
+    ];
+    for (what, depth, look, sun, extra, more) in cases {
+        let data = common::scene_from_str(&under_text(depth, look, (24, 16), sun, &extra, more));
+        let r = render(&data);
+        println!("{what}: mean {:?}", r.image.iter().map(|v| v.truncate()).sum::<Vec3>() / r.image.len() as f32);
+        use slicelight::passes::Pass;
+        let water = slicelight::sea::SeaWater.plan(&data).runs;
+        assert_eq!(water, what == "a sphere under water", "{what}: sea.water runs only where objects are under water");
+        assert_eq!(data.sea.params.underwater != 0, depth >= 0.0, "{what}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bottom_above.toml");
+    std::fs::write(&path, under_text(5.0, [0.0, 0.0, -1.0], (8, 8), 30.0, "depth_m = 4.0", "")).unwrap();
+    let refused = slicelight::scene::load(&path);
+    let Err(e) = refused else { panic!("a bottom above the eye is refused") };
+    let message = format!("{e:#}");
+    assert!(message.contains("sea.depth_m") && message.contains("below the camera"), "{message}");
+}

@@ -356,7 +356,9 @@ impl Setup {
     }
     pub fn accumulated_map_texels(&self) -> u64 {
         if self.enabled && self.second_order {
-            self.params.layers as u64 * self.params.map_width as u64 * self.params.map_height as u64
+            slicelight_shaders::sea::accumulated_blocks(&self.params) as u64
+                * self.params.map_width as u64
+                * self.params.map_height as u64
         } else {
             0
         }
@@ -911,8 +913,13 @@ impl Pass for SeaAccumulatedMap {
             return skip;
         }
         let p = &scene.sea.params;
+        let eye = if slicelight_shaders::sea::under::eye_block(p) {
+            ", and order 2 along the eye's view ray toward each direction"
+        } else {
+            ""
+        };
         Plan::run(
-            format!("the scattering maps accumulated over {} planes with the attenuation map (eq. 8)", p.planes),
+            format!("the scattering maps accumulated over {} planes with the attenuation map (eq. 8){eye}", p.planes),
             scene.sea.accumulated_map_texels(),
         )
     }
@@ -984,11 +991,18 @@ impl Pass for SeaSurface {
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
-        // Unit directions and transmissions near 1: the terms' 1e-3.
+        // Unit directions (or, under the water, where the ray ends): the
+        // terms' 1e-3. In w, transmissions and reflectances near 1, or under
+        // the water lengths in metres (up to km along level rays): each to
+        // 1e-3 of itself (at least of 1).
         let c = cpu.get::<Vec4>(&SEA_SURFACE);
         let g = gpu.get::<Vec4>(&SEA_SURFACE);
-        let flat = |v: &[Vec4]| v.iter().flat_map(|p| p.to_array()).collect::<Vec<f32>>();
-        compare_values("sea surface", &flat(g), &flat(c), 1e-3, c.len() * 4 / 1000 + 1)
+        let xyz = |v: &[Vec4]| v.iter().flat_map(|p| p.truncate().to_array()).collect::<Vec<f32>>();
+        let w = |v: &[Vec4]| v.iter().map(|p| p.w).collect::<Vec<f32>>();
+        let line = compare_values("sea surface", &xyz(g), &xyz(c), 1e-3, c.len() * 3 / 1000 + 1)?;
+        let (outliers, worst) = count_differences(&w(g), &w(c), |v| 1e-3 * v.abs().max(1.0));
+        ensure!(outliers <= c.len() / 1000 + 1, "sea surface: {outliers} of {} w values differ", c.len());
+        Ok(format!("{line}; w: {outliers} outliers, worst difference {worst:e}"))
     }
 }
 
@@ -1257,11 +1271,14 @@ impl Pass for SeaOrder2 {
                 0,
             );
         }
-        if scene.sea.params.underwater != 0 {
-            return Plan::run(
-                "second-order scattering: the maps' source gathered along the view ray, the surface's reflection of the accumulated map",
-                0,
-            );
+        let p = &scene.sea.params;
+        if p.underwater != 0 {
+            let along = if slicelight_shaders::sea::under::eye_block(p) {
+                "second-order scattering along the view ray from the accumulated map's eye block (per pixel where an object ends it)"
+            } else {
+                "second-order scattering: the maps' source gathered along each view ray"
+            };
+            return Plan::run(format!("{along}, and the surface's reflection of the water below"), 0);
         }
         Plan::run("second-order scattering, looked up in the accumulated map", 0)
     }

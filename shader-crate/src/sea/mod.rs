@@ -570,6 +570,13 @@ pub fn exp_linear3(length: Vec3, h_a: Vec3, h_b: Vec3, kappa: Vec3) -> Vec3 {
     )
 }
 
+/// Blocks of `map_width x map_height` texels in the accumulated map: one
+/// per layer, and for an eye under the water over a flat bottom one more
+/// (`under::eye_block`).
+pub fn accumulated_blocks(p: &SeaParams) -> u32 {
+    p.layers + under::eye_block(p) as u32
+}
+
 /// Accumulated map kernel: texel `index`, the scattering maps accumulated
 /// over the planes (`order2_radiance` at the texel's own direction, so no
 /// interpolation), the order-2 radiance below the surface toward the eye.
@@ -577,6 +584,13 @@ pub fn exp_linear3(length: Vec3, h_a: Vec3, h_b: Vec3, kappa: Vec3) -> Vec3 {
 pub fn accumulated_map_texel(index: u32, p: &SeaParams, maps: &[Vec4]) -> Vec4 {
     let texels = p.map_width * p.map_height;
     let (j, t) = (index / texels, index % texels);
+    if j == p.layers {
+        // The eye's block (`under::eye_block`): order 2 gathered along
+        // the whole view ray toward the texel's direction.
+        let view = map_direction(p, t % p.map_width, t / p.map_width);
+        return under::order2_segment(p, maps, -view, p.camera_depth, under::full_length(p, -view), p.depth)
+            .extend(0.0);
+    }
     let q = layer_params(p, j);
     let view = map_direction(&q, t % q.map_width, t / q.map_width);
     accumulate_planes(&q, view, maps, j * q.planes * texels + t, texels).extend(0.0)
@@ -1095,9 +1109,14 @@ pub fn order2_pixel(
             return Vec4::ZERO;
         }
         let above = Vec3::new(v.origin.x, p.level, v.origin.z);
-        let under_eye = under::depth_under(p, bottom, v.origin);
-        let mut light =
-            under::order2_segment(p, maps, v.dir, p.camera_depth, v.length, under_eye) * clouds.at(p, above);
+        let gathered = if under::eye_block(p) && v.end != under::END_OBJECT {
+            // The whole ray: the eye's block of the accumulated map.
+            scattering_map_lookup(p, accumulated, p.layers, map_coords(p, -v.dir))
+        } else {
+            let under_eye = under::depth_under(p, bottom, v.origin);
+            under::order2_segment(p, maps, v.dir, p.camera_depth, v.length, under_eye)
+        };
+        let mut light = gathered * clouds.at(p, above);
         if v.end == under::END_SURFACE {
             let (depth, _) = under::reflected_bottom(p, bottom, &v);
             let up = accumulated_toward(p, accumulated, depth, v.up) * clouds.at(p, v.end_point());
@@ -1195,7 +1214,7 @@ pub fn accumulated_map_kernel(
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
-    if index < p.layers * p.map_width * p.map_height {
+    if index < accumulated_blocks(p) * p.map_width * p.map_height {
         accumulated[index as usize] = accumulated_map_texel(index, p, maps);
     }
 }

@@ -344,6 +344,29 @@ pub fn order2_segment(p: &SeaParams, maps: &[Vec4], dir: Vec3, z_e: f32, length:
     a * (1.0 - w) + b * w
 }
 
+/// Whether the accumulated map holds the eye's block: for an eye under
+/// the water over a flat bottom, every view ray that meets no object runs
+/// its whole length (`full_length`), which depends on its direction only,
+/// so order 2 gathered along it (`order2_segment`) is kept per map
+/// direction and looked up per pixel (bilinear between directions)
+/// instead of integrated per pixel.
+pub fn eye_block(p: &SeaParams) -> bool {
+    p.underwater != 0 && p.layers <= 1
+}
+
+/// How far the eye's view ray along `dir` runs over a flat bottom with no
+/// object in the way: to the surface, the bottom, or (`DEEP`) on.
+pub fn full_length(p: &SeaParams, dir: Vec3) -> f32 {
+    let z_e = p.camera_depth.max(0.0);
+    if dir.y > 0.0 {
+        z_e / dir.y
+    } else if dir.y < 0.0 && p.depth < DEEP {
+        (p.depth - z_e).max(0.0) / -dir.y
+    } else {
+        DEEP
+    }
+}
+
 /// The bottom's depth under the horizontal point of `at` (m).
 pub fn depth_under(p: &SeaParams, grid: &[f32], at: Vec3) -> f32 {
     if p.bottom_nx < 2 {

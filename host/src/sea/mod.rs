@@ -490,72 +490,18 @@ pub fn configure(
     // An eye at the level or below it is under water (`under`).
     let camera_depth = (s.level_m - camera_y).max(0.0);
     let underwater = camera_y <= s.level_m;
-    if s.depth_m.is_some() && s.bottom.is_some() {
-        bail!(invalid("sea.bottom", "either depth_m or bottom, not both", "both"));
-    }
-    if s.depth_table == 1 || s.depth_table > 512 {
-        bail!(invalid("sea.depth_table", "0 (no depth table) or 2..=512 samples across the image", s.depth_table));
-    }
-    if !(2..=64).contains(&s.depth_layers) {
-        bail!(invalid("sea.depth_layers", "a layer count in 2..=64", s.depth_layers));
-    }
-    let grid = s.bottom.as_ref().map(|b| b.grid(base)).transpose()?;
-    let depth = match s.depth_m {
-        None if grid.is_some() => grid.as_ref().map_or(DEEP, |g| g.deep),
-        None => DEEP,
-        Some(d) => {
-            if !(d.is_finite() && d > 0.0 && d <= 1e6) {
-                bail!(invalid("sea.depth_m", "a depth in (0, 1e6] m (leave it out for no bottom)", d));
-            }
-            if underwater && d <= camera_depth {
-                bail!(invalid(
-                    "sea.depth_m",
-                    &format!("a bottom below the camera, which is {camera_depth} m under the water"),
-                    d
-                ));
-            }
-            d
-        }
-    };
+    let (grid, depth) = bottom_of(s, base, underwater.then_some(camera_depth))?;
     let albedo = validate::albedo("sea.bottom_albedo", s.bottom_albedo)?;
-    let preset = s.water.map(Water::coefficients);
-    let (Some(absorption), Some(scattering)) =
-        (s.absorption.or(preset.map(|p| p.0)), s.scattering.or(preset.map(|p| p.1)))
-    else {
-        bail!(invalid(
-            "sea.absorption",
-            "absorption and scattering, or a preset water = \"clear-ocean\" | \"tropical\" | \"coastal\"",
-            "missing"
-        ));
-    };
-    let a = validate::non_negative3("sea.absorption", absorption)?;
-    let b = validate::non_negative3("sea.scattering", scattering)?;
-    if !(s.g > -1.0 && s.g < 1.0) {
-        bail!(invalid("sea.g", "a number in (-1, 1)", s.g));
-    }
-    let n = positive("sea.ior", s.ior)?;
-    if !(1.0..=3.0).contains(&n) {
-        bail!(invalid("sea.ior", "an index of refraction in [1, 3]", s.ior));
-    }
-    let size = s.scattering_map;
-    if !size.iter().all(|v| (2..=1024).contains(v)) {
-        bail!(invalid("sea.scattering_map", "two sizes in 2..=1024", size));
-    }
-    if let Some(planes) = s.planes {
-        if !(2..=256).contains(&planes) {
-            bail!(invalid("sea.planes", "a plane count in 2..=256", planes));
-        }
-    }
-    let polar = polar_of(s.directions)?;
-    let (waves_kind, waves, wave_resolution, wave_size, roughness, wave_filter) = match &s.waves {
-        Waves::Flat => (WAVES_FLAT, vec![Vec4::ZERO; 2], 1, 1.0, Vec4::ZERO, 0),
-        Waves::Spectrum(spectrum) => {
-            let normals = spectrum.normal_map(time)?;
-            let pyramid = waves::slope_pyramid(&normals, spectrum.resolution as usize);
-            let roughness = spectrum.unresolved_roughness(&normals);
-            (WAVES_NORMAL_MAP, pyramid, spectrum.resolution, spectrum.size_m, roughness, spectrum.filter as u32)
-        }
-    };
+    let (a, b, n) = water_of(s)?;
+    let (size, polar) = sampling_of(s)?;
+    let WaveMap {
+        kind: waves_kind,
+        slopes: waves,
+        resolution: wave_resolution,
+        size: wave_size,
+        roughness,
+        filter: wave_filter,
+    } = wave_map(&s.waves, time)?;
 
     let RefractedSun { sun, cos_ii, in_water, cos_io, beam, t_i } = refracted_sun(sky, n);
     let c = a + b;
@@ -609,17 +555,8 @@ pub fn configure(
         pad0: 0,
         pad1: 0,
     };
-    if underwater && grid.is_some() {
-        let p = &params;
-        let (x, z) = (common.camera_position.x, common.camera_position.z);
-        let under = slicelight_shaders::sea::bottom_depth(p, grid.as_ref().map_or(&[][..], |g| &g.depths), x, z);
-        if under <= camera_depth {
-            bail!(invalid(
-                "sea.bottom",
-                &format!("a bottom below the camera, which is {camera_depth} m under the water"),
-                format!("{under} m deep under the camera")
-            ));
-        }
+    if underwater {
+        check_eye_above_bottom(&params, grid.as_ref(), common)?;
     }
     let sampling = if s.second_order { choose_sampling(&mut params, s.planes, polar) } else { Vec::new() };
     check_table_size(&params, s.depth_table)?;
@@ -632,6 +569,133 @@ pub fn configure(
         single: s.single,
         sampling: sampling.join(", "),
     })
+}
+
+/// `[sea]`'s bottom: a varying one's grid, if any, and the flat depth (m;
+/// a grid's deepest, or `DEEP` for none). `eye_depth`: how far under the
+/// water the camera is, if it is, which a flat bottom must lie below.
+fn bottom_of(s: &Settings, base: &std::path::Path, eye_depth: Option<f32>) -> Result<(Option<Grid>, f32)> {
+    if s.depth_m.is_some() && s.bottom.is_some() {
+        bail!(invalid("sea.bottom", "either depth_m or bottom, not both", "both"));
+    }
+    if s.depth_table == 1 || s.depth_table > 512 {
+        bail!(invalid("sea.depth_table", "0 (no depth table) or 2..=512 samples across the image", s.depth_table));
+    }
+    if !(2..=64).contains(&s.depth_layers) {
+        bail!(invalid("sea.depth_layers", "a layer count in 2..=64", s.depth_layers));
+    }
+    let grid = s.bottom.as_ref().map(|b| b.grid(base)).transpose()?;
+    let depth = match s.depth_m {
+        None if grid.is_some() => grid.as_ref().map_or(DEEP, |g| g.deep),
+        None => DEEP,
+        Some(d) => {
+            if !(d.is_finite() && d > 0.0 && d <= 1e6) {
+                bail!(invalid("sea.depth_m", "a depth in (0, 1e6] m (leave it out for no bottom)", d));
+            }
+            if let Some(camera_depth) = eye_depth.filter(|&e| d <= e) {
+                bail!(invalid(
+                    "sea.depth_m",
+                    &format!("a bottom below the camera, which is {camera_depth} m under the water"),
+                    d
+                ));
+            }
+            d
+        }
+    };
+    Ok((grid, depth))
+}
+
+/// `[sea]`'s water: absorption and scattering (1/m, per channel, a preset's
+/// unless given) and the index of refraction, validated (and `g`).
+fn water_of(s: &Settings) -> Result<(Vec3, Vec3, f32)> {
+    let preset = s.water.map(Water::coefficients);
+    let (Some(absorption), Some(scattering)) =
+        (s.absorption.or(preset.map(|p| p.0)), s.scattering.or(preset.map(|p| p.1)))
+    else {
+        bail!(invalid(
+            "sea.absorption",
+            "absorption and scattering, or a preset water = \"clear-ocean\" | \"tropical\" | \"coastal\"",
+            "missing"
+        ));
+    };
+    let a = validate::non_negative3("sea.absorption", absorption)?;
+    let b = validate::non_negative3("sea.scattering", scattering)?;
+    if !(s.g > -1.0 && s.g < 1.0) {
+        bail!(invalid("sea.g", "a number in (-1, 1)", s.g));
+    }
+    let n = positive("sea.ior", s.ior)?;
+    if !(1.0..=3.0).contains(&n) {
+        bail!(invalid("sea.ior", "an index of refraction in [1, 3]", s.ior));
+    }
+    Ok((a, b, n))
+}
+
+/// `[sea]`'s order-2 sampling as given: the scattering maps' size and
+/// `k` of the directions (`n_d = 3 k^2`), if given (`planes` checked).
+fn sampling_of(s: &Settings) -> Result<([u32; 2], Option<u32>)> {
+    let size = s.scattering_map;
+    if !size.iter().all(|v| (2..=1024).contains(v)) {
+        bail!(invalid("sea.scattering_map", "two sizes in 2..=1024", size));
+    }
+    if let Some(planes) = s.planes {
+        if !(2..=256).contains(&planes) {
+            bail!(invalid("sea.planes", "a plane count in 2..=256", planes));
+        }
+    }
+    Ok((size, polar_of(s.directions)?))
+}
+
+/// The surface's slopes as the kernels read them (`surface`).
+struct WaveMap {
+    kind: u32,
+    slopes: Vec<Vec4>,
+    resolution: u32,
+    size: f32,
+    roughness: Vec4,
+    filter: u32,
+}
+
+/// `[sea].waves` at the scene's `time` (s): flat, or a spectrum's slope
+/// pyramid with the unresolved waves' roughness.
+fn wave_map(w: &Waves, time: f64) -> Result<WaveMap> {
+    Ok(match w {
+        Waves::Flat => WaveMap {
+            kind: WAVES_FLAT,
+            slopes: vec![Vec4::ZERO; 2],
+            resolution: 1,
+            size: 1.0,
+            roughness: Vec4::ZERO,
+            filter: 0,
+        },
+        Waves::Spectrum(spectrum) => {
+            let normals = spectrum.normal_map(time)?;
+            WaveMap {
+                kind: WAVES_NORMAL_MAP,
+                slopes: waves::slope_pyramid(&normals, spectrum.resolution as usize),
+                resolution: spectrum.resolution,
+                size: spectrum.size_m,
+                roughness: spectrum.unresolved_roughness(&normals),
+                filter: spectrum.filter as u32,
+            }
+        }
+    })
+}
+
+/// A varying bottom must lie below an eye under the water.
+fn check_eye_above_bottom(p: &SeaParams, grid: Option<&Grid>, common: &CommonParams) -> Result<()> {
+    let Some(g) = grid else {
+        return Ok(());
+    };
+    let (x, z) = (common.camera_position.x, common.camera_position.z);
+    let under = slicelight_shaders::sea::bottom_depth(p, &g.depths, x, z);
+    if under <= p.camera_depth {
+        bail!(invalid(
+            "sea.bottom",
+            &format!("a bottom below the camera, which is {} m under the water", p.camera_depth),
+            format!("{under} m deep under the camera")
+        ));
+    }
+    Ok(())
 }
 
 /// The sun refracted at the mean (flat) surface, eq. 5's and 7's beam:

@@ -98,6 +98,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.radiance_map",
         "sea.scattering_maps",
         "sea.accumulated_map",
+        "sea.caustics",
         "sea.table_samples",
         "sea.depth_table",
         "sea.bottom_correction",

@@ -229,7 +229,7 @@ fn stress_image_sizes() {
         assert!(seen.is_finite() && seen.w >= 0.0, "pixel ({x}, {y}): surface {seen}");
         for v in [
             slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &clouds),
-            slicelight_shaders::sea::bottom_pixel(i, &big.common, p, seen, &big.sea.bottom, &clouds),
+            slicelight_shaders::sea::bottom_pixel(i, &big.common, p, seen, &big.sea.bottom, &[], &clouds),
         ] {
             assert!(v.is_finite() && v.min_element() >= 0.0, "pixel ({x}, {y}): {v}");
         }

@@ -18,6 +18,8 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Deserialize;
 use slicelight_shaders::optics;
+use slicelight_shaders::scatter::CpuAtomics;
+use slicelight_shaders::sea::caustics::{caustic_triangle, texel_ratio};
 use slicelight_shaders::sea::{
     accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, layer_params, map_coords, order1_pixel,
     order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
@@ -36,6 +38,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &SeaRadianceMap,
     &SeaScatteringMaps,
     &SeaAccumulatedMap,
+    &SeaCaustics,
     &table::SeaTableSamples,
     &table::SeaDepthTable,
     &table::SeaBottomCorrection,
@@ -74,6 +77,10 @@ pub static SEA_ACCUMULATED_MAP: Resource = Resource {
     name: "sea accumulated map",
     kind: ResourceKind::Frame(|s| s.sea.accumulated_map_texels() * 16),
 };
+/// The waves' caustic map on a flat bottom (`slicelight_shaders::sea::caustics`):
+/// fixed-point words, rgb per texel of the wave tile.
+pub static SEA_CAUSTICS: Resource =
+    Resource { binding: 77, name: "sea caustics", kind: ResourceKind::Frame(|s| s.sea.caustic_words() * 4) };
 /// A varying bottom's depth grid (one 0 for a flat bottom).
 pub static SEA_BOTTOM_GRID: Resource = Resource {
     binding: 28,
@@ -135,6 +142,9 @@ pub struct Settings {
     /// Whether to compute second-order scattering (the scattering maps).
     #[serde(default = "yes")]
     pub second_order: bool,
+    /// Whether the waves focus the sunlight on a flat bottom (`caustics`).
+    #[serde(default = "yes")]
+    pub caustics: bool,
     /// Sampling planes `n_z`; none: chosen by the 1/255 rule.
     pub planes: Option<u32>,
     /// Sampling directions `n_d` (three sets of `k^2`, `k` even: 12, 48, 108,
@@ -363,6 +373,14 @@ impl Setup {
             0
         }
     }
+    /// Words of the waves' caustic map (0 without one).
+    pub fn caustic_words(&self) -> u64 {
+        if self.enabled && self.params.caustics != 0 {
+            slicelight_shaders::scatter::words_for(slicelight_shaders::sea::caustics::caustic_bins(&self.params)) as u64
+        } else {
+            0
+        }
+    }
     pub fn scattering_map_texels(&self) -> u64 {
         if self.enabled && self.second_order {
             self.params.layers as u64
@@ -552,12 +570,14 @@ pub fn configure(
         wave_filter,
         camera_depth,
         underwater: underwater as u32,
-        pad0: 0,
+        caustics: 0,
         pad1: 0,
     };
     if underwater {
         check_eye_above_bottom(&params, grid.as_ref(), common)?;
     }
+    // The waves' caustic: over a flat bottom that exists.
+    params.caustics = (s.caustics && waves_kind == WAVES_NORMAL_MAP && grid.is_none() && depth < DEEP) as u32;
     let sampling = if s.second_order { choose_sampling(&mut params, s.planes, polar) } else { Vec::new() };
     check_table_size(&params, s.depth_table)?;
     Ok(Setup {
@@ -1001,6 +1021,84 @@ impl Pass for SeaAccumulatedMap {
     }
 }
 
+/// `sea.caustics`: the waves' caustic map on a flat bottom
+/// (`slicelight_shaders::sea::caustics`), rebuilt with the waves.
+pub struct SeaCaustics;
+
+impl Pass for SeaCaustics {
+    fn name(&self) -> &'static str {
+        "sea.caustics"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::wave_caustics_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SEA_PARAMS, SEA_WAVES]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_CAUSTICS]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sea(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        if p.caustics == 0 {
+            let why = if p.waves != WAVES_NORMAL_MAP {
+                "a flat sea (no waves to focus the light)"
+            } else if p.depth >= DEEP {
+                "no bottom"
+            } else if p.layers > 1 {
+                "a varying bottom (the caustic map is for a flat one)"
+            } else {
+                "caustics = false"
+            };
+            return Plan::skip(why);
+        }
+        let n = p.wave_resolution;
+        Plan::run(
+            format!(
+                "the waves' {} triangles refract the sun onto the bottom at {} m ({n}x{n} caustic map)",
+                2 * n * n,
+                p.depth
+            ),
+            2 * n as u64 * n as u64,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        let mut words = Buffer::zeroed::<u32>(scene.sea.caustic_words() as usize);
+        {
+            let atomics = crate::cpu::as_atomics(words.as_mut_slice::<u32>());
+            let n = p.wave_resolution;
+            crate::cpu::for_each_index(2 * n * n, progress, |i| {
+                caustic_triangle(i, p, &scene.sea.waves, &mut CpuAtomics(atomics));
+            });
+        }
+        frame.insert(&SEA_CAUSTICS, words);
+    }
+    fn compare(&self, scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Refraction and exp on the device (sqrt, exp: Vulkan's precision)
+        // move a corner by ~1e-6 texels: a sub-sample on a cross-section's
+        // edge may flip, moving a quarter texel's share between
+        // neighbours. 1e-3 of the peak, 1 % of the texels.
+        let p = &scene.sea.params;
+        let ratios = |f: &Frame| -> Vec<f32> {
+            let words = f.get::<u32>(&SEA_CAUSTICS);
+            let n = p.wave_resolution;
+            (0..n * n).flat_map(|t| texel_ratio(p, words, t % n, t / n).to_array()).collect()
+        };
+        let (g, c) = (ratios(gpu), ratios(cpu));
+        let (rg, rc) = (gpu.get::<u32>(&SEA_CAUSTICS)[0], cpu.get::<u32>(&SEA_CAUSTICS)[0]);
+        ensure!(rg == rc, "sea caustics: {rg} cross-sections rejected on the device, {rc} on the CPU");
+        let line = compare_values("sea caustics", &g, &c, 1e-3, c.len() / 100 + 1)?;
+        Ok(format!("{line}; {rc} cross-sections rejected"))
+    }
+}
+
 pub struct SeaSurface;
 
 impl Pass for SeaSurface {
@@ -1218,6 +1316,7 @@ fn run_term(
             maps: frame.get::<Vec4>(&SEA_SCATTERING_MAPS),
             accumulated: frame.get::<Vec4>(&SEA_ACCUMULATED_MAP),
             correction: frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION),
+            caustic: frame.get::<u32>(&SEA_CAUSTICS),
             // The clouds' shadow where the volumes' transmittance volumes ran.
             clouds: CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths },
         };
@@ -1234,6 +1333,7 @@ struct TermInputs<'a> {
     maps: &'a [Vec4],
     accumulated: &'a [Vec4],
     correction: &'a [Vec4],
+    caustic: &'a [u32],
     clouds: CloudShadow<'a>,
 }
 
@@ -1372,6 +1472,7 @@ impl Pass for SeaBottom {
             SEA_PARAMS,
             SEA_SURFACE,
             SEA_BOTTOM_GRID,
+            SEA_CAUSTICS,
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
             crate::volumes::OPTICAL_DEPTHS
@@ -1408,12 +1509,13 @@ impl Pass for SeaBottom {
         if brightest.max_element() <= 0.0 {
             return Plan::skip("the bottom is black or lies below all light (e^(-2 c d) = 0 in f32)");
         }
-        Plan::run(format!("the bottom at {} m (eq. 9 with 1/pi)", p.depth), 0)
+        let focus = if p.caustics != 0 { ", the waves' caustic on it" } else { "" };
+        Plan::run(format!("the bottom at {} m (eq. 9 with 1/pi){focus}", p.depth), 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, x| {
-            bottom_pixel(i, common, p, t, bottom, &x.clouds)
+            bottom_pixel(i, common, p, t, bottom, x.caustic, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

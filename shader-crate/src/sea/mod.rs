@@ -51,6 +51,7 @@
 //! order-2 radiance at a depth depends on the point only through that
 //! direction, so one map serves every camera.
 
+pub mod caustics;
 pub mod surface;
 pub mod table;
 pub mod under;
@@ -139,7 +140,8 @@ pub struct SeaParams {
     /// (`underwater` 1: `under`); 0 above.
     pub camera_depth: f32,
     pub underwater: u32,
-    pub pad0: u32,
+    /// 1: the waves' caustic map is built for the flat bottom (`caustics`).
+    pub caustics: u32,
     pub pad1: u32,
 }
 
@@ -1150,16 +1152,19 @@ pub fn bottom_pixel(
     p: &SeaParams,
     surface: Vec4,
     bottom: &[f32],
+    caustic: &[u32],
     clouds: &CloudShadow,
 ) -> Vec4 {
     if p.underwater != 0 {
         let v = under::decode(index, common, p, surface);
         let light = if v.end == under::END_BOTTOM {
             let (depth, cos_gamma) = under::bottom_at(p, bottom, &v);
-            under::bottom_leaving(p, depth, cos_gamma)
+            let q = v.end_point();
+            under::bottom_leaving(p, depth, cos_gamma) * caustics::caustic_at(p, caustic, q.x, q.z)
         } else if v.end == under::END_SURFACE {
             let (depth, cos_gamma) = under::reflected_bottom(p, bottom, &v);
-            bottom_radiance(p, v.up, depth, cos_gamma) * v.reflectance
+            let q = v.end_point() - v.up * (depth / v.up.y);
+            bottom_radiance(p, v.up, depth, cos_gamma) * v.reflectance * caustics::caustic_at(p, caustic, q.x, q.z)
         } else {
             return Vec4::ZERO;
         };
@@ -1172,7 +1177,10 @@ pub fn bottom_pixel(
         return Vec4::ZERO;
     }
     let (depth, cos_gamma) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
-    (bottom_radiance(p, v.view, depth, cos_gamma) * v.transmission * clouds.at(p, v.point)).extend(0.0)
+    // Where the view ray meets the bottom: the waves' caustic there.
+    let q = v.point - v.view * (depth / v.view.y);
+    let focus = caustics::caustic_at(p, caustic, q.x, q.z);
+    (bottom_radiance(p, v.view, depth, cos_gamma) * focus * v.transmission * clouds.at(p, v.point)).extend(0.0)
 }
 
 #[spirv(compute(threads(64)))]
@@ -1343,6 +1351,7 @@ pub fn bottom_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 77)] caustic: &[u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 26)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
@@ -1352,8 +1361,26 @@ pub fn bottom_kernel(
     let common = &common[0];
     if index < common.band_pixels {
         let clouds = CloudShadow { lights, grids, depths };
-        radiance[index as usize] =
-            bottom_pixel(common.band_start + index, common, &params[0], surface[index as usize], bottom, &clouds);
+        let (i, p) = (index as usize, &params[0]);
+        radiance[i] = bottom_pixel(common.band_start + index, common, p, surface[i], bottom, caustic, &clouds);
+    }
+}
+
+/// The waves' caustic map (`caustics`): two invocations per wave-grid cell.
+/// GPU only: on the host the words are `AtomicU32`s (`scatter::CpuAtomics`).
+#[cfg(target_arch = "spirv")]
+#[spirv(compute(threads(64)))]
+pub fn wave_caustics_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 77)] words: &mut [u32],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index < 2 * p.wave_resolution * p.wave_resolution {
+        caustics::caustic_triangle(index, p, waves, words);
     }
 }
 

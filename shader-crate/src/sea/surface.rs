@@ -79,6 +79,13 @@ pub fn slope_normal(s: Vec2) -> Vec3 {
     Vec3::new(-s.x, 1.0, -s.y).normalize()
 }
 
+/// The wave map's slope `(s_x, s_z)` at its grid point `(i, j)` (level 0,
+/// tiled: indices wrap).
+pub fn grid_slope(p: &SeaParams, waves: &[Vec4], i: u32, j: u32) -> Vec2 {
+    let n = p.wave_resolution;
+    texel(p, waves, 0, i % n, j % n).0.xy()
+}
+
 /// Texel `(i, j)` of level `level`: its two `Vec4`s.
 fn texel(p: &SeaParams, waves: &[Vec4], level: u32, i: u32, j: u32) -> (Vec4, Vec4) {
     let m = p.wave_resolution >> level;

@@ -19,7 +19,7 @@ use slicelight_shaders::camera::sample_offset;
 use slicelight_shaders::optics;
 use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT, MATERIAL_GLASS, PROJECTION_FISHEYE};
 
-use crate::sea::reference::{grid_depth, HeightField, SeaReference};
+use crate::sea::reference::{grid_depth, CausticReference, HeightField, SeaReference};
 use crate::sky::reference::SkyReference;
 
 /// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`;
@@ -443,7 +443,12 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let (depth, cos_gamma) = slicelight_shaders::sea::bottom_hit(p, grid, hit.x as f32, hit.z as f32, view.as_vec3());
     let local = slicelight_shaders::sea::SeaParams { depth, ..*p };
     let sea = SeaReference::new(&local, SEA_TOLERANCE);
-    let bottom = sea.bottom(view) * (cos_gamma as f64 / sea.mu_s);
+    // The waves' caustic where the view ray meets the bottom (photon traced).
+    let focus = caustic_reference(data).map_or(DVec3::ONE, |c| {
+        let q = hit - view * (depth as f64 / view.y);
+        c.at(q.x, q.z)
+    });
+    let bottom = sea.bottom(view) * (cos_gamma as f64 / sea.mu_s) * focus;
     let second = if !data.sea.second_order {
         DVec3::ZERO
     } else if p.bottom_nx >= 2 {
@@ -497,8 +502,10 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let att = (-sea.c * length).exp();
     let end = o + d * length;
     let end_above = DVec3::new(end.x, p.level as f64, end.z);
+    let caustic = caustic_reference(data);
+    let focus = |q: DVec3| caustic.as_ref().map_or(DVec3::ONE, |c| c.at(q.x, q.z));
     if d.y < 0.0 {
-        return light + sea.bottom_leaving(p.depth as f64, sea.mu_s) * att * clouds_at(end_above);
+        return light + sea.bottom_leaving(p.depth as f64, sea.mu_s) * focus(end) * att * clouds_at(end_above);
     }
     let mut normal =
         slicelight_shaders::sea::surface_normal(p, &data.sea.waves, end.x as f32, end.z as f32).as_dvec3().normalize();
@@ -521,11 +528,37 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     if up.y < 1e-4 {
         up = DVec3::new(up.x, 1e-4, up.z).normalize();
     }
-    let mut below = sea.order1(up) + sea.bottom(up);
+    let mut below = sea.order1(up) + sea.bottom(up) * focus(end - up * (p.depth as f64 / up.y));
     if data.sea.second_order {
         below += sea.order2(up);
     }
     light + below * r * att * clouds_at(end)
+}
+
+/// The scene's waves' caustic for the reference (`CausticReference`),
+/// traced once and kept for the scenes that share the sea's parameters and
+/// wave slopes (a sample of them: the slopes change with the scene's time).
+fn caustic_reference(data: &SceneData) -> Option<std::sync::Arc<CausticReference>> {
+    type Key = (Vec<u8>, Vec<u32>);
+    static CACHE: std::sync::Mutex<Vec<(Key, std::sync::Arc<CausticReference>)>> = std::sync::Mutex::new(Vec::new());
+    let p = &data.sea.params;
+    if p.caustics == 0 {
+        return None;
+    }
+    let waves = &data.sea.waves;
+    let stride = (waves.len() / 256).max(1);
+    let sample = waves.iter().step_by(stride).flat_map(|v| v.to_array().map(f32::to_bits)).collect();
+    let key = (bytemuck::bytes_of(p).to_vec(), sample);
+    let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, c)) = cache.iter().find(|(k, _)| *k == key) {
+        return Some(c.clone());
+    }
+    let c = std::sync::Arc::new(CausticReference::new(p, waves)?);
+    cache.push((key, c.clone()));
+    if cache.len() > 4 {
+        cache.remove(0);
+    }
+    Some(c)
 }
 
 /// Attenuated surface radiance of one pixel (the mean over its sub-pixel samples), f64.

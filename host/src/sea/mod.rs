@@ -502,8 +502,9 @@ pub fn configure(
     if !sky.enabled {
         bail!(invalid("sea", "a scene with a [sky] (the sea's sun and the sky it reflects)", "no [sky]"));
     }
-    if !s.level_m.is_finite() {
-        bail!(invalid("sea.level_m", "a finite height in m", s.level_m));
+    let most = crate::scene::validate::MAX_COORDINATE;
+    if !(s.level_m.is_finite() && s.level_m.abs() <= most) {
+        bail!(invalid("sea.level_m", &format!("a height in m within +-{most:e}"), s.level_m));
     }
     // An eye at the level or below it is under water (`under`).
     let camera_depth = (s.level_m - camera_y).max(0.0);

@@ -609,6 +609,98 @@ pub fn rough_reflection(
     (light, r_mean)
 }
 
+/// The waves' caustic on a flat bottom by photon tracing, in f64, for the
+/// reference: sharing none of `sea.caustics`' mesh or rasteriser. Photons
+/// leave a stratified grid of `PHOTONS_PER_TEXEL` per wave-map texel over
+/// the tile; each takes the wave slope at its point (bilinear between grid
+/// points, as the renderer reads the surface), is refracted (Snell) with
+/// Fresnel's transmittance, attenuated on its slanted way down relative to
+/// the flat beam, and binned where it meets the bottom on the wave map's
+/// texels (centres at integer texel widths). A texel's value is the ratio
+/// of the bottom's irradiance there to the flat sea's, per channel.
+pub struct CausticReference {
+    n: usize,
+    size: f64,
+    ratio: Vec<DVec3>,
+}
+
+/// Photons per wave-map texel (each way: the square root).
+pub const PHOTONS_PER_TEXEL_SIDE: usize = 8;
+
+impl CausticReference {
+    /// The caustic for the sea `p` with wave slopes `waves`, or `None`
+    /// where the renderer builds none (`SeaParams::caustics` 0).
+    pub fn new(p: &SeaParams, waves: &[glam::Vec4]) -> Option<CausticReference> {
+        if p.caustics == 0 {
+            return None;
+        }
+        let n = p.wave_resolution as usize;
+        let size = p.wave_size as f64;
+        let texel = size / n as f64;
+        let slope = |i: usize, j: usize| {
+            slicelight_shaders::sea::surface::grid_slope(p, waves, (i % n) as u32, (j % n) as u32).as_dvec2()
+        };
+        let sun = p.sun_direction.xyz().as_dvec3().normalize();
+        let n_w = p.extinction.w as f64;
+        let eta = 1.0 / n_w;
+        let flat = sun.y * slicelight_shaders::optics::transmittance(sun.y, eta);
+        let mu_s = {
+            let (cos_t, _) = slicelight_shaders::optics::transmitted_cosine(sun.y, eta);
+            cos_t
+        };
+        let (c, depth) = (p.extinction.xyz().as_dvec3(), p.depth as f64);
+        let side = n * PHOTONS_PER_TEXEL_SIDE;
+        let ratio = (0..side)
+            .into_par_iter()
+            .map(|row| {
+                let mut h = vec![DVec3::ZERO; n * n];
+                for col in 0..side {
+                    // Texel coordinates of the photon on the surface.
+                    let (u, v) = (
+                        (col as f64 + 0.5) / PHOTONS_PER_TEXEL_SIDE as f64,
+                        (row as f64 + 0.5) / PHOTONS_PER_TEXEL_SIDE as f64,
+                    );
+                    let (i0, j0) = (u.floor() as usize, v.floor() as usize);
+                    let (ax, az) = (u - i0 as f64, v - j0 as f64);
+                    let s = (slope(i0, j0) * (1.0 - ax) + slope(i0 + 1, j0) * ax) * (1.0 - az)
+                        + (slope(i0, j0 + 1) * (1.0 - ax) + slope(i0 + 1, j0 + 1) * ax) * az;
+                    let normal = DVec3::new(-s.x, 1.0, -s.y).normalize();
+                    let cos_i = sun.dot(normal);
+                    if cos_i <= 0.0 {
+                        continue;
+                    }
+                    let (cos_t, _) = slicelight_shaders::optics::transmitted_cosine(cos_i, eta);
+                    let r = (-sun * eta + normal * (eta * cos_i - cos_t)).normalize();
+                    let down = -r.y;
+                    let weight = cos_i / normal.y * slicelight_shaders::optics::transmittance(cos_i, eta) / flat;
+                    let att = (-c * (depth * (1.0 / down - 1.0 / mu_s))).exp();
+                    let (lu, lv) = (u + r.x * depth / down / texel, v + r.z * depth / down / texel);
+                    let (bi, bj) = ((lu + 0.5).floor() as i64, (lv + 0.5).floor() as i64);
+                    let (bi, bj) = (bi.rem_euclid(n as i64) as usize, bj.rem_euclid(n as i64) as usize);
+                    h[bj * n + bi] += att * weight;
+                }
+                h
+            })
+            .reduce(|| vec![DVec3::ZERO; n * n], |a, b| a.iter().zip(&b).map(|(x, y)| *x + *y).collect());
+        // Each photon carries 1/PHOTONS_PER_TEXEL of a texel's area.
+        let per_photon = 1.0 / (PHOTONS_PER_TEXEL_SIDE * PHOTONS_PER_TEXEL_SIDE) as f64;
+        Some(CausticReference { n, size, ratio: ratio.into_iter().map(|v| v * per_photon).collect() })
+    }
+
+    /// The ratio at the bottom point `(x, z)` (m), bilinear between texel
+    /// centres, tiled (the same reconstruction as the renderer's map).
+    pub fn at(&self, x: f64, z: f64) -> DVec3 {
+        let n = self.n;
+        let wrap = |v: f64| (v / self.size).rem_euclid(1.0) * n as f64;
+        let (fx, fz) = (wrap(x), wrap(z));
+        let (x0, z0) = (fx.floor() as usize % n, fz.floor() as usize % n);
+        let (ax, az) = (fx - fx.floor(), fz - fz.floor());
+        let (x1, z1) = ((x0 + 1) % n, (z0 + 1) % n);
+        let r = |i: usize, j: usize| self.ratio[j * n + i];
+        (r(x0, z0) * (1.0 - ax) + r(x1, z0) * ax) * (1.0 - az) + (r(x0, z1) * (1.0 - ax) + r(x1, z1) * ax) * az
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

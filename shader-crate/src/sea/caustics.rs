@@ -19,7 +19,7 @@
 //! channel), kept on a map of the tile (the bottom's caustic repeats with
 //! the waves), texel `(i, j)` centred on `(i, j)` texel widths.
 //!
-//! Each cross-section is rasterised by its 2x2 sub-samples per texel, by
+//! Each cross-section is rasterised by its 4x4 sub-samples per texel, by
 //! the scatter primitive (`scatter.rs`: fixed point, the same sums in any
 //! order); one that covers none goes to the texel under its centroid; one
 //! over `MAX_TEXELS` texels is counted as rejected (word 0) and not drawn.
@@ -42,11 +42,12 @@ use crate::scatter::{scatter_add, AtomicWords, REJECTED_WORD};
 pub const CAUSTIC_SCALE: f32 = 16_777_216.0;
 
 /// Sub-samples per texel each way.
-const SUB: u32 = 2;
+const SUB: u32 = 4;
 
-/// Most texels a cross-section's box may span (lavapipe ends an
-/// invocation's loops after 65 535 iterations in all).
-pub const MAX_TEXELS: f32 = 4096.0;
+/// Most texels a cross-section's box may span: two walks over it of
+/// `SUB^2` samples each stay within the 65 535 loop iterations in all
+/// that lavapipe allows an invocation.
+pub const MAX_TEXELS: f32 = 1024.0;
 
 /// Bins of the caustic map: rgb per texel.
 pub fn caustic_bins(p: &SeaParams) -> u32 {

@@ -573,6 +573,8 @@ pub fn configure(
         underwater: underwater as u32,
         caustics: 0,
         pad1: 0,
+        pad2: 0,
+        pad3: 0,
     };
     if underwater {
         check_eye_above_bottom(&params, grid.as_ref(), common)?;

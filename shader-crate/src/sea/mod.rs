@@ -143,13 +143,20 @@ pub struct SeaParams {
     /// 1: the waves' caustic map is built for the flat bottom (`caustics`).
     pub caustics: u32,
     pub pad1: u32,
+    pub pad2: u32,
+    pub pad3: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
-// SAFETY: `repr(C)`, ten `Vec4`s and twenty-four 4-byte scalars, no padding; any bits are valid.
+// SAFETY: `repr(C)`, ten `Vec4`s and twenty-four 4-byte scalars (256
+// bytes, a multiple of the `Vec4`s' 16-byte alignment: no padding, which
+// `bytes_of` would read uninitialised; the assertion below holds it); any
+// bits are valid.
 unsafe impl bytemuck::Zeroable for SeaParams {}
 #[cfg(not(target_arch = "spirv"))]
 unsafe impl bytemuck::Pod for SeaParams {}
+#[cfg(not(target_arch = "spirv"))]
+const _: () = assert!(core::mem::size_of::<SeaParams>() == 160 + 24 * 4);
 
 pub const WAVES_FLAT: u32 = 0;
 pub const WAVES_NORMAL_MAP: u32 = 1;

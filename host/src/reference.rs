@@ -19,7 +19,7 @@ use slicelight_shaders::camera::sample_offset;
 use slicelight_shaders::optics;
 use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL, LIGHT_POINT, MATERIAL_GLASS, PROJECTION_FISHEYE};
 
-use crate::sea::reference::{grid_depth, CausticReference, HeightField, SeaReference};
+use crate::sea::reference::{grid_depth, CausticReference, HeightField, SeaReference, ShaftReference};
 use crate::sky::reference::SkyReference;
 
 /// Relative tolerance of the sky's adaptive quadratures (see `sky_reference`;
@@ -491,7 +491,17 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         }
     };
     let above = DVec3::new(o.x, p.level as f64, o.z);
-    let mut along = sea.order1_segment(z_e, d, length);
+    // Order 1 through the waves' focusing where the renderer builds shafts
+    // (photon traced, read per point of a fine quadrature), else the flat beam.
+    let mut along = match shaft_reference(data) {
+        Some(shafts) => {
+            let step = p.wave_size as f64 / p.wave_resolution as f64 / 4.0;
+            sea.order1_focused(o, p.level as f64, d, length, step, &|x: DVec3| {
+                shafts.at(x.x, p.level as f64 - x.y, x.z)
+            })
+        }
+        None => sea.order1_segment(z_e, d, length),
+    };
     if data.sea.second_order {
         along += sea.order2_segment(z_e, d, length);
     }
@@ -537,23 +547,38 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
 
 /// The scene's waves' caustic for the reference (`CausticReference`),
 /// traced once and kept for the scenes that share the sea's parameters and
-/// wave slopes (a sample of them: the slopes change with the scene's time).
+/// wave slopes (`cached`).
 fn caustic_reference(data: &SceneData) -> Option<std::sync::Arc<CausticReference>> {
-    type Key = (Vec<u8>, Vec<u32>);
-    static CACHE: std::sync::Mutex<Vec<(Key, std::sync::Arc<CausticReference>)>> = std::sync::Mutex::new(Vec::new());
+    static CACHE: Cache<CausticReference> = std::sync::Mutex::new(Vec::new());
+    cached(&CACHE, data, || CausticReference::new(&data.sea.params, &data.sea.waves))
+}
+
+/// The scene's shafts' caustics for the reference (`ShaftReference`:
+/// about 4 million photons, 4 to 64 per wave texel), kept as
+/// `caustic_reference` keeps its.
+fn shaft_reference(data: &SceneData) -> Option<std::sync::Arc<ShaftReference>> {
+    static CACHE: Cache<ShaftReference> = std::sync::Mutex::new(Vec::new());
+    let n = data.sea.params.wave_resolution as f64;
+    let side = ((4.0e6f64).sqrt() / n).round().clamp(4.0, 8.0) as usize;
+    cached(&CACHE, data, || ShaftReference::new(&data.sea.params, &data.sea.waves, side))
+}
+
+type Cache<T> = std::sync::Mutex<Vec<((Vec<u8>, Vec<u32>), std::sync::Arc<T>)>>;
+
+/// What `make` builds for the scene's sea, kept per the sea's parameters
+/// and a sample of its wave slopes (which change with the scene's time),
+/// the last four.
+fn cached<T>(cache: &Cache<T>, data: &SceneData, make: impl FnOnce() -> Option<T>) -> Option<std::sync::Arc<T>> {
     let p = &data.sea.params;
-    if p.caustics == 0 {
-        return None;
-    }
     let waves = &data.sea.waves;
     let stride = (waves.len() / 256).max(1);
     let sample = waves.iter().step_by(stride).flat_map(|v| v.to_array().map(f32::to_bits)).collect();
     let key = (bytemuck::bytes_of(p).to_vec(), sample);
-    let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+    let mut cache = cache.lock().unwrap_or_else(|e| e.into_inner());
     if let Some((_, c)) = cache.iter().find(|(k, _)| *k == key) {
         return Some(c.clone());
     }
-    let c = std::sync::Arc::new(CausticReference::new(p, waves)?);
+    let c = std::sync::Arc::new(make()?);
     cache.push((key, c.clone()));
     if cache.len() > 4 {
         cache.remove(0);

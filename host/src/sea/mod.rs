@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use serde::Deserialize;
 use slicelight_shaders::optics;
 use slicelight_shaders::scatter::CpuAtomics;
-use slicelight_shaders::sea::caustics::{caustic_triangle, texel_ratio};
+use slicelight_shaders::sea::caustics::{caustic_triangle, caustic_triangles, shaft_map_len, shaft_mip_texel};
 use slicelight_shaders::sea::{
     accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, layer_params, map_coords, order1_pixel,
     order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
@@ -39,6 +39,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &SeaScatteringMaps,
     &SeaAccumulatedMap,
     &SeaCaustics,
+    &SeaShafts,
     &table::SeaTableSamples,
     &table::SeaDepthTable,
     &table::SeaBottomCorrection,
@@ -81,6 +82,9 @@ pub static SEA_ACCUMULATED_MAP: Resource = Resource {
 /// fixed-point words, rgb per texel of the wave tile.
 pub static SEA_CAUSTICS: Resource =
     Resource { binding: 77, name: "sea caustics", kind: ResourceKind::Frame(|s| s.sea.caustic_words() * 4) };
+/// The shaft planes' caustics and their mips (`sea.shafts`), rgb per texel.
+pub static SEA_SHAFTS: Resource =
+    Resource { binding: 78, name: "sea shaft maps", kind: ResourceKind::Frame(|s| s.sea.shaft_texels() * 16) };
 /// A varying bottom's depth grid (one 0 for a flat bottom).
 pub static SEA_BOTTOM_GRID: Resource = Resource {
     binding: 28,
@@ -145,6 +149,17 @@ pub struct Settings {
     /// Whether the waves focus the sunlight on a flat bottom (`caustics`).
     #[serde(default = "yes")]
     pub caustics: bool,
+    /// For an eye under the water, whether the waves' focusing is traced
+    /// into the water as light shafts (and onto objects there).
+    #[serde(default = "yes")]
+    pub shafts: bool,
+    /// Horizontal planes the shafts' caustic is built on, surface to
+    /// `shaft_depth_m`.
+    #[serde(default = "shaft_planes")]
+    pub shaft_planes: u32,
+    /// Depth of the deepest shaft plane, m; none: the bottom's depth or
+    /// 20 m, whichever is less (below it the caustic's mean).
+    pub shaft_depth_m: Option<f32>,
     /// Sampling planes `n_z`; none: chosen by the 1/255 rule.
     pub planes: Option<u32>,
     /// Sampling directions `n_d` (three sets of `k^2`, `k` even: 12, 48, 108,
@@ -160,6 +175,11 @@ pub struct Settings {
 fn depth_layers() -> u32 {
     12
 }
+fn shaft_planes() -> u32 {
+    12
+}
+/// The deepest default shaft plane, m.
+pub const SHAFT_DEPTH: f32 = 20.0;
 fn depth_table() -> u32 {
     32
 }
@@ -373,9 +393,17 @@ impl Setup {
             0
         }
     }
-    /// Words of the waves' caustic map (0 without one).
+    /// Texels of the shaft maps (0 without shafts).
+    pub fn shaft_texels(&self) -> u64 {
+        if self.enabled {
+            shaft_map_len(&self.params) as u64
+        } else {
+            0
+        }
+    }
+    /// Words of the waves' caustic maps (0 without one).
     pub fn caustic_words(&self) -> u64 {
-        if self.enabled && self.params.caustics != 0 {
+        if self.enabled && caustic_triangles(&self.params) > 0 {
             slicelight_shaders::scatter::words_for(slicelight_shaders::sea::caustics::caustic_bins(&self.params)) as u64
         } else {
             0
@@ -572,15 +600,16 @@ pub fn configure(
         camera_depth,
         underwater: underwater as u32,
         caustics: 0,
-        pad1: 0,
-        pad2: 0,
-        pad3: 0,
+        shaft_planes: 0,
+        shaft_depth: 0.0,
+        shaft_level: 0,
     };
     if underwater {
         check_eye_above_bottom(&params, grid.as_ref(), common)?;
     }
     // The waves' caustic: over a flat bottom that exists.
     params.caustics = (s.caustics && waves_kind == WAVES_NORMAL_MAP && grid.is_none() && depth < DEEP) as u32;
+    shafts_of(s, &mut params)?;
     let sampling = if s.second_order { choose_sampling(&mut params, s.planes, polar) } else { Vec::new() };
     check_table_size(&params, s.depth_table)?;
     Ok(Setup {
@@ -592,6 +621,31 @@ pub fn configure(
         single: s.single,
         sampling: sampling.join(", "),
     })
+}
+
+/// `[sea]`'s caustic light shafts: for an eye under waves, `shaft_planes`
+/// planes from the surface to `shaft_depth_m` (default: the bottom's
+/// depth, at most `SHAFT_DEPTH`), on the wave pyramid's level whose side is
+/// at most `MAX_SHAFT_RESOLUTION` texels.
+fn shafts_of(s: &Settings, params: &mut SeaParams) -> Result<()> {
+    if !(2..=64).contains(&s.shaft_planes) {
+        bail!(invalid("sea.shaft_planes", "a count of planes in 2..=64", s.shaft_planes));
+    }
+    if let Some(d) = s.shaft_depth_m {
+        if !(d.is_finite() && d > 0.0 && d <= 1e4) {
+            bail!(invalid("sea.shaft_depth_m", "a depth in m in (0, 1e4]", d));
+        }
+    }
+    if !(s.shafts && params.underwater != 0 && params.waves == WAVES_NORMAL_MAP) {
+        return Ok(());
+    }
+    let max = slicelight_shaders::sea::caustics::MAX_SHAFT_RESOLUTION;
+    let n = params.wave_resolution;
+    params.shaft_level = if n > max { (n / max).trailing_zeros() } else { 0 };
+    params.shaft_planes = s.shaft_planes;
+    let bottom = if params.bottom_nx >= 2 { params.bottom_grid.w } else { params.depth };
+    params.shaft_depth = s.shaft_depth_m.unwrap_or(bottom.min(SHAFT_DEPTH));
+    Ok(())
 }
 
 /// `[sea]`'s bottom: a varying one's grid, if any, and the flat depth (m;
@@ -1024,8 +1078,9 @@ impl Pass for SeaAccumulatedMap {
     }
 }
 
-/// `sea.caustics`: the waves' caustic map on a flat bottom
-/// (`slicelight_shaders::sea::caustics`), rebuilt with the waves.
+/// `sea.caustics`: the waves' caustic map on a flat bottom and on the
+/// shaft planes (`slicelight_shaders::sea::caustics`), rebuilt with the
+/// waves.
 pub struct SeaCaustics;
 
 impl Pass for SeaCaustics {
@@ -1049,7 +1104,7 @@ impl Pass for SeaCaustics {
             return skip;
         }
         let p = &scene.sea.params;
-        if p.caustics == 0 {
+        if p.caustics == 0 && p.shaft_planes == 0 {
             let why = if p.waves != WAVES_NORMAL_MAP {
                 "a flat sea (no waves to focus the light)"
             } else if p.depth >= DEEP {
@@ -1062,22 +1117,27 @@ impl Pass for SeaCaustics {
             return Plan::skip(why);
         }
         let n = p.wave_resolution;
-        Plan::run(
-            format!(
-                "the waves' {} triangles refract the sun onto the bottom at {} m ({n}x{n} caustic map)",
-                2 * n * n,
-                p.depth
-            ),
-            2 * n as u64 * n as u64,
-        )
+        let mut what = Vec::new();
+        if p.caustics != 0 {
+            what.push(format!("{} triangles onto the bottom at {} m ({n}x{n} map)", 2 * n * n, p.depth));
+        }
+        if p.shaft_planes != 0 {
+            let m = slicelight_shaders::sea::caustics::shaft_resolution(p);
+            what.push(format!(
+                "{} triangles onto each of {} shaft planes down to {} m ({m}x{m} maps)",
+                2 * m * m,
+                p.shaft_planes,
+                p.shaft_depth
+            ));
+        }
+        Plan::run(format!("the waves refract the sun: {}", what.join("; ")), caustic_triangles(p) as u64)
     }
     fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let p = &scene.sea.params;
         let mut words = Buffer::zeroed::<u32>(scene.sea.caustic_words() as usize);
         {
             let atomics = crate::cpu::as_atomics(words.as_mut_slice::<u32>());
-            let n = p.wave_resolution;
-            crate::cpu::for_each_index(2 * n * n, progress, |i| {
+            crate::cpu::for_each_index(caustic_triangles(p), progress, |i| {
                 caustic_triangle(i, p, &scene.sea.waves, &mut CpuAtomics(atomics));
             });
         }
@@ -1091,14 +1151,71 @@ impl Pass for SeaCaustics {
         let p = &scene.sea.params;
         let ratios = |f: &Frame| -> Vec<f32> {
             let words = f.get::<u32>(&SEA_CAUSTICS);
-            let n = p.wave_resolution;
-            (0..n * n).flat_map(|t| texel_ratio(p, words, t % n, t / n).to_array()).collect()
+            let bins = slicelight_shaders::sea::caustics::caustic_bins(p);
+            (0..bins).map(|b| slicelight_shaders::sea::caustics::read(words, b)).collect()
         };
         let (g, c) = (ratios(gpu), ratios(cpu));
         let (rg, rc) = (gpu.get::<u32>(&SEA_CAUSTICS)[0], cpu.get::<u32>(&SEA_CAUSTICS)[0]);
         ensure!(rg == rc, "sea caustics: {rg} cross-sections rejected on the device, {rc} on the CPU");
         let line = compare_values("sea caustics", &g, &c, 1e-3, c.len() / 100 + 1)?;
         Ok(format!("{line}; {rc} cross-sections rejected"))
+    }
+}
+
+/// `sea.shafts`: the shaft planes' caustics as rgb ratios with their mips
+/// (`caustics::shaft_mip_texel`), read along the view rays by order 1.
+pub struct SeaShafts;
+
+impl Pass for SeaShafts {
+    fn name(&self) -> &'static str {
+        "sea.shafts"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::shaft_maps_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SEA_PARAMS, SEA_CAUSTICS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_SHAFTS]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sea(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        if p.shaft_planes == 0 {
+            let why = if p.underwater == 0 {
+                "the eye is above the water"
+            } else if p.waves != WAVES_NORMAL_MAP {
+                "a flat sea (no waves to focus the light)"
+            } else {
+                "shafts = false"
+            };
+            return Plan::skip(why);
+        }
+        let m = slicelight_shaders::sea::caustics::shaft_resolution(p);
+        Plan::run(format!("{} shaft planes' {m}x{m} caustics and their mips", p.shaft_planes), shaft_map_len(p) as u64)
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        let mut maps = Buffer::zeroed::<Vec4>(shaft_map_len(p) as usize);
+        {
+            let words = frame.get::<u32>(&SEA_CAUSTICS);
+            for_each_invocation(maps.as_mut_slice::<Vec4>(), 0, progress, |i, v| {
+                *v = shaft_mip_texel(i, p, words);
+            });
+        }
+        frame.insert(&SEA_SHAFTS, maps);
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Averages of the caustic words, which agree to 1e-3 of the peak
+        // on 1 % of the bins (`sea.caustics`); the mips average those.
+        let c = cpu.get::<Vec4>(&SEA_SHAFTS);
+        compare_rgb("sea shaft maps", gpu.get(&SEA_SHAFTS), c, 1e-3, c.len() * 3 / 100 + 1)
     }
 }
 
@@ -1192,7 +1309,7 @@ impl Pass for SeaWater {
         "sea::water_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_SURFACE]
+        resources![COMMON, GBUFFER, SEA_PARAMS, SEA_SURFACE, SEA_SHAFTS]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_WATER]
@@ -1220,11 +1337,13 @@ impl Pass for SeaWater {
         let blank = slicelight_shaders::common::surface::no_surface();
         frame.write_all::<Vec4>(&SEA_WATER, common.band_pixels as usize, |frame, out| {
             let surface = frame.get::<Vec4>(&SEA_SURFACE);
+            let shafts = frame.get::<Vec4>(&SEA_SHAFTS);
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
             for_each_invocation(out, common.band_start, progress, |i, v| {
                 let k = (i - common.band_start) as usize;
                 let seen = surface.get(k).copied().unwrap_or(Vec4::ZERO);
-                *v = slicelight_shaders::sea::water_pixel(i, common, p, seen, gbuffer.get(k).unwrap_or(&blank));
+                let texel = gbuffer.get(k).unwrap_or(&blank);
+                *v = slicelight_shaders::sea::water_pixel(i, common, p, seen, shafts, texel);
             });
         });
     }
@@ -1320,6 +1439,7 @@ fn run_term(
             accumulated: frame.get::<Vec4>(&SEA_ACCUMULATED_MAP),
             correction: frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION),
             caustic: frame.get::<u32>(&SEA_CAUSTICS),
+            shafts: frame.get::<Vec4>(&SEA_SHAFTS),
             // The clouds' shadow where the volumes' transmittance volumes ran.
             clouds: CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths },
         };
@@ -1337,6 +1457,7 @@ struct TermInputs<'a> {
     accumulated: &'a [Vec4],
     correction: &'a [Vec4],
     caustic: &'a [u32],
+    shafts: &'a [Vec4],
     clouds: CloudShadow<'a>,
 }
 
@@ -1355,6 +1476,7 @@ impl Pass for SeaOrder1 {
             SEA_PARAMS,
             SEA_SURFACE,
             SEA_BOTTOM_GRID,
+            SEA_SHAFTS,
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
             crate::volumes::OPTICAL_DEPTHS
@@ -1385,7 +1507,7 @@ impl Pass for SeaOrder1 {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, x| {
-            order1_pixel(i, common, p, t, bottom, &x.clouds)
+            order1_pixel(i, common, p, t, bottom, x.shafts, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

@@ -289,6 +289,41 @@ impl SeaReference {
         self.along(&f, length)
     }
 
+    /// Order 1 gathered toward an eye at `o` (scene coordinates, the
+    /// surface at height `level`) along `d` over `length` m with the
+    /// waves' focusing `focus(x)` (the ratio of the sun's irradiance at `x`
+    /// to the flat beam's): `int b p(sun . -d) E_w e^(-c z/mu_s) focus e^(-c t) dt`
+    /// by the midpoint rule in steps of about `step` m (at most 10^6),
+    /// out to 60 optical lengths of the clearest channel.
+    pub fn order1_focused(
+        &self,
+        o: DVec3,
+        level: f64,
+        d: DVec3,
+        length: f64,
+        step: f64,
+        focus: &dyn Fn(DVec3) -> DVec3,
+    ) -> DVec3 {
+        let beta = self.b * self.hg(-self.sun.dot(d));
+        let c = self.c;
+        let reach = if c.min_element() > 0.0 { length.min(60.0 / c.min_element()) } else { length.min(1e6) };
+        let count = ((reach / step).ceil() as usize).clamp(1, 1_000_000);
+        let h = reach / count as f64;
+        let mut sum = DVec3::ZERO;
+        for i in 0..count {
+            let t = (i as f64 + 0.5) * h;
+            let x = o + d * t;
+            let z = (level - x.y).max(0.0);
+            let e = DVec3::new(
+                (-c.x * (z / self.mu_s + t)).exp(),
+                (-c.y * (z / self.mu_s + t)).exp(),
+                (-c.z * (z / self.mu_s + t)).exp(),
+            );
+            sum += e * focus(x);
+        }
+        beta * self.beam * sum * h
+    }
+
     /// Order 2 gathered toward an eye at depth `z_e` along `d` over
     /// `length` m: `int J2(z(t), -d) e^(-c t) dt` with `J2` the order-2
     /// source by quadrature over the sphere (`source2`), no planes, no maps.
@@ -634,70 +669,151 @@ impl CausticReference {
         if p.caustics == 0 {
             return None;
         }
-        let n = p.wave_resolution as usize;
-        let size = p.wave_size as f64;
-        let texel = size / n as f64;
-        let slope = |i: usize, j: usize| {
-            slicelight_shaders::sea::surface::grid_slope(p, waves, (i % n) as u32, (j % n) as u32).as_dvec2()
-        };
-        let sun = p.sun_direction.xyz().as_dvec3().normalize();
-        let n_w = p.extinction.w as f64;
-        let eta = 1.0 / n_w;
-        let flat = sun.y * slicelight_shaders::optics::transmittance(sun.y, eta);
-        let mu_s = {
-            let (cos_t, _) = slicelight_shaders::optics::transmitted_cosine(sun.y, eta);
-            cos_t
-        };
-        let (c, depth) = (p.extinction.xyz().as_dvec3(), p.depth as f64);
-        let side = n * PHOTONS_PER_TEXEL_SIDE;
-        let ratio = (0..side)
-            .into_par_iter()
-            .map(|row| {
-                let mut h = vec![DVec3::ZERO; n * n];
-                for col in 0..side {
-                    // Texel coordinates of the photon on the surface.
-                    let (u, v) = (
-                        (col as f64 + 0.5) / PHOTONS_PER_TEXEL_SIDE as f64,
-                        (row as f64 + 0.5) / PHOTONS_PER_TEXEL_SIDE as f64,
-                    );
-                    let (i0, j0) = (u.floor() as usize, v.floor() as usize);
-                    let (ax, az) = (u - i0 as f64, v - j0 as f64);
-                    let s = (slope(i0, j0) * (1.0 - ax) + slope(i0 + 1, j0) * ax) * (1.0 - az)
-                        + (slope(i0, j0 + 1) * (1.0 - ax) + slope(i0 + 1, j0 + 1) * ax) * az;
-                    let normal = DVec3::new(-s.x, 1.0, -s.y).normalize();
-                    let cos_i = sun.dot(normal);
-                    if cos_i <= 0.0 {
-                        continue;
-                    }
-                    let (cos_t, _) = slicelight_shaders::optics::transmitted_cosine(cos_i, eta);
-                    let r = (-sun * eta + normal * (eta * cos_i - cos_t)).normalize();
-                    let down = -r.y;
-                    let weight = cos_i / normal.y * slicelight_shaders::optics::transmittance(cos_i, eta) / flat;
-                    let att = (-c * (depth * (1.0 / down - 1.0 / mu_s))).exp();
-                    let (lu, lv) = (u + r.x * depth / down / texel, v + r.z * depth / down / texel);
-                    let (bi, bj) = ((lu + 0.5).floor() as i64, (lv + 0.5).floor() as i64);
-                    let (bi, bj) = (bi.rem_euclid(n as i64) as usize, bj.rem_euclid(n as i64) as usize);
-                    h[bj * n + bi] += att * weight;
-                }
-                h
-            })
-            .reduce(|| vec![DVec3::ZERO; n * n], |a, b| a.iter().zip(&b).map(|(x, y)| *x + *y).collect());
-        // Each photon carries 1/PHOTONS_PER_TEXEL of a texel's area.
-        let per_photon = 1.0 / (PHOTONS_PER_TEXEL_SIDE * PHOTONS_PER_TEXEL_SIDE) as f64;
-        Some(CausticReference { n, size, ratio: ratio.into_iter().map(|v| v * per_photon).collect() })
+        let mut maps = photon_maps(p, waves, &[p.depth as f64], PHOTONS_PER_TEXEL_SIDE);
+        Some(CausticReference { n: p.wave_resolution as usize, size: p.wave_size as f64, ratio: maps.remove(0) })
     }
 
     /// The ratio at the bottom point `(x, z)` (m), bilinear between texel
     /// centres, tiled (the same reconstruction as the renderer's map).
     pub fn at(&self, x: f64, z: f64) -> DVec3 {
-        let n = self.n;
-        let wrap = |v: f64| (v / self.size).rem_euclid(1.0) * n as f64;
-        let (fx, fz) = (wrap(x), wrap(z));
-        let (x0, z0) = (fx.floor() as usize % n, fz.floor() as usize % n);
-        let (ax, az) = (fx - fx.floor(), fz - fz.floor());
-        let (x1, z1) = ((x0 + 1) % n, (z0 + 1) % n);
-        let r = |i: usize, j: usize| self.ratio[j * n + i];
-        (r(x0, z0) * (1.0 - ax) + r(x1, z0) * ax) * (1.0 - az) + (r(x0, z1) * (1.0 - ax) + r(x1, z1) * ax) * az
+        bilinear(&self.ratio, self.n, self.size, x, z)
+    }
+}
+
+/// `map` (`n`^2 texels over a tile `size` m wide, centres at integer
+/// texel widths) at the horizontal point `(x, z)`, bilinear, tiled.
+fn bilinear(map: &[DVec3], n: usize, size: f64, x: f64, z: f64) -> DVec3 {
+    let wrap = |v: f64| (v / size).rem_euclid(1.0) * n as f64;
+    let (fx, fz) = (wrap(x), wrap(z));
+    let (x0, z0) = (fx.floor() as usize % n, fz.floor() as usize % n);
+    let (ax, az) = (fx - fx.floor(), fz - fz.floor());
+    let (x1, z1) = ((x0 + 1) % n, (z0 + 1) % n);
+    let r = |i: usize, j: usize| map[j * n + i];
+    (r(x0, z0) * (1.0 - ax) + r(x1, z0) * ax) * (1.0 - az) + (r(x0, z1) * (1.0 - ax) + r(x1, z1) * ax) * az
+}
+
+/// The waves' caustic at each of `depths` (m) by photon tracing in f64:
+/// `side`^2 photons per wave-map texel from a stratified grid over the
+/// tile, each taking the wave slope at its point (bilinear between the
+/// full-resolution grid's points, as the renderer reads the surface),
+/// refracted (Snell) with Fresnel's transmittance, attenuated on its
+/// slanted way down relative to the flat beam, and binned where its
+/// straight path crosses each depth, on the wave map's texels. Each map
+/// holds the ratio of the irradiance there to the flat sea's, per channel.
+pub fn photon_maps(p: &SeaParams, waves: &[glam::Vec4], depths: &[f64], side: usize) -> Vec<Vec<DVec3>> {
+    let n = p.wave_resolution as usize;
+    let size = p.wave_size as f64;
+    let texel = size / n as f64;
+    let slope = |i: usize, j: usize| {
+        slicelight_shaders::sea::surface::grid_slope(p, waves, (i % n) as u32, (j % n) as u32).as_dvec2()
+    };
+    let sun = p.sun_direction.xyz().as_dvec3().normalize();
+    let n_w = p.extinction.w as f64;
+    let eta = 1.0 / n_w;
+    let flat = sun.y * slicelight_shaders::optics::transmittance(sun.y, eta);
+    let mu_s = {
+        let (cos_t, _) = slicelight_shaders::optics::transmitted_cosine(sun.y, eta);
+        cos_t
+    };
+    let c = p.extinction.xyz().as_dvec3();
+    let rows = n * side;
+    let empty = || vec![vec![DVec3::ZERO; n * n]; depths.len()];
+    let maps = (0..rows)
+        .into_par_iter()
+        .fold(empty, |mut h, row| {
+            for col in 0..rows {
+                // Texel coordinates of the photon on the surface.
+                let (u, v) = ((col as f64 + 0.5) / side as f64, (row as f64 + 0.5) / side as f64);
+                let (i0, j0) = (u.floor() as usize, v.floor() as usize);
+                let (ax, az) = (u - i0 as f64, v - j0 as f64);
+                let s = (slope(i0, j0) * (1.0 - ax) + slope(i0 + 1, j0) * ax) * (1.0 - az)
+                    + (slope(i0, j0 + 1) * (1.0 - ax) + slope(i0 + 1, j0 + 1) * ax) * az;
+                let normal = DVec3::new(-s.x, 1.0, -s.y).normalize();
+                let cos_i = sun.dot(normal);
+                if cos_i <= 0.0 {
+                    continue;
+                }
+                let (cos_t, _) = slicelight_shaders::optics::transmitted_cosine(cos_i, eta);
+                let r = (-sun * eta + normal * (eta * cos_i - cos_t)).normalize();
+                let down = -r.y;
+                let weight = cos_i / normal.y * slicelight_shaders::optics::transmittance(cos_i, eta) / flat;
+                for (map, &depth) in h.iter_mut().zip(depths) {
+                    let att = (-c * (depth * (1.0 / down - 1.0 / mu_s))).exp();
+                    let (lu, lv) = (u + r.x * depth / down / texel, v + r.z * depth / down / texel);
+                    let (bi, bj) = ((lu + 0.5).floor() as i64, (lv + 0.5).floor() as i64);
+                    let (bi, bj) = (bi.rem_euclid(n as i64) as usize, bj.rem_euclid(n as i64) as usize);
+                    map[bj * n + bi] += att * weight;
+                }
+            }
+            h
+        })
+        .reduce(empty, |mut a, b| {
+            for (x, y) in a.iter_mut().zip(&b) {
+                for (u, v) in x.iter_mut().zip(y) {
+                    *u += *v;
+                }
+            }
+            a
+        });
+    // Each photon carries 1/side^2 of a texel's area.
+    let per_photon = 1.0 / (side * side) as f64;
+    maps.into_iter().map(|m| m.into_iter().map(|v| v * per_photon).collect()).collect()
+}
+
+/// The waves' focusing through the water for the shafts' reference: the
+/// photon-traced caustic (`photon_maps`) on the full-resolution wave grid
+/// at `SHAFT_REFERENCE_REFINE` times the renderer's shaft planes (from the
+/// surface to its deepest plane), read at a point between the two maps
+/// around its depth along the refracted sun, as light travels (`at`).
+pub struct ShaftReference {
+    n: usize,
+    size: f64,
+    spacing: f64,
+    along: (f64, f64),
+    maps: Vec<Vec<DVec3>>,
+}
+
+/// The reference's planes per interval of the renderer's shaft planes.
+pub const SHAFT_REFERENCE_REFINE: usize = 4;
+
+impl ShaftReference {
+    /// The reference for the sea `p` (`None` without shafts), with
+    /// `side`^2 photons per wave texel.
+    pub fn new(p: &SeaParams, waves: &[glam::Vec4], side: usize) -> Option<ShaftReference> {
+        if p.shaft_planes == 0 {
+            return None;
+        }
+        let count = (p.shaft_planes as usize - 1) * SHAFT_REFERENCE_REFINE + 1;
+        let spacing = p.shaft_depth as f64 / (count - 1) as f64;
+        let depths: Vec<f64> = (0..count).map(|k| k as f64 * spacing).collect();
+        let s = p.sun_in_water.xyz().as_dvec3();
+        Some(ShaftReference {
+            n: p.wave_resolution as usize,
+            size: p.wave_size as f64,
+            spacing,
+            along: (s.x / -s.y, s.z / -s.y),
+            maps: photon_maps(p, waves, &depths, side),
+        })
+    }
+
+    /// The ratio at the horizontal point `(x, z)` and depth `depth` (m):
+    /// each map around the depth read where the refracted sun's line
+    /// through the point crosses it, linear between them; below the
+    /// deepest, that map's mean.
+    pub fn at(&self, x: f64, depth: f64, z: f64) -> DVec3 {
+        let last = self.maps.len() - 1;
+        let u = (depth / self.spacing).max(0.0);
+        if u > last as f64 {
+            let m = &self.maps[last];
+            return m.iter().sum::<DVec3>() / m.len() as f64;
+        }
+        let k = (u.floor() as usize).min(last - 1);
+        let w = u - k as f64;
+        let read = |k: usize| {
+            let dz = k as f64 * self.spacing - depth;
+            bilinear(&self.maps[k], self.n, self.size, x + self.along.0 * dz, z + self.along.1 * dz)
+        };
+        read(k) * (1.0 - w) + read(k + 1) * w
     }
 }
 

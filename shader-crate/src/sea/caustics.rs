@@ -32,7 +32,8 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use super::surface::{grid_slope, slope_normal};
+use super::surface::level_offset;
+use super::surface::{level_slope, slope_normal, top_level};
 use super::SeaParams;
 use crate::glam::{Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::optics::{refract, transmittance};
@@ -41,26 +42,100 @@ use crate::scatter::{scatter_add, AtomicWords, REJECTED_WORD};
 /// Fixed-point units per unit of the ratio times texel area (`scatter.rs`).
 pub const CAUSTIC_SCALE: f32 = 16_777_216.0;
 
-/// Sub-samples per texel each way.
+/// Sub-samples per texel each way: the bottom's map, and the shaft
+/// planes'. (2x2 on the shaft planes cost a third less but left 14 % RMS
+/// per texel against the photon tracer 0.7 m down, more than the
+/// caustic's contrast there, 10 %; 4x4 leaves 8 %.)
 const SUB: u32 = 4;
+const SHAFT_SUB: u32 = 4;
 
 /// Most texels a cross-section's box may span: two walks over it of
 /// `SUB^2` samples each stay within the 65 535 loop iterations in all
 /// that lavapipe allows an invocation.
 pub const MAX_TEXELS: f32 = 1024.0;
 
-/// Bins of the caustic map: rgb per texel.
-pub fn caustic_bins(p: &SeaParams) -> u32 {
-    3 * p.wave_resolution * p.wave_resolution
+/// The largest shaft plane's side, texels: the mip resolve's coarsest
+/// texel averages all of a plane's (`shaft_mip_texel`), and 128^2 stays
+/// within lavapipe's loop limit.
+pub const MAX_SHAFT_RESOLUTION: u32 = 128;
+
+/// One of the maps the caustic pass draws: the bottom's, or a shaft
+/// plane's (`caustic_map`).
+#[derive(Copy, Clone, Debug)]
+pub struct CausticMap {
+    /// The wave pyramid's level its mesh takes its slopes from, and its
+    /// side in texels (`wave_resolution >> level`).
+    pub level: u32,
+    pub resolution: u32,
+    /// The plane's depth below the mean level, m.
+    pub depth: f32,
+    /// Sub-samples per texel each way.
+    pub sub: u32,
+    /// Its first bin in the words.
+    pub first_bin: u32,
 }
 
-/// The refracted sun at grid point `(i, j)`: where its ray meets the bottom
-/// (texel coordinates, unwrapped), its relative flux factor `F` and the
-/// attenuation ratio per channel (see the module's text).
-pub fn refracted_at(p: &SeaParams, waves: &[Vec4], i: u32, j: u32) -> (Vec2, f32, Vec3) {
+/// Texels of the bottom's map (0 without one).
+pub fn bottom_map_texels(p: &SeaParams) -> u32 {
+    if p.caustics != 0 {
+        p.wave_resolution * p.wave_resolution
+    } else {
+        0
+    }
+}
+
+/// A shaft plane's side, texels.
+pub fn shaft_resolution(p: &SeaParams) -> u32 {
+    p.wave_resolution >> p.shaft_level
+}
+
+/// Bins of the caustic words: rgb per texel of the bottom's map, then of
+/// each shaft plane's.
+pub fn caustic_bins(p: &SeaParams) -> u32 {
+    let m = shaft_resolution(p);
+    3 * (bottom_map_texels(p) + p.shaft_planes * m * m)
+}
+
+/// Invocations of the caustic pass: two triangles per texel of every map.
+pub fn caustic_triangles(p: &SeaParams) -> u32 {
+    let m = shaft_resolution(p);
+    2 * (bottom_map_texels(p) + p.shaft_planes * m * m)
+}
+
+/// Shaft plane `k`'s depth, m: evenly from the surface (plane 0) to
+/// `shaft_depth`.
+pub fn shaft_plane_depth(p: &SeaParams, k: u32) -> f32 {
+    p.shaft_depth * k as f32 / (p.shaft_planes.max(2) - 1) as f32
+}
+
+/// The map invocation `index` draws into, and its triangle there.
+pub fn caustic_map(p: &SeaParams, index: u32) -> (CausticMap, u32) {
+    let bottom = bottom_map_texels(p);
+    if index < 2 * bottom {
+        let map = CausticMap { level: 0, resolution: p.wave_resolution, depth: p.depth, sub: SUB, first_bin: 0 };
+        return (map, index);
+    }
+    let m = shaft_resolution(p);
+    let rest = index - 2 * bottom;
+    let k = rest / (2 * m * m);
+    let map = CausticMap {
+        level: p.shaft_level,
+        resolution: m,
+        depth: shaft_plane_depth(p, k),
+        sub: SHAFT_SUB,
+        first_bin: 3 * (bottom + k * m * m),
+    };
+    (map, rest % (2 * m * m))
+}
+
+/// The refracted sun at grid point `(i, j)` of `map`'s mesh: where its ray
+/// meets the map's plane (the map's texel coordinates, unwrapped), its
+/// relative flux factor `F` and the attenuation ratio per channel (see the
+/// module's text).
+pub fn refracted_at(p: &SeaParams, waves: &[Vec4], map: &CausticMap, i: u32, j: u32) -> (Vec2, f32, Vec3) {
     let sun = p.sun_direction.xyz();
     let n_w = p.extinction.w;
-    let normal = slope_normal(grid_slope(p, waves, i, j));
+    let normal = slope_normal(level_slope(p, waves, map.level, i, j));
     let cos_i = sun.dot(normal);
     let (r, through) = refract(-sun, normal, 1.0 / n_w);
     let down = (-r.y).max(1e-3);
@@ -70,28 +145,29 @@ pub fn refracted_at(p: &SeaParams, waves: &[Vec4], i: u32, j: u32) -> (Vec2, f32
     } else {
         0.0
     };
-    let d = p.depth;
-    let texel = p.wave_size / p.wave_resolution as f32;
+    let d = map.depth;
+    let texel = p.wave_size / map.resolution as f32;
     let landed = Vec2::new(i as f32 + r.x * d / down / texel, j as f32 + r.z * d / down / texel);
     let c = p.extinction.xyz();
     let att = (-c * (d * (1.0 / down - 1.0 / p.sun_in_water.w))).exp();
     (landed, factor, att)
 }
 
-/// Invocation `index` = triangle `index % 2` of grid cell `index / 2`
-/// (cells row by row): its cross-section with the bottom rasterised into
-/// the caustic map `words`.
+/// Invocation `index`: triangle `t % 2` of grid cell `t / 2` (cells row by
+/// row) of the map `caustic_map` gives: its cross-section with the map's
+/// plane rasterised into the caustic words.
 pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, waves: &[Vec4], words: &mut A) {
-    let n = p.wave_resolution;
-    let cell = index / 2;
+    let (map, t) = caustic_map(p, index);
+    let n = map.resolution;
+    let cell = t / 2;
     let (i, j) = (cell % n, cell / n);
     // Cell corners (i, j), (i+1, j), (i, j+1), (i+1, j+1): triangles
     // (00, 10, 01) and (10, 11, 01).
     let (a, b, c) =
-        if index & 1 == 0 { ((i, j), (i + 1, j), (i, j + 1)) } else { ((i + 1, j), (i + 1, j + 1), (i, j + 1)) };
-    let (pa, fa, ta) = refracted_at(p, waves, a.0, a.1);
-    let (pb, fb, tb) = refracted_at(p, waves, b.0, b.1);
-    let (pc, fc, tc) = refracted_at(p, waves, c.0, c.1);
+        if t & 1 == 0 { ((i, j), (i + 1, j), (i, j + 1)) } else { ((i + 1, j), (i + 1, j + 1), (i, j + 1)) };
+    let (pa, fa, ta) = refracted_at(p, waves, &map, a.0, a.1);
+    let (pb, fb, tb) = refracted_at(p, waves, &map, b.0, b.1);
+    let (pc, fc, tc) = refracted_at(p, waves, &map, c.0, c.1);
     // The flux in texel^2 units: the horizontal area (half a texel^2) times
     // the relative factor and attenuation, the mean of the corners'.
     let flux = (ta * fa + tb * fb + tc * fc) * (0.5 / 3.0);
@@ -111,7 +187,8 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, wave
     }
     let area2 = (pb.x - pa.x) * (pc.y - pa.y) - (pb.y - pa.y) * (pc.x - pa.x);
     let sign = if area2 < 0.0 { -1.0 } else { 1.0 };
-    let step = 1.0 / SUB as f32;
+    let sub = map.sub;
+    let step = 1.0 / sub as f32;
     let first = -0.5 + 0.5 * step;
     // First the sub-samples covered in all, then each texel its share.
     let mut count = 0u32;
@@ -123,9 +200,9 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, wave
             while x <= i1 {
                 let mut covered = 0u32;
                 let mut sy = 0;
-                while sy < SUB {
+                while sy < sub {
                     let mut sx = 0;
-                    while sx < SUB {
+                    while sx < sub {
                         if inside(pa, pb, pc, sign, x + first + sx as f32 * step, y + first + sy as f32 * step) {
                             covered += 1;
                         }
@@ -136,7 +213,7 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, wave
                 if pass == 0 {
                     count += covered;
                 } else if covered > 0 {
-                    deposit(p, words, x, y, flux * (covered as f32 / count as f32));
+                    deposit(&map, words, x, y, flux * (covered as f32 / count as f32));
                 }
                 x += 1.0;
             }
@@ -146,7 +223,7 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, wave
             // Smaller than a sub-sample's spacing, or a focal line: all of
             // it in the texel under the centroid.
             let g = (pa + pb + pc) / 3.0;
-            deposit(p, words, g.x.round(), g.y.round(), flux);
+            deposit(&map, words, g.x.round(), g.y.round(), flux);
             return;
         }
         pass += 1;
@@ -161,18 +238,18 @@ fn inside(a: Vec2, b: Vec2, c: Vec2, sign: f32, x: f32, y: f32) -> bool {
     e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0
 }
 
-/// Adds `v` (rgb) to texel `(x, y)` of the map, wrapped into the tile.
-fn deposit<A: AtomicWords + ?Sized>(p: &SeaParams, words: &mut A, x: f32, y: f32, v: Vec3) {
-    let n = p.wave_resolution as i32;
+/// Adds `v` (rgb) to texel `(x, y)` of `map`, wrapped into the tile.
+fn deposit<A: AtomicWords + ?Sized>(map: &CausticMap, words: &mut A, x: f32, y: f32, v: Vec3) {
+    let n = map.resolution as i32;
     let (i, j) = ((x as i32 % n + n) % n, (y as i32 % n + n) % n);
-    let bin = 3 * (j as u32 * p.wave_resolution + i as u32);
+    let bin = map.first_bin + 3 * (j as u32 * map.resolution + i as u32);
     scatter_add(words, bin, v.x, CAUSTIC_SCALE);
     scatter_add(words, bin + 1, v.y, CAUSTIC_SCALE);
     scatter_add(words, bin + 2, v.z, CAUSTIC_SCALE);
 }
 
 /// Bin `bin`'s value (f32).
-fn read(words: &[u32], bin: u32) -> f32 {
+pub fn read(words: &[u32], bin: u32) -> f32 {
     let low = words[(1 + 2 * bin) as usize];
     let high = words[(2 + 2 * bin) as usize];
     (high as f32 * 4_294_967_296.0 + low as f32) / CAUSTIC_SCALE
@@ -205,4 +282,131 @@ fn wrap(p: &SeaParams, v: f32) -> f32 {
 pub fn texel_ratio(p: &SeaParams, words: &[u32], i: u32, j: u32) -> Vec3 {
     let b = 3 * (j * p.wave_resolution + i);
     Vec3::new(read(words, b), read(words, b + 1), read(words, b + 2))
+}
+
+/// Texels of one shaft plane's mip chain (`m^2 + (m/2)^2 + ... + 1`).
+pub fn shaft_mip_len(p: &SeaParams) -> u32 {
+    let m = shaft_resolution(p);
+    level_offset(m, top_level(m)) + 1
+}
+
+/// Texels of the shaft maps (every plane's chain; 0 without shafts).
+pub fn shaft_map_len(p: &SeaParams) -> u32 {
+    p.shaft_planes * shaft_mip_len(p)
+}
+
+/// Texel `index` of the shaft maps (`sea.shafts`): plane `k`'s chain holds
+/// its caustic (rgb ratios, from the words) at level 0 and, at level `l`,
+/// the box average of the `2^l x 2^l` level-0 texels under each texel, so
+/// that a view ray's step reads the caustic averaged over its footprint
+/// (`shaft_at`). w: 0.
+pub fn shaft_mip_texel(index: u32, p: &SeaParams, words: &[u32]) -> Vec4 {
+    let len = shaft_mip_len(p);
+    let (k, r) = (index / len, index % len);
+    let m = shaft_resolution(p);
+    let top = top_level(m);
+    let mut l = 0;
+    while l < top && level_offset(m, l + 1) <= r {
+        l += 1;
+    }
+    let s = m >> l;
+    let local = r - level_offset(m, l);
+    let (i, j) = (local % s, local / s);
+    let span = 1u32 << l;
+    let first = 3 * (bottom_map_texels(p) + k * m * m);
+    let mut sum = Vec3::ZERO;
+    let mut b = 0;
+    while b < span {
+        let mut a = 0;
+        while a < span {
+            let bin = first + 3 * ((j * span + b) * m + i * span + a);
+            sum += Vec3::new(read(words, bin), read(words, bin + 1), read(words, bin + 2));
+            a += 1;
+        }
+        b += 1;
+    }
+    (sum / (span * span) as f32).extend(0.0)
+}
+
+/// How far (m) a point moving a metre along the unit `dir` moves across
+/// the shafts: the caustic at depth `z` is, near a plane, that plane's
+/// carried along the refracted sun `s`, so what the shafts show of a
+/// point is where its line along `s` crosses a plane, which moves
+/// horizontally by `|dir_h - s_h dir_y / s_y|` per metre (0 looking along
+/// the sun's beam or against it).
+pub fn shaft_drift(p: &SeaParams, dir: Vec3) -> f32 {
+    let s = p.sun_in_water.xyz();
+    let k = dir.y / s.y.min(-1e-6);
+    Vec2::new(dir.x - s.x * k, dir.z - s.z * k).length()
+}
+
+/// The waves' focusing of the sun at the point `point` (scene
+/// coordinates, under the surface): the ratio of the refracted sun's
+/// irradiance there to the flat sea's beam's (rgb; 1 without shafts),
+/// averaged over a footprint `width` m across the shafts (the mip level
+/// nearest it), bilinear between texel centres; between the two shaft
+/// planes around its depth, each read where the refracted sun's line
+/// through the point crosses it (so shafts stay sharp between planes),
+/// linear in depth; below the last plane, that plane's mean (the
+/// caustic's detail there is left unresolved).
+pub fn shaft_at(p: &SeaParams, shafts: &[Vec4], point: Vec3, width: f32) -> Vec3 {
+    if p.shaft_planes == 0 {
+        return Vec3::ONE;
+    }
+    let m = shaft_resolution(p);
+    let top = top_level(m);
+    let texel = p.wave_size / m as f32;
+    let lod = if width > texel { ((width / texel).log2() + 0.5) as u32 } else { 0 };
+    let last = p.shaft_planes - 1;
+    let z = p.level - point.y;
+    let u = z / p.shaft_depth.max(1e-6) * last as f32;
+    if u > last as f32 {
+        return mip_bilinear(p, shafts, last, top, point.x, point.z);
+    }
+    let u = u.max(0.0);
+    let k = (u as u32).min(last - 1);
+    let w = u - k as f32;
+    let lod = lod.min(top);
+    // Along the refracted sun to each plane: `dz` deeper is `dz / -s_y` along `s`.
+    let s = p.sun_in_water.xyz();
+    let along = Vec2::new(s.x, s.z) / (-s.y).max(1e-6);
+    let (za, zb) = (shaft_plane_depth(p, k), shaft_plane_depth(p, k + 1));
+    let qa = Vec2::new(point.x, point.z) + along * (za - z);
+    let qb = Vec2::new(point.x, point.z) + along * (zb - z);
+    let a = mip_bilinear(p, shafts, k, lod, qa.x, qa.y);
+    let b = mip_bilinear(p, shafts, k + 1, lod, qb.x, qb.y);
+    a * (1.0 - w) + b * w
+}
+
+/// Plane `k`'s level `l` at the horizontal point `(x, z)` (m), bilinear
+/// between its texel centres, tiled. The plane's texel `i` of level 0 is
+/// centred over the pyramid level's grid point, `(i + delta)` of its
+/// texels with `delta = (1 - 2^-L)/2` for `L = shaft_level`; level `l`'s
+/// texel `j` averages level 0's `j 2^l ..`, centred at `j 2^l + (2^l - 1)/2`.
+fn mip_bilinear(p: &SeaParams, shafts: &[Vec4], k: u32, l: u32, x: f32, z: f32) -> Vec3 {
+    let m = shaft_resolution(p);
+    let s = m >> l;
+    let base = k * shaft_mip_len(p) + level_offset(m, l);
+    let delta = 0.5 - 0.5 / (1u32 << p.shaft_level) as f32;
+    let scale = (1u32 << l) as f32;
+    // (Functions, not closures: a closure capturing a storage buffer's
+    // slice is a type the SPIR-V front end rejects.)
+    let fx = mip_coord(x / p.wave_size, m, s, delta, scale);
+    let fz = mip_coord(z / p.wave_size, m, s, delta, scale);
+    let (x0, z0) = ((fx as u32).min(s - 1), (fz as u32).min(s - 1));
+    let (ax, az) = (fx - x0 as f32, fz - z0 as f32);
+    let (x1, z1) = ((x0 + 1) % s, (z0 + 1) % s);
+    let t00 = shafts[(base + z0 * s + x0) as usize].xyz();
+    let t10 = shafts[(base + z0 * s + x1) as usize].xyz();
+    let t01 = shafts[(base + z1 * s + x0) as usize].xyz();
+    let t11 = shafts[(base + z1 * s + x1) as usize].xyz();
+    (t00 * (1.0 - ax) + t10 * ax) * (1.0 - az) + (t01 * (1.0 - ax) + t11 * ax) * az
+}
+
+/// A position in tiles `u` as a continuous texel coordinate of a level
+/// `s` texels wide (`mip_bilinear`), wrapped into `[0, s)`.
+fn mip_coord(u: f32, m: u32, s: u32, delta: f32, scale: f32) -> f32 {
+    let f0 = (u - u.floor()) * m as f32 - delta;
+    let f = (f0 - (scale - 1.0) * 0.5) / scale;
+    f - (f / s as f32).floor() * s as f32
 }

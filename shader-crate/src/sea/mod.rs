@@ -142,9 +142,14 @@ pub struct SeaParams {
     pub underwater: u32,
     /// 1: the waves' caustic map is built for the flat bottom (`caustics`).
     pub caustics: u32,
-    pub pad1: u32,
-    pub pad2: u32,
-    pub pad3: u32,
+    /// Caustic light shafts (`caustics`, `under::order1_shafts`): the
+    /// waves' caustic on `shaft_planes` horizontal planes from the surface
+    /// down to `shaft_depth` (m), on the wave pyramid's level
+    /// `shaft_level` (maps of `wave_resolution >> shaft_level` texels a
+    /// side); 0 planes: none.
+    pub shaft_planes: u32,
+    pub shaft_depth: f32,
+    pub shaft_level: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
@@ -992,6 +997,7 @@ pub fn order1_pixel(
     p: &SeaParams,
     surface: Vec4,
     bottom: &[f32],
+    shafts: &[Vec4],
     clouds: &CloudShadow,
 ) -> Vec4 {
     let c1 = p.order1_extinction.xyz();
@@ -1001,7 +1007,8 @@ pub fn order1_pixel(
             return Vec4::ZERO;
         }
         let above = Vec3::new(v.origin.x, p.level, v.origin.z);
-        let mut light = under::order1_segment(p, v.dir, p.camera_depth, v.length, c1) * clouds.at(p, above);
+        let mut light =
+            under::order1_shafts(p, shafts, v.origin, v.dir, p.camera_depth, v.length, c1) * clouds.at(p, above);
         if v.end == under::END_SURFACE {
             let (depth, _) = under::reflected_bottom(p, bottom, &v);
             let up = order1_radiance(p, v.up, depth, c1) * clouds.at(p, v.end_point());
@@ -1300,6 +1307,7 @@ pub fn order1_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 78)] shafts: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 24)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
@@ -1309,8 +1317,15 @@ pub fn order1_kernel(
     let common = &common[0];
     if index < common.band_pixels {
         let clouds = CloudShadow { lights, grids, depths };
-        radiance[index as usize] =
-            order1_pixel(common.band_start + index, common, &params[0], surface[index as usize], bottom, &clouds);
+        radiance[index as usize] = order1_pixel(
+            common.band_start + index,
+            common,
+            &params[0],
+            surface[index as usize],
+            bottom,
+            shafts,
+            &clouds,
+        );
     }
 }
 
@@ -1386,17 +1401,42 @@ pub fn wave_caustics_kernel(
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
-    if index < 2 * p.wave_resolution * p.wave_resolution {
+    if index < caustics::caustic_triangles(p) {
         caustics::caustic_triangle(index, p, waves, words);
+    }
+}
+
+/// The shaft planes' maps and their mips from the caustic words
+/// (`caustics::shaft_mip_texel`).
+#[spirv(compute(threads(64)))]
+pub fn shaft_maps_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 77)] words: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 78)] shafts: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index < caustics::shaft_map_len(p) {
+        shafts[index as usize] = caustics::shaft_mip_texel(index, p, words);
     }
 }
 
 /// Per-pixel kernel, `sea.water`: for an eye under water, what the water
 /// does to the light of the object the sample sees (`under::water_transmittance`).
-pub fn water_pixel(index: u32, common: &CommonParams, p: &SeaParams, surface: Vec4, texel: &GBufferTexel) -> Vec4 {
-    under::water_transmittance(p, &under::decode(index, common, p, surface), texel.object != NO_OBJECT)
+pub fn water_pixel(
+    index: u32,
+    common: &CommonParams,
+    p: &SeaParams,
+    surface: Vec4,
+    shafts: &[Vec4],
+    texel: &GBufferTexel,
+) -> Vec4 {
+    under::water_transmittance(p, shafts, &under::decode(index, common, p, surface), texel.object != NO_OBJECT)
 }
 
+#[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn water_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
@@ -1405,13 +1445,14 @@ pub fn water_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 78)] shafts: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 76)] water: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
         let i = index as usize;
-        water[i] = water_pixel(common.band_start + index, common, &params[0], surface[i], &gbuffer[i]);
+        water[i] = water_pixel(common.band_start + index, common, &params[0], surface[i], shafts, &gbuffer[i]);
     }
 }
 

@@ -86,6 +86,13 @@ pub fn grid_slope(p: &SeaParams, waves: &[Vec4], i: u32, j: u32) -> Vec2 {
     texel(p, waves, 0, i % n, j % n).0.xy()
 }
 
+/// The mean slope of level `level`'s texel `(i, j)` (tiled): the waves
+/// averaged over `2^level` base texels each way.
+pub fn level_slope(p: &SeaParams, waves: &[Vec4], level: u32, i: u32, j: u32) -> Vec2 {
+    let m = p.wave_resolution >> level;
+    texel(p, waves, level, i % m, j % m).0.xy()
+}
+
 /// Texel `(i, j)` of level `level`: its two `Vec4`s.
 fn texel(p: &SeaParams, waves: &[Vec4], level: u32, i: u32, j: u32) -> (Vec4, Vec4) {
     let m = p.wave_resolution >> level;

@@ -33,12 +33,16 @@
 //!   pass's transmittance layer).
 //!
 //! The sun inside the water is the flat surface's refracted beam, as
-//! everywhere in the sea passes (the paper's section 3): the waves'
-//! focusing of it (caustics) is not in these terms.
+//! everywhere in the sea passes (the paper's section 3), except where
+//! the waves' focusing of it is built (`caustics`): on a flat bottom (its
+//! caustic map) and, with shafts, along the view ray in order 1
+//! (`order1_shafts`) and on the objects (`water_transmittance`). Order 2
+//! and the light the surface reflects down keep the flat beam.
 
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
+use super::caustics;
 use super::surface;
 use super::{
     bottom_depth, bottom_hit, exp_linear3, layer_at, layer_params, map_coords, march_to_bottom, phi3, plane_depth,
@@ -226,6 +230,104 @@ pub fn order1_segment(p: &SeaParams, dir: Vec3, z_e: f32, length: f32, c: Vec3) 
     let a0 = c * (z_e / mu_s);
     let a1 = a0 + c * ((1.0 - dir.y / mu_s) * length);
     beta * p.beam_irradiance.xyz() * (length * (-a0.min(a1)).exp() * phi3((a1 - a0).abs()))
+}
+
+/// Steps of `order1_shafts` along a view ray.
+pub const SHAFT_STEPS: u32 = 16;
+
+/// The most taps `shafts_over` takes along one step.
+pub const SHAFT_TAPS: u32 = 4;
+
+/// Optical length (in the clearest channel's order-1 extinction) that
+/// `order1_shafts` steps through; the rest, under `e^-8` of the first
+/// step's weight, is the flat beam's closed form.
+pub const SHAFT_REACH: f32 = 8.0;
+
+/// Order 1 with the waves' caustic light shafts (issue 26; Iwasaki,
+/// Dobashi and Nishita 2002's virtual planes): eq. 5's integrand along the
+/// view ray times the caustic ratio `C(x)` of the refracted sun's
+/// irradiance to the flat beam's (`caustics::shaft_at`, W/m^2 over W/m^2),
+///
+/// `int_0^l beta(theta) E_w e^(-a(t)) C(x(t)) dt`, `a(t) = c z(t)/mu_s + c t`,
+///
+/// over `SHAFT_STEPS` intervals graded from the eye (`t_k = T (k/K)^2`,
+/// `T` the length or `SHAFT_REACH` optical lengths, whichever is
+/// shorter): each interval's exact integral of the exponential (energy
+/// conserving whatever its length, as `order1_segment`) times `C` at its
+/// middle, averaged over how far the interval moves across the shafts
+/// (`caustics::shaft_drift`); past `T` the flat beam's. With `C = 1` it is
+/// `order1_segment` over the whole ray; without shafts it is that.
+pub fn order1_shafts(p: &SeaParams, shafts: &[Vec4], origin: Vec3, dir: Vec3, z_e: f32, length: f32, c: Vec3) -> Vec3 {
+    if p.shaft_planes == 0 {
+        return order1_segment(p, dir, z_e, length, c);
+    }
+    let mu_s = p.sun_in_water.w;
+    let beta = p.scattering.xyz() * henyey_greenstein(-p.sun_in_water.xyz().dot(dir), p.scattering.w);
+    let source = beta * p.beam_irradiance.xyz();
+    let c_min = c.x.min(c.y).min(c.z);
+    let reach = if c_min > 0.0 { SHAFT_REACH / c_min } else { 1e6 };
+    let end = length.min(reach);
+    let drift = caustics::shaft_drift(p, dir);
+    // a(t) = a0 + kappa t, never negative along the ray in the water.
+    let a0 = c * (z_e / mu_s);
+    let kappa = c * (1.0 - dir.y / mu_s);
+    let mut e_a = (-a0).exp();
+    let mut sum = Vec3::ZERO;
+    let mut t_a = 0.0;
+    let mut k = 1;
+    while k <= SHAFT_STEPS {
+        let u = k as f32 / SHAFT_STEPS as f32;
+        let t_b = end * u * u;
+        let dt = t_b - t_a;
+        let e_b = (-(a0 + kappa * t_b)).exp();
+        let delta = (kappa * dt).abs();
+        let piece = Vec3::new(
+            interval(dt, e_a.x, e_b.x, delta.x),
+            interval(dt, e_a.y, e_b.y, delta.y),
+            interval(dt, e_a.z, e_b.z, delta.z),
+        );
+        sum += piece * shafts_over(p, shafts, origin + dir * t_a, dir * dt, dt * drift);
+        t_a = t_b;
+        e_a = e_b;
+        k += 1;
+    }
+    sum *= source;
+    if length > end {
+        let z_a = (z_e - end * dir.y).max(0.0);
+        sum += order1_segment(p, dir, z_a, length - end, c) * (-c * end).exp();
+    }
+    sum
+}
+
+/// The caustic (`caustics::shaft_at`) averaged along the step from
+/// `start` by `step` (m), which moves `width` m across the shafts: up to
+/// `SHAFT_TAPS` taps along it, each read over its share of the width (a
+/// box mip is square, the step a line: taps keep the shafts the line
+/// crosses rather than blurring them away).
+fn shafts_over(p: &SeaParams, shafts: &[Vec4], start: Vec3, step: Vec3, width: f32) -> Vec3 {
+    let texel = p.wave_size / caustics::shaft_resolution(p) as f32;
+    let taps = ((width / (2.0 * texel)).ceil() as u32).clamp(1, SHAFT_TAPS);
+    let mut sum = Vec3::ZERO;
+    let mut i = 0;
+    while i < taps {
+        let at = start + step * ((i as f32 + 0.5) / taps as f32);
+        sum += caustics::shaft_at(p, shafts, at, width / taps as f32);
+        i += 1;
+    }
+    sum / taps as f32
+}
+
+/// `int e^(-a) dt` over an interval `dt` long at whose ends `e^(-a)` is
+/// `e_a` and `e_b`, `a` linear and changing by `delta` (>= 0) across it:
+/// `dt max(e_a, e_b) (1 - e^-delta)/delta` (a series below 1e-2, where the
+/// difference would lose digits).
+fn interval(dt: f32, e_a: f32, e_b: f32, delta: f32) -> f32 {
+    let hi = e_a.max(e_b);
+    if delta < 1e-2 {
+        dt * hi * (1.0 - delta * (0.5 - delta * (1.0 / 6.0 - delta / 24.0)))
+    } else {
+        dt * (hi - e_a.min(e_b)) / delta
+    }
 }
 
 /// One channel of a `Vec3`.
@@ -435,11 +537,12 @@ pub fn through_window(p: &SeaParams, v: &UnderView) -> (Vec3, f32) {
 /// `e^(-c l)`, times what the water does to the sunlight that lights it,
 /// `(E_w / E) e^(-c z_o/mu_s)` at the object's depth `z_o` (the refracted
 /// beam's irradiance over the sun's, `T_i cos(theta_ii)/cos(theta_io)`,
-/// and its attenuation on the way down; applied to the object's whole
+/// and its attenuation on the way down, times the waves' caustic there
+/// where shafts are built: `caustics::shaft_at`; applied to the object's whole
 /// shading, whose light under water is mostly that beam's); 0 where the
 /// object lies beyond the surface or the bottom (`object_seen` and the ray
 /// ends first); 1 elsewhere.
-pub fn water_transmittance(p: &SeaParams, v: &UnderView, object_seen: bool) -> Vec4 {
+pub fn water_transmittance(p: &SeaParams, shafts: &[Vec4], v: &UnderView, object_seen: bool) -> Vec4 {
     if v.end != END_OBJECT {
         return if object_seen { Vec4::ZERO } else { Vec4::ONE };
     }
@@ -448,6 +551,8 @@ pub fn water_transmittance(p: &SeaParams, v: &UnderView, object_seen: bool) -> V
     if z_o > 0.0 {
         let beam = p.beam_irradiance.w * p.sun_direction.w / p.sun_in_water.w;
         t *= (-p.extinction.xyz() * (z_o / p.sun_in_water.w)).exp() * beam;
+        // The waves' focusing at the object (1 without shafts).
+        t *= caustics::shaft_at(p, shafts, v.end_point(), 0.0);
     }
     t.extend((t.x + t.y + t.z) / 3.0)
 }

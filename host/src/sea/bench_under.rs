@@ -1,6 +1,7 @@
 //! `slicelight bench` on an eye under water (issue 26): run time against
 //! error over the second-order settings (planes `n_z`, directions `n_d`)
-//! on each scene and backend; `sea_under_bench.csv` and a PNG plot per
+//! and the caustic shafts' planes (none: the flat beam) on each scene and
+//! backend; `sea_under_bench.csv` and a PNG plot per
 //! scene and backend.
 //!
 //! Error is the whole image's difference from the f64 reference
@@ -10,7 +11,8 @@
 //! largest difference after the scene's tone mapping, and the RMS relative
 //! to the reference's peak. Waves are read at each sample's point on both
 //! sides (the footprint filter off), so that the two see the same normal.
-//! Times are medians over repeats: the whole render and `sea.order2`.
+//! Times are medians over repeats: the whole render, `sea.order2`, and the
+//! shafts' passes (`sea.caustics`, `sea.shafts`, `sea.order1`).
 
 use anyhow::{Context, Result};
 use glam::DVec3;
@@ -23,12 +25,14 @@ use crate::render::Backend;
 use crate::scene::SceneData;
 
 /// One configuration: `auto` (the scene's 1/255 choice), or a count of
-/// planes or directions (`n_d = 3 k^2`) with the rest the scene's.
+/// planes or directions (`n_d = 3 k^2`) or shaft planes (0: no shafts)
+/// with the rest the scene's.
 #[derive(Debug, Clone, Copy)]
 struct Config {
     series: &'static str,
     planes: u32,
     polar: u32,
+    shaft_planes: u32,
 }
 
 struct Row {
@@ -37,6 +41,7 @@ struct Row {
     config: Config,
     seconds: f64,
     order2_seconds: f64,
+    shafts_seconds: f64,
     rms_8bit: f64,
     max_8bit: f64,
     rms_relative: f64,
@@ -44,12 +49,16 @@ struct Row {
 
 fn sweep(data: &SceneData, quick: bool) -> Vec<Config> {
     let p = &data.sea.params;
-    let base = Config { series: "auto", planes: p.planes, polar: p.polar };
+    let base = Config { series: "auto", planes: p.planes, polar: p.polar, shaft_planes: p.shaft_planes };
     let planes: &[u32] = if quick { &[2, 4, 8, 16] } else { &[2, 3, 4, 6, 8, 12, 16, 24] };
     let polar: &[u32] = if quick { &[2, 6, 12] } else { &[2, 4, 6, 8, 12, 16] };
+    let shafts: &[u32] = if quick { &[0, 4, 12, 24] } else { &[0, 2, 4, 8, 12, 24, 48] };
     let mut v = vec![base];
     v.extend(planes.iter().map(|&n| Config { series: "planes", planes: n, ..base }));
     v.extend(polar.iter().map(|&k| Config { series: "directions", polar: k, ..base }));
+    if p.shaft_planes > 0 {
+        v.extend(shafts.iter().map(|&k| Config { series: "shafts", shaft_planes: k, ..base }));
+    }
     v
 }
 
@@ -60,6 +69,10 @@ fn configure(data: &SceneData, c: Option<&Config>) -> Result<SceneData> {
             if let Some(c) = c {
                 s.planes = Some(c.planes);
                 s.directions = Some(3 * c.polar * c.polar);
+                s.shafts = c.shaft_planes > 0;
+                if c.shaft_planes > 0 {
+                    s.shaft_planes = c.shaft_planes;
+                }
             }
             if let super::Waves::Spectrum(w) = &mut s.waves {
                 w.filter = false;
@@ -96,9 +109,10 @@ pub fn run(
         for backend in backends {
             for c in sweep(&unfiltered, quick) {
                 let d = configure(data, Some(&c))?;
-                let order2: Vec<&'static dyn crate::passes::Pass> =
-                    super::PASSES.iter().copied().filter(|p| p.name() == "sea.order2").collect();
-                let timed = time_renders(&d, backend, repeats, &[&order2])?;
+                let order2: Vec<&'static dyn crate::passes::Pass> = vec![&super::SeaOrder2];
+                let shafts: Vec<&'static dyn crate::passes::Pass> =
+                    vec![&super::SeaCaustics, &super::SeaShafts, &super::SeaOrder1];
+                let timed = time_renders(&d, backend, repeats, &[&order2, &shafts])?;
                 let at: Vec<DVec3> =
                     pixels.iter().map(|&i| timed.last.image[i as usize].truncate().as_dvec3()).collect();
                 let diff = crate::metrics::difference(&at, &reference, data.exposure);
@@ -108,18 +122,21 @@ pub fn run(
                     config: c,
                     seconds: timed.total_seconds,
                     order2_seconds: timed.group_seconds[0],
+                    shafts_seconds: timed.group_seconds[1],
                     rms_8bit: diff.rms_8bit_percent,
                     max_8bit: diff.max_8bit_percent,
                     rms_relative: diff.rms_relative,
                 };
                 eprintln!(
-                    "{name:>14} {:>4} {:<10} n_z={:<3} n_d={:<5} {:>8.4} s (order 2 {:.4} s)  8-bit rms {:.3}%  max {:.3}%",
+                    "{name:>14} {:>4} {:<10} n_z={:<3} n_d={:<5} shaft planes={:<3} {:>8.4} s (order 2 {:.4} s, shafts {:.4} s)  8-bit rms {:.3}%  max {:.3}%",
                     row.backend,
                     c.series,
                     c.planes,
                     3 * c.polar * c.polar,
+                    c.shaft_planes,
                     row.seconds,
                     row.order2_seconds,
+                    row.shafts_seconds,
                     row.rms_8bit,
                     row.max_8bit
                 );
@@ -133,7 +150,7 @@ pub fn run(
     pairs.dedup();
     for (scene, backend) in &pairs {
         let path = out_dir.join(format!("sea_under_time_vs_error_{scene}_{backend}.png"));
-        let series: Vec<(String, Vec<(f64, f64)>)> = ["planes", "directions", "auto"]
+        let series: Vec<(String, Vec<(f64, f64)>)> = ["planes", "directions", "shafts", "auto"]
             .iter()
             .map(|s| {
                 let points = rows
@@ -160,19 +177,21 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     let mut out = Vec::new();
     writeln!(
         out,
-        "scene,backend,series,planes,directions,median_seconds,order2_median_seconds,rms_8bit_percent,max_8bit_percent,rms_relative"
+        "scene,backend,series,planes,directions,shaft_planes,median_seconds,order2_median_seconds,shafts_median_seconds,rms_8bit_percent,max_8bit_percent,rms_relative"
     )?;
     for r in rows {
         writeln!(
             out,
-            "{},{},{},{},{},{:.6},{:.6},{:.4},{:.4},{:.3e}",
+            "{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.4},{:.4},{:.3e}",
             r.scene,
             r.backend,
             r.config.series,
             r.config.planes,
             3 * r.config.polar * r.config.polar,
+            r.config.shaft_planes,
             r.seconds,
             r.order2_seconds,
+            r.shafts_seconds,
             r.rms_8bit,
             r.max_8bit,
             r.rms_relative

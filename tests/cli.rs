@@ -99,6 +99,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.scattering_maps",
         "sea.accumulated_map",
         "sea.caustics",
+        "sea.shafts",
         "sea.table_samples",
         "sea.depth_table",
         "sea.bottom_correction",

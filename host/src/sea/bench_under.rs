@@ -33,6 +33,7 @@ struct Config {
     planes: u32,
     polar: u32,
     shaft_planes: u32,
+    shaft_steps: u32,
 }
 
 struct Row {
@@ -49,15 +50,23 @@ struct Row {
 
 fn sweep(data: &SceneData, quick: bool) -> Vec<Config> {
     let p = &data.sea.params;
-    let base = Config { series: "auto", planes: p.planes, polar: p.polar, shaft_planes: p.shaft_planes };
+    let base = Config {
+        series: "auto",
+        planes: p.planes,
+        polar: p.polar,
+        shaft_planes: p.shaft_planes,
+        shaft_steps: p.shaft_steps,
+    };
     let planes: &[u32] = if quick { &[2, 4, 8, 16] } else { &[2, 3, 4, 6, 8, 12, 16, 24] };
     let polar: &[u32] = if quick { &[2, 6, 12] } else { &[2, 4, 6, 8, 12, 16] };
     let shafts: &[u32] = if quick { &[0, 4, 12, 24] } else { &[0, 2, 4, 8, 12, 24, 48] };
+    let steps: &[u32] = if quick { &[4, 8, 16, 32] } else { &[2, 4, 6, 8, 12, 16, 24, 32, 64] };
     let mut v = vec![base];
     v.extend(planes.iter().map(|&n| Config { series: "planes", planes: n, ..base }));
     v.extend(polar.iter().map(|&k| Config { series: "directions", polar: k, ..base }));
     if p.shaft_planes > 0 {
         v.extend(shafts.iter().map(|&k| Config { series: "shafts", shaft_planes: k, ..base }));
+        v.extend(steps.iter().map(|&k| Config { series: "shaft steps", shaft_steps: k, ..base }));
     }
     v
 }
@@ -72,6 +81,7 @@ fn configure(data: &SceneData, c: Option<&Config>) -> Result<SceneData> {
                 s.shafts = c.shaft_planes > 0;
                 if c.shaft_planes > 0 {
                     s.shaft_planes = c.shaft_planes;
+                    s.shaft_steps = c.shaft_steps;
                 }
             }
             if let super::Waves::Spectrum(w) = &mut s.waves {
@@ -128,12 +138,13 @@ pub fn run(
                     rms_relative: diff.rms_relative,
                 };
                 eprintln!(
-                    "{name:>14} {:>4} {:<10} n_z={:<3} n_d={:<5} shaft planes={:<3} {:>8.4} s (order 2 {:.4} s, shafts {:.4} s)  8-bit rms {:.3}%  max {:.3}%",
+                    "{name:>14} {:>4} {:<10} n_z={:<3} n_d={:<5} shaft planes={:<3} steps={:<3} {:>8.4} s (order 2 {:.4} s, shafts {:.4} s)  8-bit rms {:.3}%  max {:.3}%",
                     row.backend,
                     c.series,
                     c.planes,
                     3 * c.polar * c.polar,
                     c.shaft_planes,
+                    c.shaft_steps,
                     row.seconds,
                     row.order2_seconds,
                     row.shafts_seconds,
@@ -150,7 +161,7 @@ pub fn run(
     pairs.dedup();
     for (scene, backend) in &pairs {
         let path = out_dir.join(format!("sea_under_time_vs_error_{scene}_{backend}.png"));
-        let series: Vec<(String, Vec<(f64, f64)>)> = ["planes", "directions", "shafts", "auto"]
+        let series: Vec<(String, Vec<(f64, f64)>)> = ["planes", "directions", "shafts", "shaft steps", "auto"]
             .iter()
             .map(|s| {
                 let points = rows
@@ -177,18 +188,19 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     let mut out = Vec::new();
     writeln!(
         out,
-        "scene,backend,series,planes,directions,shaft_planes,median_seconds,order2_median_seconds,shafts_median_seconds,rms_8bit_percent,max_8bit_percent,rms_relative"
+        "scene,backend,series,planes,directions,shaft_planes,shaft_steps,median_seconds,order2_median_seconds,shafts_median_seconds,rms_8bit_percent,max_8bit_percent,rms_relative"
     )?;
     for r in rows {
         writeln!(
             out,
-            "{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.4},{:.4},{:.3e}",
+            "{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.4},{:.4},{:.3e}",
             r.scene,
             r.backend,
             r.config.series,
             r.config.planes,
             3 * r.config.polar * r.config.polar,
             r.config.shaft_planes,
+            r.config.shaft_steps,
             r.seconds,
             r.order2_seconds,
             r.shafts_seconds,

@@ -160,6 +160,9 @@ pub struct Settings {
     /// Depth of the deepest shaft plane, m; none: the bottom's depth or
     /// 20 m, whichever is less (below it the caustic's mean).
     pub shaft_depth_m: Option<f32>,
+    /// Intervals along each view ray the shafts are gathered over.
+    #[serde(default = "shaft_steps")]
+    pub shaft_steps: u32,
     /// Sampling planes `n_z`; none: chosen by the 1/255 rule.
     pub planes: Option<u32>,
     /// Sampling directions `n_d` (three sets of `k^2`, `k` even: 12, 48, 108,
@@ -178,6 +181,12 @@ fn depth_layers() -> u32 {
 fn shaft_planes() -> u32 {
     12
 }
+fn shaft_steps() -> u32 {
+    SHAFT_STEPS
+}
+/// The default intervals of the shafts along a view ray (docs/sea.md,
+/// "Caustic light shafts": the bench's time against error).
+pub const SHAFT_STEPS: u32 = 16;
 /// The deepest default shaft plane, m.
 pub const SHAFT_DEPTH: f32 = 20.0;
 fn depth_table() -> u32 {
@@ -603,6 +612,10 @@ pub fn configure(
         shaft_planes: 0,
         shaft_depth: 0.0,
         shaft_level: 0,
+        shaft_steps: 0,
+        pad1: 0,
+        pad2: 0,
+        pad3: 0,
     };
     if underwater {
         check_eye_above_bottom(&params, grid.as_ref(), common)?;
@@ -631,6 +644,9 @@ fn shafts_of(s: &Settings, params: &mut SeaParams) -> Result<()> {
     if !(2..=64).contains(&s.shaft_planes) {
         bail!(invalid("sea.shaft_planes", "a count of planes in 2..=64", s.shaft_planes));
     }
+    if !(2..=64).contains(&s.shaft_steps) {
+        bail!(invalid("sea.shaft_steps", "a count of intervals in 2..=64", s.shaft_steps));
+    }
     if let Some(d) = s.shaft_depth_m {
         if !(d.is_finite() && d > 0.0 && d <= 1e4) {
             bail!(invalid("sea.shaft_depth_m", "a depth in m in (0, 1e4]", d));
@@ -643,6 +659,7 @@ fn shafts_of(s: &Settings, params: &mut SeaParams) -> Result<()> {
     let n = params.wave_resolution;
     params.shaft_level = if n > max { (n / max).trailing_zeros() } else { 0 };
     params.shaft_planes = s.shaft_planes;
+    params.shaft_steps = s.shaft_steps;
     let bottom = if params.bottom_nx >= 2 { params.bottom_grid.w } else { params.depth };
     params.shaft_depth = s.shaft_depth_m.unwrap_or(bottom.min(SHAFT_DEPTH));
     Ok(())

@@ -150,10 +150,15 @@ pub struct SeaParams {
     pub shaft_planes: u32,
     pub shaft_depth: f32,
     pub shaft_level: u32,
+    /// Intervals of `under::order1_shafts` along each view ray.
+    pub shaft_steps: u32,
+    pub pad1: u32,
+    pub pad2: u32,
+    pub pad3: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
-// SAFETY: `repr(C)`, ten `Vec4`s and twenty-four 4-byte scalars (256
+// SAFETY: `repr(C)`, ten `Vec4`s and twenty-eight 4-byte scalars (272
 // bytes, a multiple of the `Vec4`s' 16-byte alignment: no padding, which
 // `bytes_of` would read uninitialised; the assertion below holds it); any
 // bits are valid.
@@ -161,7 +166,7 @@ unsafe impl bytemuck::Zeroable for SeaParams {}
 #[cfg(not(target_arch = "spirv"))]
 unsafe impl bytemuck::Pod for SeaParams {}
 #[cfg(not(target_arch = "spirv"))]
-const _: () = assert!(core::mem::size_of::<SeaParams>() == 160 + 24 * 4);
+const _: () = assert!(core::mem::size_of::<SeaParams>() == 160 + 28 * 4);
 
 pub const WAVES_FLAT: u32 = 0;
 pub const WAVES_NORMAL_MAP: u32 = 1;

@@ -232,9 +232,6 @@ pub fn order1_segment(p: &SeaParams, dir: Vec3, z_e: f32, length: f32, c: Vec3) 
     beta * p.beam_irradiance.xyz() * (length * (-a0.min(a1)).exp() * phi3((a1 - a0).abs()))
 }
 
-/// Steps of `order1_shafts` along a view ray.
-pub const SHAFT_STEPS: u32 = 16;
-
 /// The most taps `shafts_over` takes along one step.
 pub const SHAFT_TAPS: u32 = 4;
 
@@ -250,7 +247,7 @@ pub const SHAFT_REACH: f32 = 8.0;
 ///
 /// `int_0^l beta(theta) E_w e^(-a(t)) C(x(t)) dt`, `a(t) = c z(t)/mu_s + c t`,
 ///
-/// over `SHAFT_STEPS` intervals graded from the eye (`t_k = T (k/K)^2`,
+/// over `K = shaft_steps` intervals graded from the eye (`t_k = T (k/K)^2`,
 /// `T` the length or `SHAFT_REACH` optical lengths, whichever is
 /// shorter): each interval's exact integral of the exponential (energy
 /// conserving whatever its length, as `order1_segment`) times `C` at its
@@ -275,8 +272,9 @@ pub fn order1_shafts(p: &SeaParams, shafts: &[Vec4], origin: Vec3, dir: Vec3, z_
     let mut sum = Vec3::ZERO;
     let mut t_a = 0.0;
     let mut k = 1;
-    while k <= SHAFT_STEPS {
-        let u = k as f32 / SHAFT_STEPS as f32;
+    let steps = p.shaft_steps.max(1);
+    while k <= steps {
+        let u = k as f32 / steps as f32;
         let t_b = end * u * u;
         let dt = t_b - t_a;
         let e_b = (-(a0 + kappa * t_b)).exp();

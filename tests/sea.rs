@@ -222,20 +222,30 @@ fn stress_image_sizes() {
     let blank = slicelight_shaders::common::surface::no_surface();
     let waves = &big.sea.waves;
     let clouds = slicelight_shaders::sea::CloudShadow { lights: &big.lights, grids: &[], depths: &[] };
+    let sunlit = slicelight_shaders::sea::under::Sunlit { shafts: &[], geometry: big.geometry() };
     let n = 8192u32;
     for (x, y) in [(0, 0), (n - 1, 0), (0, n - 1), (n - 1, n - 1), (n / 2, n / 2), (n / 2, n - 1), (0, n / 2)] {
         let i = y * n + x;
         let seen = slicelight_shaders::sea::surface_pixel(i, &big.common, p, waves, &[0.0], &blank);
         assert!(seen.is_finite() && seen.w >= 0.0, "pixel ({x}, {y}): surface {seen}");
         for v in [
-            slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &[], &clouds),
-            slicelight_shaders::sea::bottom_pixel(i, &big.common, p, seen, &big.sea.bottom, &[], &clouds),
+            slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &sunlit, &clouds),
+            slicelight_shaders::sea::bottom_pixel(
+                i,
+                &big.common,
+                p,
+                seen,
+                &big.sea.bottom,
+                &[],
+                &big.geometry(),
+                &clouds,
+            ),
         ] {
             assert!(v.is_finite() && v.min_element() >= 0.0, "pixel ({x}, {y}): {v}");
         }
         // The lower half of the image looks down at the sea.
         if y > n / 2 + 8 {
-            let v = slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &[], &clouds);
+            let v = slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &sunlit, &clouds);
             assert!(v.max_element() > 0.0, "pixel ({x}, {y}) misses the sea");
         }
     }

@@ -442,7 +442,8 @@ fn shafts_order1_along_rays_matches_the_reference() {
             let (az, el) = ((i as f32 - 7.5) * 0.08 + 2.094, (j as f32 - 5.5) * 0.12 + 0.3);
             let dir = glam::Vec3::new(el.cos() * az.sin(), el.sin(), el.cos() * az.cos()).normalize();
             let length = slicelight_shaders::sea::under::full_length(p, dir);
-            let method = under::order1_shafts(p, &shafts, eye, dir, 3.0, length, c).as_dvec3();
+            let sunlit = under::Sunlit { shafts: &shafts, geometry: data.geometry() };
+            let method = under::order1_shafts(p, &sunlit, eye, dir, 3.0, length, c).as_dvec3();
             let even = under::order1_segment(p, dir, 3.0, length, c).as_dvec3();
             let exact = sea.order1_focused(eye.as_dvec3(), p.level as f64, dir.as_dvec3(), length as f64, step, &|x| {
                 reference.at(x.x, p.level as f64 - x.y, x.z)
@@ -550,7 +551,8 @@ fn shaft_planes_conserve_the_light_and_reduce_to_the_flat_beam() {
         // closed form lets the depth go negative past the surface.)
         let open = if dir.y <= 0.0 { 1e20 } else { 1.0 };
         for length in [0.5, 3.0, under::full_length(&p, dir), open] {
-            let stepped = under::order1_shafts(&p, &ones, eye, dir, 2.0, length, c);
+            let sunlit = under::Sunlit { shafts: &ones, geometry: data.geometry() };
+            let stepped = under::order1_shafts(&p, &sunlit, eye, dir, 2.0, length, c);
             let closed = under::order1_segment(&p, dir, 2.0, length, c);
             worst = worst.max(((stepped - closed) / closed).abs().max_element());
         }
@@ -558,4 +560,76 @@ fn shaft_planes_conserve_the_light_and_reduce_to_the_flat_beam() {
     println!("stepped against closed form with no focusing: {worst:.2e}");
     // f32 sums of 16 exact intervals: a few ulps each.
     assert!(worst < 1e-5, "{worst}");
+}
+
+/// Objects in the water shade the sun: a ball 1.5 m across, 3 m down,
+/// over flat sand 6 m down, seen from 1 m down. Every pixel whose view ray
+/// meets the sand gets its sunlit bottom term where the refracted sun's
+/// line from that point misses the ball (an f64 ray-sphere test) and none
+/// where it meets it (pixels within 2 cm of the shadow's edge aside); with
+/// waves, the shafts through the ball's shadow are dimmer than without it.
+#[test]
+fn objects_shade_the_bottom_and_the_shafts() {
+    let ball = "[[object]]\ntype = \"sphere\"\ncenter = [1.0, -3.0, -4.0]\nradius = 0.75\nalbedo = [0.7, 0.7, 0.7]";
+    let text = under_text(1.0, [0.6, -1.0, -3.0], (48, 32), 30.0, "depth_m = 6.0\nsecond_order = false", ball);
+    let data = common::scene_from_str(&text);
+    let p = &data.sea.params;
+    let r = render(&data);
+    let layer = |name: &str| r.layers.iter().find(|(n, _)| *n == name).unwrap().1.as_slice::<glam::Vec4>().to_vec();
+    let bottom = layer("sea.bottom");
+    let s = p.sun_in_water.truncate().as_dvec3();
+    let (center, radius) = (DVec3::new(1.0, -3.0, -4.0), 0.75);
+    let (mut shaded, mut lit, mut wrong) = (0, 0, Vec::new());
+    let w = data.width();
+    for i in 0..data.pixel_count() {
+        let (o, d) = slicelight_shaders::camera::camera_ray(&data.common, i % w, i / w);
+        let (o, d) = (o.as_dvec3(), d.as_dvec3());
+        // The camera ray against the ball (those pixels see it) and down to the sand.
+        let oc = o - center;
+        let (b, c) = (oc.dot(d), oc.length_squared() - radius * radius);
+        let sees_ball = b * b - c > 0.0 && -b + (b * b - c).sqrt() > 0.0;
+        if d.y >= 0.0 || sees_ball {
+            continue;
+        }
+        let q = o + d * ((p.level as f64 - 6.0 - o.y) / d.y);
+        let to_ball = center - q;
+        let miss = (to_ball - (-s) * to_ball.dot(-s)).length() - radius;
+        if miss.abs() < 0.02 {
+            continue;
+        }
+        let value = bottom[i as usize].truncate().max_element();
+        if miss < 0.0 {
+            shaded += 1;
+            if value != 0.0 {
+                wrong.push((i, value));
+            }
+        } else {
+            lit += 1;
+            if value <= 0.0 {
+                wrong.push((i, value));
+            }
+        }
+    }
+    println!("the sand: {shaded} pixels in the ball's shadow, {lit} lit");
+    assert!(shaded > 10 && lit > 200, "the view holds both: {shaded} shaded, {lit} lit");
+    assert!(wrong.is_empty(), "pixels on the wrong side of the shadow: {wrong:?}");
+
+    // The shafts: with waves, order 1 with the ball against without it.
+    let waves =
+        "waves = { kind = \"spectrum\", wind_m_s = 6.0, fetch_m = 50000.0, size_m = 16.0, resolution = 64, seed = 5 }";
+    let sea = format!("depth_m = 6.0\nsecond_order = false\n{waves}");
+    let with = common::scene_from_str(&under_text(1.0, [0.6, -1.0, -3.0], (48, 32), 30.0, &sea, ball));
+    assert!(with.sea.params.shaft_planes > 0);
+    let order1 = |data: &SceneData| {
+        let r = render(data);
+        r.layers.iter().find(|(n, _)| *n == "sea.order1").unwrap().1.as_slice::<glam::Vec4>().to_vec()
+    };
+    let (a, b) =
+        (order1(&with), order1(&common::scene_from_str(&under_text(1.0, [0.6, -1.0, -3.0], (48, 32), 30.0, &sea, ""))));
+    let dimmer = a.iter().zip(&b).filter(|(x, y)| x.y < 0.99 * y.y).count();
+    let brighter = a.iter().zip(&b).filter(|(x, y)| x.y > y.y * (1.0 + 1e-5) + 1e-12).count();
+    println!("order 1 with the ball: {dimmer} pixels dimmer by over 1 %, {brighter} brighter");
+    // The ball only takes light away (and ends the rays that meet it).
+    assert_eq!(brighter, 0);
+    assert!(dimmer > 20, "the ball's shadow crosses the shafts: {dimmer}");
 }

@@ -1494,6 +1494,9 @@ impl Pass for SeaOrder1 {
             SEA_SURFACE,
             SEA_BOTTOM_GRID,
             SEA_SHAFTS,
+            crate::passes::SPHERES,
+            crate::passes::TRIANGLES,
+            crate::passes::BVH_NODES,
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
             crate::volumes::OPTICAL_DEPTHS
@@ -1524,7 +1527,8 @@ impl Pass for SeaOrder1 {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, x| {
-            order1_pixel(i, common, p, t, bottom, x.shafts, &x.clouds)
+            let sunlit = slicelight_shaders::sea::under::Sunlit { shafts: x.shafts, geometry: scene.geometry() };
+            order1_pixel(i, common, p, t, bottom, &sunlit, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
@@ -1615,6 +1619,9 @@ impl Pass for SeaBottom {
             SEA_SURFACE,
             SEA_BOTTOM_GRID,
             SEA_CAUSTICS,
+            crate::passes::SPHERES,
+            crate::passes::TRIANGLES,
+            crate::passes::BVH_NODES,
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
             crate::volumes::OPTICAL_DEPTHS
@@ -1657,7 +1664,7 @@ impl Pass for SeaBottom {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, x| {
-            bottom_pixel(i, common, p, t, bottom, x.caustic, &x.clouds)
+            bottom_pixel(i, common, p, t, bottom, x.caustic, &scene.geometry(), &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

@@ -60,6 +60,7 @@ pub mod under;
 use spirv_std::num_traits::Float;
 
 use crate::camera::{camera_ray, in_image, sample_offset};
+use crate::geometry::Geometry;
 use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::optics::{reflectance, refract};
 use crate::phase::henyey_greenstein;
@@ -1002,7 +1003,7 @@ pub fn order1_pixel(
     p: &SeaParams,
     surface: Vec4,
     bottom: &[f32],
-    shafts: &[Vec4],
+    sunlit: &under::Sunlit,
     clouds: &CloudShadow,
 ) -> Vec4 {
     let c1 = p.order1_extinction.xyz();
@@ -1013,7 +1014,7 @@ pub fn order1_pixel(
         }
         let above = Vec3::new(v.origin.x, p.level, v.origin.z);
         let mut light =
-            under::order1_shafts(p, shafts, v.origin, v.dir, p.camera_depth, v.length, c1) * clouds.at(p, above);
+            under::order1_shafts(p, sunlit, v.origin, v.dir, p.camera_depth, v.length, c1) * clouds.at(p, above);
         if v.end == under::END_SURFACE {
             let (depth, _) = under::reflected_bottom(p, bottom, &v);
             let up = order1_radiance(p, v.up, depth, c1) * clouds.at(p, v.end_point());
@@ -1165,6 +1166,7 @@ pub fn order2_pixel(
 /// sunlight (eq. 9 with `1/pi`) where the view ray meets it, above the
 /// surface. Under water, where the view ray meets the bottom
 /// (`under::bottom_leaving`) or its reflection in the surface, attenuated.
+#[allow(clippy::too_many_arguments)]
 pub fn bottom_pixel(
     index: u32,
     common: &CommonParams,
@@ -1172,6 +1174,7 @@ pub fn bottom_pixel(
     surface: Vec4,
     bottom: &[f32],
     caustic: &[u32],
+    geometry: &Geometry,
     clouds: &CloudShadow,
 ) -> Vec4 {
     if p.underwater != 0 {
@@ -1179,11 +1182,16 @@ pub fn bottom_pixel(
         let light = if v.end == under::END_BOTTOM {
             let (depth, cos_gamma) = under::bottom_at(p, bottom, &v);
             let q = v.end_point();
-            under::bottom_leaving(p, depth, cos_gamma) * caustics::caustic_at(p, caustic, q.x, q.z)
+            under::bottom_leaving(p, depth, cos_gamma)
+                * caustics::caustic_at(p, caustic, q.x, q.z)
+                * under::sun_visibility(p, geometry, q)
         } else if v.end == under::END_SURFACE {
             let (depth, cos_gamma) = under::reflected_bottom(p, bottom, &v);
             let q = v.end_point() - v.up * (depth / v.up.y);
-            bottom_radiance(p, v.up, depth, cos_gamma) * v.reflectance * caustics::caustic_at(p, caustic, q.x, q.z)
+            bottom_radiance(p, v.up, depth, cos_gamma)
+                * v.reflectance
+                * caustics::caustic_at(p, caustic, q.x, q.z)
+                * under::sun_visibility(p, geometry, q)
         } else {
             return Vec4::ZERO;
         };
@@ -1198,7 +1206,7 @@ pub fn bottom_pixel(
     let (depth, cos_gamma) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
     // Where the view ray meets the bottom: the waves' caustic there.
     let q = v.point - v.view * (depth / v.view.y);
-    let focus = caustics::caustic_at(p, caustic, q.x, q.z);
+    let focus = caustics::caustic_at(p, caustic, q.x, q.z) * under::sun_visibility(p, geometry, q);
     (bottom_radiance(p, v.view, depth, cos_gamma) * focus * v.transmission * clouds.at(p, v.point)).extend(0.0)
 }
 
@@ -1313,6 +1321,9 @@ pub fn order1_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 78)] shafts: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 24)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
@@ -1322,13 +1333,14 @@ pub fn order1_kernel(
     let common = &common[0];
     if index < common.band_pixels {
         let clouds = CloudShadow { lights, grids, depths };
+        let sunlit = under::Sunlit { shafts, geometry: crate::scene_geometry(common, spheres, triangles, nodes) };
         radiance[index as usize] = order1_pixel(
             common.band_start + index,
             common,
             &params[0],
             surface[index as usize],
             bottom,
-            shafts,
+            &sunlit,
             &clouds,
         );
     }
@@ -1379,6 +1391,9 @@ pub fn bottom_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 77)] caustic: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 26)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
@@ -1389,7 +1404,9 @@ pub fn bottom_kernel(
     if index < common.band_pixels {
         let clouds = CloudShadow { lights, grids, depths };
         let (i, p) = (index as usize, &params[0]);
-        radiance[i] = bottom_pixel(common.band_start + index, common, p, surface[i], bottom, caustic, &clouds);
+        let geometry = crate::scene_geometry(common, spheres, triangles, nodes);
+        radiance[i] =
+            bottom_pixel(common.band_start + index, common, p, surface[i], bottom, caustic, &geometry, &clouds);
     }
 }
 

@@ -49,6 +49,7 @@ use super::{
     MapCoords, SeaParams, DEEP, WAVES_NORMAL_MAP,
 };
 use crate::camera::{camera_ray, in_image};
+use crate::geometry::{occluded, Geometry};
 use crate::glam::{Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::optics::{reflect, reflectance, refract};
 use crate::phase::henyey_greenstein;
@@ -253,8 +254,10 @@ pub const SHAFT_REACH: f32 = 8.0;
 /// conserving whatever its length, as `order1_segment`) times `C` at its
 /// middle, averaged over how far the interval moves across the shafts
 /// (`caustics::shaft_drift`); past `T` the flat beam's. With `C = 1` it is
-/// `order1_segment` over the whole ray; without shafts it is that.
-pub fn order1_shafts(p: &SeaParams, shafts: &[Vec4], origin: Vec3, dir: Vec3, z_e: f32, length: f32, c: Vec3) -> Vec3 {
+/// `order1_segment` over the whole ray; without shafts it is that. Objects
+/// shade each interval by a shadow ray from its middle
+/// (`sun_visibility`): their shadows in the shafts.
+pub fn order1_shafts(p: &SeaParams, sunlit: &Sunlit, origin: Vec3, dir: Vec3, z_e: f32, length: f32, c: Vec3) -> Vec3 {
     if p.shaft_planes == 0 {
         return order1_segment(p, dir, z_e, length, c);
     }
@@ -284,7 +287,8 @@ pub fn order1_shafts(p: &SeaParams, shafts: &[Vec4], origin: Vec3, dir: Vec3, z_
             interval(dt, e_a.y, e_b.y, delta.y),
             interval(dt, e_a.z, e_b.z, delta.z),
         );
-        sum += piece * shafts_over(p, shafts, origin + dir * t_a, dir * dt, dt * drift);
+        let shade = sun_visibility(p, &sunlit.geometry, origin + dir * (t_a + 0.5 * dt));
+        sum += piece * shafts_over(p, sunlit.shafts, origin + dir * t_a, dir * dt, dt * drift) * shade;
         t_a = t_b;
         e_a = e_b;
         k += 1;
@@ -295,6 +299,35 @@ pub fn order1_shafts(p: &SeaParams, shafts: &[Vec4], origin: Vec3, dir: Vec3, z_
         sum += order1_segment(p, dir, z_a, length - end, c) * (-c * end).exp();
     }
     sum
+}
+
+/// What lights the water with shafts: the shaft maps and the objects that
+/// shade the sun (`order1_shafts`).
+pub struct Sunlit<'a> {
+    pub shafts: &'a [Vec4],
+    pub geometry: Geometry<'a>,
+}
+
+/// Whether the sun reaches `point` in the water (1) or an object is in the
+/// way (0): a shadow ray up the refracted beam to the surface, and on
+/// toward the sun in the air (an object above the surface shades the water
+/// too). 1 without objects, at no cost. (A point's own shadow: the shafts
+/// paper's shadow test, here per sample rather than from a shadow map.)
+pub fn sun_visibility(p: &SeaParams, geometry: &Geometry, point: Vec3) -> f32 {
+    if geometry.node_count == 0 && geometry.sphere_count == 0 {
+        return 1.0;
+    }
+    let up = -p.sun_in_water.xyz();
+    let t_s = (p.level - point.y).max(0.0) / up.y.max(1e-6);
+    let eps = 1e-5 * point.abs().max_element().max(1.0);
+    if t_s > eps && occluded(point, up, eps, t_s, geometry) {
+        return 0.0;
+    }
+    let sun = p.sun_direction.xyz();
+    if sun.y > 0.0 && occluded(point + up * t_s, sun, eps, 1e7, geometry) {
+        return 0.0;
+    }
+    1.0
 }
 
 /// The caustic (`caustics::shaft_at`) averaged along the step from

@@ -581,14 +581,19 @@ fn objects_shade_the_bottom_and_the_shafts() {
     let (center, radius) = (DVec3::new(1.0, -3.0, -4.0), 0.75);
     let (mut shaded, mut lit, mut wrong) = (0, 0, Vec::new());
     let w = data.width();
+    // The pixels whose camera ray meets the ball (their rays end there).
+    let sees_ball: Vec<bool> = (0..data.pixel_count())
+        .map(|i| {
+            let (o, d) = slicelight_shaders::camera::camera_ray(&data.common, i % w, i / w);
+            let oc = o.as_dvec3() - center;
+            let (b, c) = (oc.dot(d.as_dvec3()), oc.length_squared() - radius * radius);
+            b * b - c > 0.0 && -b + (b * b - c).sqrt() > 0.0
+        })
+        .collect();
     for i in 0..data.pixel_count() {
         let (o, d) = slicelight_shaders::camera::camera_ray(&data.common, i % w, i / w);
         let (o, d) = (o.as_dvec3(), d.as_dvec3());
-        // The camera ray against the ball (those pixels see it) and down to the sand.
-        let oc = o - center;
-        let (b, c) = (oc.dot(d), oc.length_squared() - radius * radius);
-        let sees_ball = b * b - c > 0.0 && -b + (b * b - c).sqrt() > 0.0;
-        if d.y >= 0.0 || sees_ball {
+        if d.y >= 0.0 || sees_ball[i as usize] {
             continue;
         }
         let q = o + d * ((p.level as f64 - 6.0 - o.y) / d.y);
@@ -611,6 +616,28 @@ fn objects_shade_the_bottom_and_the_shafts() {
         }
     }
     println!("the sand: {shaded} pixels in the ball's shadow, {lit} lit");
+    // A flat sea's single scattering: the ball's shadow in the beam.
+    let without = common::scene_from_str(&under_text(
+        1.0,
+        [0.6, -1.0, -3.0],
+        (48, 32),
+        30.0,
+        "depth_m = 6.0\nsecond_order = false",
+        "",
+    ));
+    let flat = layer("sea.order1");
+    let open =
+        render(&without).layers.iter().find(|(n, _)| *n == "sea.order1").unwrap().1.as_slice::<glam::Vec4>().to_vec();
+    // Beside the ball: rays that pass it (or end behind it) and cross its shadow.
+    let beside = |v: &[glam::Vec4]| {
+        v.iter().enumerate().filter(|(i, _)| !sees_ball[*i]).map(|(_, x)| *x).collect::<Vec<glam::Vec4>>()
+    };
+    let (flat, open) = (beside(&flat), beside(&open));
+    let dimmer = flat.iter().zip(&open).filter(|(x, y)| x.y < 0.99 * y.y).count();
+    let brighter = flat.iter().zip(&open).filter(|(x, y)| x.y > y.y * (1.0 + 1e-5) + 1e-12).count();
+    println!("flat sea, order 1 beside the ball: {dimmer} pixels dimmer by over 1 %, {brighter} brighter");
+    assert_eq!(brighter, 0);
+    assert!(dimmer > 20, "the ball's shadow in the flat beam: {dimmer}");
     assert!(shaded > 10 && lit > 200, "the view holds both: {shaded} shaded, {lit} lit");
     assert!(wrong.is_empty(), "pixels on the wrong side of the shadow: {wrong:?}");
 
@@ -624,11 +651,11 @@ fn objects_shade_the_bottom_and_the_shafts() {
         let r = render(data);
         r.layers.iter().find(|(n, _)| *n == "sea.order1").unwrap().1.as_slice::<glam::Vec4>().to_vec()
     };
-    let (a, b) =
-        (order1(&with), order1(&common::scene_from_str(&under_text(1.0, [0.6, -1.0, -3.0], (48, 32), 30.0, &sea, ""))));
+    let no_ball = common::scene_from_str(&under_text(1.0, [0.6, -1.0, -3.0], (48, 32), 30.0, &sea, ""));
+    let (a, b) = (beside(&order1(&with)), beside(&order1(&no_ball)));
     let dimmer = a.iter().zip(&b).filter(|(x, y)| x.y < 0.99 * y.y).count();
     let brighter = a.iter().zip(&b).filter(|(x, y)| x.y > y.y * (1.0 + 1e-5) + 1e-12).count();
-    println!("order 1 with the ball: {dimmer} pixels dimmer by over 1 %, {brighter} brighter");
+    println!("shafts, order 1 beside the ball: {dimmer} pixels dimmer by over 1 %, {brighter} brighter");
     // The ball only takes light away (and ends the rays that meet it).
     assert_eq!(brighter, 0);
     assert!(dimmer > 20, "the ball's shadow crosses the shafts: {dimmer}");

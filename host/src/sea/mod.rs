@@ -652,6 +652,8 @@ fn shafts_of(s: &Settings, params: &mut SeaParams) -> Result<()> {
             bail!(invalid("sea.shaft_depth_m", "a depth in m in (0, 1e4]", d));
         }
     }
+    // The intervals also carry the objects' shadows without shafts.
+    params.shaft_steps = s.shaft_steps;
     if !(s.shafts && params.underwater != 0 && params.waves == WAVES_NORMAL_MAP) {
         return Ok(());
     }
@@ -659,7 +661,6 @@ fn shafts_of(s: &Settings, params: &mut SeaParams) -> Result<()> {
     let n = params.wave_resolution;
     params.shaft_level = if n > max { (n / max).trailing_zeros() } else { 0 };
     params.shaft_planes = s.shaft_planes;
-    params.shaft_steps = s.shaft_steps;
     let bottom = if params.bottom_nx >= 2 { params.bottom_grid.w } else { params.depth };
     params.shaft_depth = s.shaft_depth_m.unwrap_or(bottom.min(SHAFT_DEPTH));
     Ok(())

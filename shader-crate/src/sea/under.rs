@@ -254,11 +254,13 @@ pub const SHAFT_REACH: f32 = 8.0;
 /// conserving whatever its length, as `order1_segment`) times `C` at its
 /// middle, averaged over how far the interval moves across the shafts
 /// (`caustics::shaft_drift`); past `T` the flat beam's. With `C = 1` it is
-/// `order1_segment` over the whole ray; without shafts it is that. Objects
-/// shade each interval by a shadow ray from its middle
-/// (`sun_visibility`): their shadows in the shafts.
+/// `order1_segment` over the whole ray; without shafts or objects it is
+/// that. Objects shade each interval by a shadow ray from its middle
+/// (`sun_visibility`): their shadows in the water's light, with the shafts
+/// or in the flat beam (`C = 1`).
 pub fn order1_shafts(p: &SeaParams, sunlit: &Sunlit, origin: Vec3, dir: Vec3, z_e: f32, length: f32, c: Vec3) -> Vec3 {
-    if p.shaft_planes == 0 {
+    let objects = sunlit.geometry.node_count > 0 || sunlit.geometry.sphere_count > 0;
+    if p.shaft_planes == 0 && !objects {
         return order1_segment(p, dir, z_e, length, c);
     }
     let mu_s = p.sun_in_water.w;
@@ -288,7 +290,12 @@ pub fn order1_shafts(p: &SeaParams, sunlit: &Sunlit, origin: Vec3, dir: Vec3, z_
             interval(dt, e_a.z, e_b.z, delta.z),
         );
         let shade = sun_visibility(p, &sunlit.geometry, origin + dir * (t_a + 0.5 * dt));
-        sum += piece * shafts_over(p, sunlit.shafts, origin + dir * t_a, dir * dt, dt * drift) * shade;
+        let focus = if p.shaft_planes > 0 {
+            shafts_over(p, sunlit.shafts, origin + dir * t_a, dir * dt, dt * drift)
+        } else {
+            Vec3::ONE
+        };
+        sum += piece * focus * shade;
         t_a = t_b;
         e_a = e_b;
         k += 1;

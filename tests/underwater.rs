@@ -178,6 +178,22 @@ fn the_view_from_under_the_water_holds_at_its_edges() {
         ),
         ("over a shore", 1.0, [0.0, -0.2, -1.0], 30.0, shore.into(), ""),
         ("a sphere under water", 3.0, [0.0, -0.3, -1.0], 30.0, "depth_m = 12.0".into(), sphere),
+        (
+            "a sphere under water, shafts at their most",
+            3.0,
+            [0.0, -0.3, -1.0],
+            30.0,
+            format!("depth_m = 12.0\nshaft_planes = 64\nshaft_steps = 64\nshaft_depth_m = 10000.0\n{}", waves(100.0)),
+            sphere,
+        ),
+        (
+            "shafts at their least",
+            3.0,
+            [0.3, 0.6, -1.0],
+            30.0,
+            format!("depth_m = 12.0\nshaft_planes = 2\nshaft_steps = 2\nshaft_depth_m = 0.001\n{}", waves(4.0)),
+            "",
+        ),
     ];
     for (what, depth, look, sun, extra, more) in cases {
         let data = common::scene_from_str(&under_text(depth, look, (24, 16), sun, &extra, more));
@@ -185,7 +201,11 @@ fn the_view_from_under_the_water_holds_at_its_edges() {
         println!("{what}: mean {:?}", r.image.iter().map(|v| v.truncate()).sum::<Vec3>() / r.image.len() as f32);
         use slicelight::passes::Pass;
         let water = slicelight::sea::SeaWater.plan(&data).runs;
-        assert_eq!(water, what == "a sphere under water", "{what}: sea.water runs only where objects are under water");
+        assert_eq!(
+            water,
+            what.starts_with("a sphere under water"),
+            "{what}: sea.water runs only where objects are under water"
+        );
         assert_eq!(data.sea.params.underwater != 0, depth >= 0.0, "{what}");
     }
     let dir = tempfile::tempdir().unwrap();
@@ -195,6 +215,18 @@ fn the_view_from_under_the_water_holds_at_its_edges() {
     let Err(e) = refused else { panic!("a bottom above the eye is refused") };
     let message = format!("{e:#}");
     assert!(message.contains("sea.depth_m") && message.contains("below the camera"), "{message}");
+    // The shafts' settings out of range: the field named.
+    for (line, field) in [
+        ("shaft_planes = 1", "sea.shaft_planes"),
+        ("shaft_steps = 65", "sea.shaft_steps"),
+        ("shaft_depth_m = -1.0", "sea.shaft_depth_m"),
+    ] {
+        std::fs::write(&path, under_text(5.0, [0.0, 0.0, -1.0], (8, 8), 30.0, &format!("depth_m = 12.0\n{line}"), ""))
+            .unwrap();
+        let Err(e) = slicelight::scene::load(&path) else { panic!("{line} is refused") };
+        let message = format!("{e:#}");
+        assert!(message.contains(field), "{line}: {message}");
+    }
 }
 
 /// The waves' caustic map on a flat bottom 3 m down in water that neither

@@ -263,16 +263,7 @@ fn wave_caustics_conserve_the_light_and_match_a_photon_tracer() {
     // (1) The flux in: half a texel^2 per triangle times its corners' mean factor.
     // The bottom's map is the first the pass draws (invocation 0 is its).
     let (bottom_map, _) = slicelight_shaders::sea::caustics::caustic_map(p, 0);
-    let factor = |i: u32, j: u32| {
-        slicelight_shaders::sea::caustics::refracted_at(p, &data.sea.waves, &bottom_map, i, j).1 as f64
-    };
-    let mut flux = 0.0;
-    for j in 0..n {
-        for i in 0..n {
-            let (a, b, c, d) = (factor(i, j), factor(i + 1, j), factor(i, j + 1), factor(i + 1, j + 1));
-            flux += 0.5 * (a + b + c) / 3.0 + 0.5 * (b + d + c) / 3.0;
-        }
-    }
+    let flux = mesh_flux(p, &data.sea.waves, &bottom_map);
     let total: f64 = map.iter().sum();
     let drift = (total - flux).abs() / flux;
     println!(
@@ -354,6 +345,26 @@ fn wave_caustics_conserve_the_light_and_match_a_photon_tracer() {
     // cell. 5 % is under a third of the contrast.
     assert!(rms < 0.05, "{rms}");
     assert!(spread > 3.0 * rms, "the caustic's contrast ({spread}) is well above the difference ({rms})");
+}
+
+/// The flux `map`'s mesh lets in, in texel^2 (red channel, f64): half a
+/// texel^2 per triangle (two per cell) times its corners' mean factor
+/// (`caustics::refracted_at`), summed over the tile.
+fn mesh_flux(
+    p: &slicelight_shaders::sea::SeaParams,
+    waves: &[glam::Vec4],
+    map: &slicelight_shaders::sea::caustics::CausticMap,
+) -> f64 {
+    let factor = |i: u32, j: u32| slicelight_shaders::sea::caustics::refracted_at(p, waves, map, i, j).1 as f64;
+    let n = map.resolution;
+    let mut flux = 0.0;
+    for j in 0..n {
+        for i in 0..n {
+            let (a, b, c, d) = (factor(i, j), factor(i + 1, j), factor(i, j + 1), factor(i + 1, j + 1));
+            flux += 0.5 * (a + b + c) / 3.0 + 0.5 * (b + d + c) / 3.0;
+        }
+    }
+    flux
 }
 
 /// Texel `(i, j)`'s caustic ratio (the red channel; the water here is clear,
@@ -537,14 +548,7 @@ fn shaft_planes_conserve_the_light_and_reduce_to_the_flat_beam() {
     for k in 0..p.shaft_planes {
         // (1) The flux its mesh lets in against what the plane holds.
         let (map, _) = caustics::caustic_map(p, k * 2 * m * m);
-        let factor = |i: u32, j: u32| caustics::refracted_at(p, &data.sea.waves, &map, i, j).1 as f64;
-        let mut flux = 0.0;
-        for j in 0..m {
-            for i in 0..m {
-                let (a, b, c, d) = (factor(i, j), factor(i + 1, j), factor(i, j + 1), factor(i + 1, j + 1));
-                flux += 0.5 * (a + b + c) / 3.0 + 0.5 * (b + d + c) / 3.0;
-            }
-        }
+        let flux = mesh_flux(p, &data.sea.waves, &map);
         let plane = &maps[k as usize * len..(k as usize + 1) * len];
         let held: f64 = plane[..(m * m) as usize].iter().map(|v| v.x as f64).sum();
         // Measured under 1e-7; the fixed point's truncation, as for the bottom's map.

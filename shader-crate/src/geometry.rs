@@ -52,6 +52,14 @@ pub struct Geometry<'a> {
     pub node_count: u32,
 }
 
+impl Geometry<'_> {
+    /// Whether the scene has no objects (no sphere, no triangle): every
+    /// ray misses.
+    pub fn is_empty(&self) -> bool {
+        self.node_count == 0 && self.sphere_count == 0
+    }
+}
+
 /// Distance to the first intersection of the ray `origin + t dir` (`dir` unit,
 /// `t > t_min`) with a sphere, metres; `NO_HIT` if none.
 ///

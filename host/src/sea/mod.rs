@@ -20,6 +20,7 @@ use serde::Deserialize;
 use slicelight_shaders::optics;
 use slicelight_shaders::scatter::CpuAtomics;
 use slicelight_shaders::sea::caustics::{caustic_triangle, caustic_triangles, shaft_map_len, shaft_mip_texel};
+use slicelight_shaders::sea::under::Sunlit;
 use slicelight_shaders::sea::{
     accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, layer_params, map_coords, order1_pixel,
     order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
@@ -1457,7 +1458,9 @@ fn run_term(
             accumulated: frame.get::<Vec4>(&SEA_ACCUMULATED_MAP),
             correction: frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION),
             caustic: frame.get::<u32>(&SEA_CAUSTICS),
-            shafts: frame.get::<Vec4>(&SEA_SHAFTS),
+            // The shaft maps (empty where `sea.shafts` did not run) and the
+            // objects that shade the sun, once per band.
+            sunlit: Sunlit { shafts: frame.get::<Vec4>(&SEA_SHAFTS), geometry: scene.geometry() },
             // The clouds' shadow where the volumes' transmittance volumes ran.
             clouds: CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths },
         };
@@ -1475,7 +1478,7 @@ struct TermInputs<'a> {
     accumulated: &'a [Vec4],
     correction: &'a [Vec4],
     caustic: &'a [u32],
-    shafts: &'a [Vec4],
+    sunlit: Sunlit<'a>,
     clouds: CloudShadow<'a>,
 }
 
@@ -1528,8 +1531,7 @@ impl Pass for SeaOrder1 {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, x| {
-            let sunlit = slicelight_shaders::sea::under::Sunlit { shafts: x.shafts, geometry: scene.geometry() };
-            order1_pixel(i, common, p, t, bottom, &sunlit, &x.clouds)
+            order1_pixel(i, common, p, t, bottom, &x.sunlit, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
@@ -1665,7 +1667,7 @@ impl Pass for SeaBottom {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, x| {
-            bottom_pixel(i, common, p, t, bottom, x.caustic, &scene.geometry(), &x.clouds)
+            bottom_pixel(i, common, p, t, bottom, x.caustic, &x.sunlit.geometry, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

@@ -89,17 +89,21 @@ pub fn shaft_resolution(p: &SeaParams) -> u32 {
     p.wave_resolution >> p.shaft_level
 }
 
-/// Bins of the caustic words: rgb per texel of the bottom's map, then of
-/// each shaft plane's.
-pub fn caustic_bins(p: &SeaParams) -> u32 {
+/// Texels of every map the caustic pass draws: the bottom's, then each
+/// shaft plane's.
+fn caustic_texels(p: &SeaParams) -> u32 {
     let m = shaft_resolution(p);
-    3 * (bottom_map_texels(p) + p.shaft_planes * m * m)
+    bottom_map_texels(p) + p.shaft_planes * m * m
+}
+
+/// Bins of the caustic words: rgb per texel of every map.
+pub fn caustic_bins(p: &SeaParams) -> u32 {
+    3 * caustic_texels(p)
 }
 
 /// Invocations of the caustic pass: two triangles per texel of every map.
 pub fn caustic_triangles(p: &SeaParams) -> u32 {
-    let m = shaft_resolution(p);
-    2 * (bottom_map_texels(p) + p.shaft_planes * m * m)
+    2 * caustic_texels(p)
 }
 
 /// Shaft plane `k`'s depth, m: evenly from the surface (plane 0) to
@@ -278,10 +282,14 @@ fn wrap(p: &SeaParams, v: f32) -> f32 {
     (u - u.floor()) * p.wave_resolution as f32
 }
 
-/// Texel `(i, j)`'s ratio (rgb).
+/// Texel `(i, j)`'s ratio (rgb) on the bottom's map.
 pub fn texel_ratio(p: &SeaParams, words: &[u32], i: u32, j: u32) -> Vec3 {
-    let b = 3 * (j * p.wave_resolution + i);
-    Vec3::new(read(words, b), read(words, b + 1), read(words, b + 2))
+    read_rgb(words, 3 * (j * p.wave_resolution + i))
+}
+
+/// The three bins from `bin` (one texel's rgb).
+fn read_rgb(words: &[u32], bin: u32) -> Vec3 {
+    Vec3::new(read(words, bin), read(words, bin + 1), read(words, bin + 2))
 }
 
 /// Texels of one shaft plane's mip chain (`m^2 + (m/2)^2 + ... + 1`).
@@ -319,8 +327,7 @@ pub fn shaft_mip_texel(index: u32, p: &SeaParams, words: &[u32]) -> Vec4 {
     while b < span {
         let mut a = 0;
         while a < span {
-            let bin = first + 3 * ((j * span + b) * m + i * span + a);
-            sum += Vec3::new(read(words, bin), read(words, bin + 1), read(words, bin + 2));
+            sum += read_rgb(words, first + 3 * ((j * span + b) * m + i * span + a));
             a += 1;
         }
         b += 1;

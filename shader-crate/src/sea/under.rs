@@ -259,8 +259,7 @@ pub const SHAFT_REACH: f32 = 8.0;
 /// (`sun_visibility`): their shadows in the water's light, with the shafts
 /// or in the flat beam (`C = 1`).
 pub fn order1_shafts(p: &SeaParams, sunlit: &Sunlit, origin: Vec3, dir: Vec3, z_e: f32, length: f32, c: Vec3) -> Vec3 {
-    let objects = sunlit.geometry.node_count > 0 || sunlit.geometry.sphere_count > 0;
-    if p.shaft_planes == 0 && !objects {
+    if p.shaft_planes == 0 && sunlit.geometry.is_empty() {
         return order1_segment(p, dir, z_e, length, c);
     }
     let mu_s = p.sun_in_water.w;
@@ -321,7 +320,7 @@ pub struct Sunlit<'a> {
 /// too). 1 without objects, at no cost. (A point's own shadow: the shafts
 /// paper's shadow test, here per sample rather than from a shadow map.)
 pub fn sun_visibility(p: &SeaParams, geometry: &Geometry, point: Vec3) -> f32 {
-    if geometry.node_count == 0 && geometry.sphere_count == 0 {
+    if geometry.is_empty() {
         return 1.0;
     }
     let up = -p.sun_in_water.xyz();

@@ -646,3 +646,173 @@ fn stress_collapsing_cross_sections_and_broken_meshes() {
     println!("lens: {:.4} W on the floor's plane of {falling:.4} W falling on the lens", planes[0]);
     assert!(lens.caustics.enabled && planes[0] > 0.85 * falling && planes[0] <= falling, "{planes:?} of {falling}");
 }
+
+/// Caustic light shafts (issue 26): the glass ball hung in fog under a
+/// spotlight, the `caustics.shafts` layer against the light tracer's medium
+/// estimate (`caustic_shaft_image`: every path segment after the glass
+/// connected to the eye; transmission only, the paths the method models)
+/// over the pixels that see no glass, at 160x120 with 16 samples per pixel
+/// (both are pixel means). The floor's caustic is unchanged by the shafts.
+#[test]
+fn caustic_shafts_in_fog_match_the_light_tracer() {
+    let data = shrink("caustics_fog_ball.toml", 160, 120, 16, "");
+    assert!(data.caustics.shafts_on(), "shafts are built: {}", data.caustics.shafts_reason);
+    let r = render_checked(&data, "caustics_fog_ball");
+    let keep = not_glass(&data);
+    let shafts = to_f64(layer(&r, "caustics.shafts"));
+    let (traced, paths) = slicelight::caustics::reference::light_trace_converged(
+        &data,
+        1 << 18,
+        1 << 23,
+        2e-3,
+        true,
+        slicelight::caustics::reference::Splat::Medium,
+    );
+    let d = difference(&select(&shafts, &keep), &select(&traced, &keep), data.exposure);
+    let peak = select(&traced, &keep).iter().map(|v| v.max_element()).fold(0.0, f64::max);
+    let sum = |v: &[DVec3]| select(v, &keep).iter().map(|v| v.x).sum::<f64>();
+    // Within the shafts (the reference over a tenth of its peak): RMS relative to the peak.
+    let lit: Vec<usize> = (0..traced.len()).filter(|&i| keep[i] && traced[i].max_element() > 0.1 * peak).collect();
+    let within = (lit.iter().map(|&i| (shafts[i] - traced[i]).length_squared() / 3.0).sum::<f64>()
+        / lit.len().max(1) as f64)
+        .sqrt()
+        / peak;
+    println!(
+        "caustic shafts vs light tracer ({paths} paths): RMS {:.3} % (8-bit), max {:.2} %; peak {peak:.4} W/(m^2 sr); within the {} shaft pixels {:.2} % of the peak; sums {:.4} vs {:.4}",
+        d.rms_8bit_percent,
+        d.max_8bit_percent,
+        lit.len(),
+        within * 100.0,
+        sum(&shafts),
+        sum(&traced)
+    );
+    assert!(peak * data.exposure as f64 > 0.02, "the shafts are visible in the reference: peak {peak}");
+    assert!(d.rms_8bit_percent < 2.0, "the issue's 2 % RMS (8-bit): {d:?}");
+    // Within the shafts the planes (3.9 cm apart) and texels blur the focus
+    // under the ball, where the light changes within a plane's spacing:
+    // measured 6.2 % of the peak with the defaults (3.6 % with 64 steps).
+    assert!(within < 0.10, "within the shafts: {:.2} % of the peak", within * 100.0);
+    // The light scattered toward the eye in all: measured 1.1 % apart.
+    assert!((sum(&shafts) / sum(&traced) - 1.0).abs() < 0.05, "{} against {}", sum(&shafts), sum(&traced));
+}
+
+/// Energy (issue 26): the light on the floor and the light the medium
+/// scatters out of the caustic shafts together never exceed what falls on
+/// the glass. The ball in fog with an isotropic phase (the shaft maps then
+/// hold `E_perp / 4 pi`), no absorption (`sigma_s = sigma_t`: the tightest
+/// case) from thin to 10/m: the floor's flux from the receivers' lowest
+/// map, the scattered power `sigma_s int E_perp dV` from the shaft maps
+/// (planes by the trapezoid rule). With no scattering, no shafts are built.
+#[test]
+fn caustic_shafts_and_floor_never_hold_more_than_fell_on_the_glass() {
+    use slicelight::passes::Pass;
+    let text = std::fs::read_to_string(common::root().join("scenes/caustics_fog_ball.toml")).unwrap();
+    let text = regex_free_resolution(&text, 32, 24);
+    for sigma in [0.02f32, 0.5, 2.0] {
+        let text = text
+            .replace("sigma_s = [0.10, 0.10, 0.10]", &format!("sigma_s = [{sigma}, {sigma}, {sigma}]"))
+            .replace("sigma_t = [0.12, 0.12, 0.12]", &format!("sigma_t = [{sigma}, {sigma}, {sigma}]"))
+            .replace("{ kind = \"henyey-greenstein\", g = 0.4 }", "{ kind = \"isotropic\" }");
+        let data = common::scene_from_str(&format!("{text}\n[caustics]\ncache = false\n"));
+        assert!(data.caustics.shafts_on(), "{sigma}: {}", data.caustics.shafts_reason);
+        let (mut frame, hidden) = (slicelight::passes::Frame::default(), indicatif::ProgressBar::hidden());
+        for pass in [
+            &slicelight::caustics::CausticsTable as &dyn Pass,
+            &slicelight::caustics::CausticsLookup,
+            &slicelight::caustics::CausticsMaps,
+            &slicelight::caustics::CausticShaftMaps,
+        ] {
+            pass.run_cpu(&data, &data.common, &mut frame, &hidden);
+        }
+        let mut entering = 0.0f64;
+        for light in &data.lights {
+            for t in &data.glass_triangles {
+                let [a, b, c] = t.vertices.map(|i| data.glass_vertices[i as usize].position.truncate());
+                let f = slicelight_shaders::caustics::triangle_flux(
+                    &data.common,
+                    light,
+                    &data.light_map,
+                    a,
+                    b,
+                    c,
+                    Vec4::ONE,
+                );
+                entering += f.x as f64;
+            }
+        }
+        let p = &data.caustics.params;
+        let floor_maps =
+            slicelight::caustics::decode_maps(&data, frame.get::<u32>(&slicelight::caustics::CAUSTICS_MAPS));
+        let per_plane = (p.map_width * p.map_height) as usize;
+        let floor: f64 =
+            floor_maps[..per_plane].iter().map(|v| v.x as f64).sum::<f64>() * (p.map_origin.w as f64).powi(2);
+        let s = &data.caustics.shafts;
+        let maps =
+            slicelight::caustics::decode_shaft_maps(&data, frame.get::<u32>(&slicelight::caustics::CAUSTIC_SHAFT_MAPS));
+        let per_plane = (s.map_width * s.map_height) as usize;
+        let mut volume = 0.0f64;
+        for (k, plane) in maps.chunks(per_plane).enumerate() {
+            let texel = s.rects[k].z as f64;
+            let across: f64 =
+                plane.iter().map(|v| v.x as f64).sum::<f64>() * texel * texel * 4.0 * std::f64::consts::PI;
+            let weight = if k == 0 || k + 1 == s.planes as usize { 0.5 } else { 1.0 };
+            volume += across * weight * s.plane_spacing as f64;
+        }
+        let scattered = sigma as f64 * volume;
+        println!(
+            "sigma {sigma}/m: {entering:.4e} W on the glass, {floor:.4e} W on the floor, {scattered:.4e} W scattered from the shafts"
+        );
+        assert!(scattered > 0.0, "{sigma}: the shafts scatter light");
+        assert!(
+            floor + scattered <= entering * 1.001,
+            "{sigma}: floor {floor} W + scattered {scattered} W exceed the {entering} W on the glass"
+        );
+    }
+}
+
+/// Stress (issue 26): glass in a medium that does not scatter builds no
+/// shafts (and says why); in one of 10/m (the light reaches the glass
+/// through 24 optical depths) and at the shafts' extremes (2 planes of
+/// 16 x 16 texels and 2 steps; 64 planes of 1024 x 1024 texels and 256
+/// steps) every value is finite and not negative; settings out of range
+/// are refused with the field named.
+#[test]
+fn caustic_shafts_at_their_edges() {
+    let text = std::fs::read_to_string(common::root().join("scenes/caustics_fog_ball.toml")).unwrap();
+    let text = regex_free_resolution(&text, 32, 24);
+    let clear = common::scene_from_str(&text.replace("sigma_s = [0.10, 0.10, 0.10]", "sigma_s = [0.0, 0.0, 0.0]"));
+    assert!(!clear.caustics.shafts_on());
+    assert_eq!(clear.caustics.shafts_reason, "no scattering medium");
+    let thick = text
+        .replace("sigma_s = [0.10, 0.10, 0.10]", "sigma_s = [10.0, 10.0, 10.0]")
+        .replace("sigma_t = [0.12, 0.12, 0.12]", "sigma_t = [10.0, 10.0, 10.0]");
+    for (what, extra) in [
+        ("10/m", ""),
+        ("fewest", "[caustics]\nshaft_planes = 2\nshaft_resolution = 16\nshaft_steps = 2"),
+        ("most", "[caustics]\nshaft_planes = 64\nshaft_resolution = 1024\nshaft_steps = 256"),
+    ] {
+        let body = if what == "10/m" { &thick } else { &text };
+        let data = common::scene_from_str(&format!("{body}\n{extra}\n"));
+        assert!(data.caustics.shafts_on(), "{what}: {}", data.caustics.shafts_reason);
+        let r = render_checked(&data, what);
+        let peak = layer(&r, "caustics.shafts").iter().map(|v| v.max_element()).fold(0.0f32, f32::max);
+        println!("{what}: caustic shafts' peak {peak:e} W/(m^2 sr)");
+        if what != "10/m" {
+            assert!(peak > 0.0, "{what}: the shafts show");
+        }
+    }
+    for (line, field) in [
+        ("shaft_planes = 1", "caustics.shaft_planes"),
+        ("shaft_planes = 65", "caustics.shaft_planes"),
+        ("shaft_resolution = 8", "caustics.shaft_resolution"),
+        ("shaft_steps = 1", "caustics.shaft_steps"),
+        ("shaft_steps = 257", "caustics.shaft_steps"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.toml");
+        std::fs::write(&path, format!("{text}\n[caustics]\n{line}\n")).unwrap();
+        let Err(e) = slicelight::scene::load(&path) else { panic!("{line} is refused") };
+        let message = format!("{e:#}");
+        assert!(message.contains(field), "{line}: {message}");
+    }
+}

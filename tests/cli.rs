@@ -89,6 +89,8 @@ fn good_scene_writes_png_exr_and_stats() {
         "caustics.lookup",
         "caustics.maps",
         "caustics",
+        "caustics.shaft_maps",
+        "caustics.shafts",
         "sky_transmittance",
         "sky_view",
         "sky_irradiance",

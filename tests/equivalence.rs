@@ -104,6 +104,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("sea_diver", sky("sea_diver", 180, 120)),
         ("under a shore, a sphere in the water", under_a_shore()),
         ("caustics_ball", traced("caustics_ball", 160, 120)),
+        ("caustics_fog_ball", traced("caustics_fog_ball", 160, 120)),
         ("caustics_torus, turned", turned_torus()),
         ("cloud_cumulus", sky("cloud_cumulus", 160, 120)),
         ("cloud_cumulus_splat", sky("cloud_cumulus_splat", 160, 120)),

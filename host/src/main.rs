@@ -577,22 +577,23 @@ fn reference_command(args: ReferenceArgs) -> Result<()> {
         eprintln!("reference: {:.3} s (the medium does not scatter: no ray march)", t.elapsed().as_secs_f64());
     }
     if !data.glass_vertices.is_empty() && !data.lights.is_empty() {
-        let t = Instant::now();
-        let (caustics, n) = slicelight::caustics::reference::caustic_image_converged(
-            &data,
-            paths,
-            paths << 6,
-            10.0 * tolerance,
-            transmission_only,
-        );
-        for (p, c) in image.iter_mut().zip(caustics) {
-            *p += c;
+        use slicelight::caustics::reference::{light_trace_converged, Splat};
+        // The caustics on surfaces, and in a scattering medium the caustic
+        // light it scatters toward the eye (the caustic shafts).
+        let splats = [(Splat::Surfaces, "caustics"), (Splat::Medium, "caustic shafts")];
+        for (splat, what) in splats.into_iter().filter(|(s, _)| *s == Splat::Surfaces || data.scatters()) {
+            let t = Instant::now();
+            let (light, n) =
+                light_trace_converged(&data, paths, paths << 6, 10.0 * tolerance, transmission_only, splat);
+            for (p, c) in image.iter_mut().zip(light) {
+                *p += c;
+            }
+            eprintln!(
+                "reference {what}: {n} light paths per light, glass object and channel{}, {:.3} s",
+                if transmission_only { " (transmission only)" } else { "" },
+                t.elapsed().as_secs_f64()
+            );
         }
-        eprintln!(
-            "reference caustics: {n} light paths per light, glass object and channel{}, {:.3} s",
-            if transmission_only { " (transmission only)" } else { "" },
-            t.elapsed().as_secs_f64()
-        );
     }
     let pixels: Vec<Vec4> = image.iter().map(|p| p.as_vec3().extend(0.0)).collect();
     write_outputs(&output, &pixels, &[], &data, false, &[])

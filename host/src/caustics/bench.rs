@@ -13,6 +13,12 @@
 //! direct light (`reference::render_surfaces`) plus the f64 light tracer's
 //! caustics, transmission only (the paths the method models). For the
 //! vertex sweep, the reference's sphere is the finest tessellation swept.
+//!
+//! In a scene whose medium scatters (`caustics_fog_ball`) the error is the
+//! caustic light shafts' (the `caustics.shafts` layer) against the light
+//! tracer's medium estimate (`caustic_shaft_image`), over the same pixels,
+//! and the sweep adds the shaft planes, the shaft maps' resolution and the
+//! steps along each view ray.
 
 use anyhow::Result;
 use glam::DVec3;
@@ -35,12 +41,24 @@ pub struct Config {
     pub compression: bool,
     pub planes: u32,
     pub map_resolution: u32,
+    pub shaft_planes: u32,
+    pub shaft_resolution: u32,
+    pub shaft_steps: u32,
 }
 
-const BASE: Config =
-    Config { series: "", directions: [8, 16], segments: None, compression: true, planes: 6, map_resolution: 512 };
+const BASE: Config = Config {
+    series: "",
+    directions: [8, 16],
+    segments: None,
+    compression: true,
+    planes: 6,
+    map_resolution: 512,
+    shaft_planes: 32,
+    shaft_resolution: 128,
+    shaft_steps: 32,
+};
 
-pub fn sweep(quick: bool, sphere: bool) -> Vec<Config> {
+pub fn sweep(quick: bool, sphere: bool, shafts: bool) -> Vec<Config> {
     let dirs: &[[u32; 2]] =
         if quick { &[[2, 4], [8, 16], [16, 32]] } else { &[[2, 4], [4, 8], [6, 12], [8, 16], [12, 24], [16, 32]] };
     let segs: &[[u32; 2]] = if quick { &[[24, 16], [96, 64]] } else { &[[24, 16], [48, 32], [96, 64], [144, 96]] };
@@ -64,6 +82,20 @@ pub fn sweep(quick: bool, sphere: bool) -> Vec<Config> {
     for &m in maps {
         v.push(Config { series: "map", map_resolution: m, ..BASE });
     }
+    if shafts {
+        let planes: &[u32] = if quick { &[8, 32] } else { &[4, 8, 16, 32, 64] };
+        let maps: &[u32] = if quick { &[64, 128] } else { &[32, 64, 128, 256] };
+        let steps: &[u32] = if quick { &[16, 32] } else { &[8, 16, 32, 64, 128] };
+        for &p in planes {
+            v.push(Config { series: "shaft planes", shaft_planes: p, ..BASE });
+        }
+        for &m in maps {
+            v.push(Config { series: "shaft map", shaft_resolution: m, ..BASE });
+        }
+        for &n in steps {
+            v.push(Config { series: "shaft steps", shaft_steps: n, ..BASE });
+        }
+    }
     v
 }
 
@@ -80,6 +112,8 @@ pub struct Row {
     pub frame_median_seconds: f64,
     pub rms_8bit_percent: f64,
     pub max_8bit_percent: f64,
+    /// The error is the caustic shafts' (the scene's medium scatters).
+    pub shafts: bool,
 }
 
 /// Whether glass is the scene's sphere (whose tessellation the sweep varies).
@@ -98,6 +132,9 @@ fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
         f.caustics.compression = c.compression;
         f.caustics.planes = c.planes;
         f.caustics.map_resolution = c.map_resolution;
+        f.caustics.shaft_planes = c.shaft_planes;
+        f.caustics.shaft_resolution = c.shaft_resolution;
+        f.caustics.shaft_steps = c.shaft_steps;
         f.caustics.cache = false;
         if let Some(segments) = c.segments {
             for o in &mut f.object {
@@ -154,7 +191,7 @@ pub struct CausticsSweep;
 
 impl crate::bench::Sweep for CausticsSweep {
     fn default_scenes(&self) -> &'static [&'static str] {
-        &["caustics_ball", "caustics_knot"]
+        &["caustics_ball", "caustics_knot", "caustics_fog_ball"]
     }
     fn takes(&self, s: &SceneData) -> bool {
         !s.glass_vertices.is_empty()
@@ -180,14 +217,33 @@ pub fn run(
     let mut rows = Vec::new();
     for BenchScene { name, data: scene, .. } in scenes {
         let sphere = glass_sphere(&scene.source.file);
-        let configs = sweep(quick, sphere);
+        let shafts = scene.caustics.shafts_on();
+        let configs = sweep(quick, sphere, shafts);
         // References: the scene as it is, and (sphere scenes) the finest sphere.
         let reference_of = |segments: Option<[u32; 2]>| -> Result<(Vec<DVec3>, Vec<bool>)> {
             let c = Config { segments, ..BASE };
             let data = small(configure(scene, &c)?, stride)?;
+            if shafts {
+                let (traced, paths) = crate::caustics::reference::light_trace_converged(
+                    &data,
+                    1 << 18,
+                    1 << 23,
+                    2e-3,
+                    true,
+                    crate::caustics::reference::Splat::Medium,
+                );
+                eprintln!("{name}: caustic shafts' reference with {paths} light paths per light and object");
+                return Ok((traced, not_glass(&data)));
+            }
             let direct = crate::reference::render_surfaces(&data);
-            let (traced, paths) =
-                crate::caustics::reference::caustic_image_converged(&data, 1 << 21, 1 << 24, 2e-3, true);
+            let (traced, paths) = crate::caustics::reference::light_trace_converged(
+                &data,
+                1 << 21,
+                1 << 24,
+                2e-3,
+                true,
+                crate::caustics::reference::Splat::Surfaces,
+            );
             eprintln!("{name}: reference with {paths} light paths per light and object");
             let image = direct.iter().zip(&traced).map(|(a, b)| *a + *b).collect();
             Ok((image, not_glass(&data)))
@@ -217,7 +273,13 @@ pub fn run(
                 let (image, keep) =
                     if c.segments.is_some() { finest.as_ref().unwrap_or(&reference) } else { &reference };
                 let keep: Vec<bool> = keep.iter().zip(not_glass(&s)).map(|(a, b)| *a && b).collect();
-                let d = difference(&select(&to_f64(&r.image), &keep), &select(image, &keep), data.exposure);
+                let measured = if shafts {
+                    let layer = r.layers.iter().find(|(n, _)| *n == "caustics.shafts").map(|(_, b)| b.as_slice());
+                    to_f64(layer.unwrap_or(&[]))
+                } else {
+                    to_f64(&r.image)
+                };
+                let d = difference(&select(&measured, &keep), &select(image, &keep), data.exposure);
                 let row = Row {
                     scene: name.clone(),
                     backend: backend.name(),
@@ -227,9 +289,10 @@ pub fn run(
                     frame_median_seconds: median(frames),
                     rms_8bit_percent: d.rms_8bit_percent,
                     max_8bit_percent: d.max_8bit_percent,
+                    shafts,
                 };
                 eprintln!(
-                    "{name:>20} {:>4} {:<12} dirs={:?} verts={:<6} compress={:<5} planes={:<2} map={:<4} table {:.3} s frame {:.4} s  rms {:.3}%  max {:.1}%",
+                    "{name:>20} {:>4} {:<12} dirs={:?} verts={:<6} compress={:<5} planes={:<2} map={:<4} shaft planes={:<2} map={:<4} steps={:<3} table {:.3} s frame {:.4} s  rms {:.3}%  max {:.1}%",
                     row.backend,
                     c.series,
                     c.directions,
@@ -237,6 +300,9 @@ pub fn run(
                     c.compression,
                     c.planes,
                     c.map_resolution,
+                    c.shaft_planes,
+                    c.shaft_resolution,
+                    c.shaft_steps,
                     row.table_median_seconds,
                     row.frame_median_seconds,
                     row.rms_8bit_percent,
@@ -256,13 +322,13 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     let mut out = Vec::new();
     writeln!(
         out,
-        "scene,backend,series,rings,azimuths,directions,vertices,compression,planes,map_resolution,table_median_seconds,frame_median_seconds,rms_8bit_percent,max_8bit_percent"
+        "scene,backend,series,rings,azimuths,directions,vertices,compression,planes,map_resolution,shaft_planes,shaft_resolution,shaft_steps,measured,table_median_seconds,frame_median_seconds,rms_8bit_percent,max_8bit_percent"
     )?;
     for r in rows {
         let c = &r.config;
         writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.5},{:.5}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.5},{:.5}",
             r.scene,
             r.backend,
             c.series,
@@ -273,6 +339,10 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
             c.compression,
             c.planes,
             c.map_resolution,
+            c.shaft_planes,
+            c.shaft_resolution,
+            c.shaft_steps,
+            if r.shafts { "caustic shafts" } else { "image" },
             r.table_median_seconds,
             r.frame_median_seconds,
             r.rms_8bit_percent,
@@ -320,7 +390,7 @@ fn plot(path: &Path, rows: &[Row], precompute: bool) -> Result<()> {
         crate::bench::LogLogPlot {
             caption: "Caustics: frame time against error",
             x_desc: "median frame time without the table, s",
-            y_desc: "RMS error, % of 8 bit (no glass)",
+            y_desc: "RMS error, % of 8 bit (no glass; in fog, the caustic shafts)",
         }
     };
     crate::bench::plot_log_log(path, &labels, &series, 1e-4)

@@ -12,8 +12,9 @@ use anyhow::{bail, ensure, Result};
 use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use slicelight_shaders::caustics::{
-    caustics_pixel, light_at_vertex, load_entry, lookup, map_bins, rasterize, read_bin, store_entry, table_entry,
-    table_slot, triangle_flux, CausticsParams, ExitRay, TableEntry, ENTRY_WORDS, MAP_BINS, MAX_SLOPE, PACKED_WORDS,
+    caustic_shafts_pixel, caustics_pixel, light_at_vertex, load_entry, lookup, map_bins, rasterize, read_bin,
+    store_entry, table_entry, table_slot, texel_bins, triangle_flux, CausticsParams, ExitRay, TableEntry, ENTRY_WORDS,
+    MAX_SHAFT_PLANES, MAX_SLOPE, PACKED_WORDS,
 };
 use slicelight_shaders::glass::{dispersive, trace_through, Glass, PATH_OUT};
 use slicelight_shaders::scatter::{words_for, CpuAtomics};
@@ -22,7 +23,8 @@ use slicelight_shaders::types::{CommonParams, GBufferTexel, MATERIAL_GLASS, NO_O
 use crate::passes::*;
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
-pub static PASSES: &[&dyn Pass] = &[&CausticsTable, &CausticsLookup, &CausticsMaps, &Caustics];
+pub static PASSES: &[&dyn Pass] =
+    &[&CausticsTable, &CausticsLookup, &CausticsMaps, &Caustics, &CausticShaftMaps, &CausticShafts];
 
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family =
@@ -49,11 +51,33 @@ pub struct Settings {
     /// Pack table entries into 16-bit fields, 20 bytes instead of 48
     /// (section 6; true).
     pub compression: bool,
+    /// Caustic light shafts in a scattering `[medium]` (true): the light the
+    /// glass refracts, scattered toward the eye (`caustic_shafts_pixel`).
+    pub shafts: bool,
+    /// Horizontal shaft planes from the receivers up to the highest point
+    /// the light leaves the glass from (default 32, 2..=64).
+    pub shaft_planes: u32,
+    /// Texels along each side of every shaft plane's square map, which
+    /// covers where the light crosses that plane (default 128, 16..=1024).
+    pub shaft_resolution: u32,
+    /// Intervals along each view ray where it crosses the shaft maps (default 32, 2..=256).
+    pub shaft_steps: u32,
 }
 
 impl Default for Settings {
     fn default() -> Self {
-        Settings { enabled: true, directions: [8, 16], planes: 6, map_resolution: 512, cache: true, compression: true }
+        Settings {
+            enabled: true,
+            directions: [8, 16],
+            planes: 6,
+            map_resolution: 512,
+            cache: true,
+            compression: true,
+            shafts: true,
+            shaft_planes: 32,
+            shaft_resolution: 128,
+            shaft_steps: 32,
+        }
     }
 }
 
@@ -70,6 +94,10 @@ pub struct Setup {
     /// Why not, when not enabled.
     pub reason: String,
     pub params: CausticsParams,
+    /// The shaft maps' parameters (`planes` 0: no caustic shafts).
+    pub shafts: CausticsParams,
+    /// Why no caustic shafts, when there are none.
+    pub shafts_reason: String,
 }
 
 /// Largest light transport table, bytes (lavapipe binds at most 128 MiB).
@@ -87,6 +115,15 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
     }
     if !(16..=4096).contains(&s.map_resolution) {
         bail!(invalid("map_resolution", "a texel count in 16..=4096", s.map_resolution));
+    }
+    if !(2..=MAX_SHAFT_PLANES).contains(&s.shaft_planes) {
+        bail!(invalid("shaft_planes", &format!("a count in 2..={MAX_SHAFT_PLANES}"), s.shaft_planes));
+    }
+    if !(16..=1024).contains(&s.shaft_resolution) {
+        bail!(invalid("shaft_resolution", "a texel count in 16..=1024", s.shaft_resolution));
+    }
+    if !(2..=256).contains(&s.shaft_steps) {
+        bail!(invalid("shaft_steps", "a count in 2..=256", s.shaft_steps));
     }
     let off = |reason: &str| Ok(Setup { enabled: false, reason: reason.into(), ..Default::default() });
     if scene.glass_vertices.is_empty() {
@@ -130,18 +167,11 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
     };
 
     let y_top = y_lo + spacing * (planes - 1) as f32;
-    let Some((xz_lo, xz_hi)) = exit_footprint(scene, channels, [y_lo, y_top]) else {
+    let exits = exit_rays(scene, channels);
+    let Some(footprint) = footprint(&exits, [y_lo, y_top]) else {
         return off("no light leaves the glass downward toward the receivers");
     };
-    // A margin for the rays between the sampled vertices, then the receivers' extent.
-    let margin = (xz_hi - xz_lo).max_element() * 0.1 + 1e-3 * scale;
-    let xz_lo = (xz_lo - margin).max(glam::Vec2::new(lo.x, lo.z));
-    let xz_hi = (xz_hi + margin).min(glam::Vec2::new(hi.x, hi.z));
-    let size = (xz_hi - xz_lo).max(glam::Vec2::splat(1e-6 * scale));
-    let texel = size.max_element() / s.map_resolution as f32;
-    let map_width = ((size.x / texel).ceil() as u32).clamp(1, s.map_resolution);
-    let map_height = ((size.y / texel).ceil() as u32).clamp(1, s.map_resolution);
-
+    let (xz_lo, map_width, map_height, texel) = map_rectangle(footprint, (lo, hi), scale, s.map_resolution);
     let Some(fixed_scale) = fixed_point_scale(scene, texel) else {
         return off("the lights send no light onto the glass");
     };
@@ -162,9 +192,16 @@ pub fn configure(s: &Settings, scene: &SceneData) -> Result<Setup> {
         scale: fixed_scale,
         compressed: s.compression as u32,
         entry_words,
-        _pad: [0; 2],
+        shaft_steps: 0,
+        _pad: 0,
+        ..Default::default()
     };
-    let mut setup = Setup { enabled: true, table_blocks: blocks as u32, params, ..Default::default() };
+    let (shafts, shafts_reason) = match shaft_maps(s, scene, &params, &exits, (lo, hi), scale) {
+        Ok(shafts) => (shafts, String::new()),
+        Err(reason) => (CausticsParams::default(), reason.to_string()),
+    };
+    let mut setup =
+        Setup { enabled: true, table_blocks: blocks as u32, params, shafts, shafts_reason, ..Default::default() };
     if s.cache {
         if let Some(dir) = cache::directory() {
             cache::load(&mut setup, scene, &dir);
@@ -191,15 +228,109 @@ fn receiver_bounds(scene: &SceneData) -> Option<(Vec3, Vec3)> {
     (lo.x <= hi.x).then_some((lo, hi))
 }
 
-/// Where the light leaving the glass crosses the planes at `heights` (the
-/// lowest and the highest), as x-z bounds, from exactly traced exit rays at
-/// up to 4096 vertices per light; `None` if no light leaves downward.
-fn exit_footprint(scene: &SceneData, channels: u32, heights: [f32; 2]) -> Option<(glam::Vec2, glam::Vec2)> {
+/// The shaft maps' parameters (`caustic_shafts_pixel`): `shaft_planes`
+/// planes from the receivers' lowest point up to the highest point the
+/// light leaves the glass downward from, over where those rays go between
+/// them; the reason why there are none otherwise.
+fn shaft_maps(
+    s: &Settings,
+    scene: &SceneData,
+    receivers: &CausticsParams,
+    exits: &[(Vec3, Vec3)],
+    bounds: (Vec3, Vec3),
+    scale: f32,
+) -> std::result::Result<CausticsParams, &'static str> {
+    if !s.shafts {
+        return Err("[caustics] shafts = false");
+    }
+    if scene.common.sigma_s.truncate().max_element() <= 0.0 {
+        return Err("no scattering medium");
+    }
+    let y_lo = receivers.map_origin.y;
+    let top = exits.iter().map(|(p, _)| p.y).fold(f32::NEG_INFINITY, f32::max);
+    if top.is_nan() || top - y_lo <= 1e-4 * scale {
+        return Err("no light leaves the glass above the receivers");
+    }
+    let planes = s.shaft_planes;
+    let spacing = (top - y_lo) / (planes - 1) as f32;
+    let res = s.shaft_resolution;
+    let mut rects = [Vec4::ZERO; MAX_SHAFT_PLANES as usize];
+    let mut union = (glam::Vec2::splat(f32::INFINITY), glam::Vec2::splat(f32::NEG_INFINITY));
+    let mut finest = f32::INFINITY;
+    for k in 0..planes {
+        // Where the rays cross this plane, or leave the glass below it
+        // (`rasterize` draws those where they leave).
+        let y = y_lo + spacing * k as f32;
+        let crossings = exits.iter().map(|&(p, d)| if p.y >= y { p + d * ((y - p.y) / d.y) } else { p });
+        let (mut xs, mut zs): (Vec<f32>, Vec<f32>) = crossings.map(|q| (q.x, q.z)).unzip();
+        let (Some(x), Some(z)) = (central(&mut xs), central(&mut zs)) else {
+            return Err("no light leaves the glass above the receivers");
+        };
+        let lo = glam::Vec2::new(x.0, z.0);
+        let hi = glam::Vec2::new(x.1, z.1);
+        let (corner, _, _, texel) = map_rectangle((lo, hi), bounds, scale, res);
+        rects[k as usize] = Vec4::new(corner.x, corner.y, texel, 0.0);
+        union.0 = union.0.min(corner);
+        union.1 = union.1.max(corner + glam::Vec2::splat(texel * res as f32));
+        finest = finest.min(texel);
+    }
+    let fixed_scale = fixed_point_scale(scene, finest).ok_or("the lights send no light onto the glass")?;
+    Ok(CausticsParams {
+        map_origin: Vec4::new(union.0.x, y_lo, union.0.y, finest),
+        planes,
+        map_width: res,
+        map_height: res,
+        plane_spacing: spacing,
+        scale: fixed_scale,
+        shaft_steps: s.shaft_steps,
+        bounds: Vec4::new(union.0.x, union.0.y, union.1.x, union.1.y),
+        rects,
+        ..*receivers
+    })
+}
+
+/// The share of the exit rays a shaft map may leave off on each side, per
+/// axis: the light that leaves a lens at grazing angles spreads over the
+/// whole floor (a ball's rim sends rays out nearly level); bounding all of
+/// it would spread a plane's texels over metres for a thousandth of the flux.
+const SHAFT_TAIL: f64 = 0.01;
+
+/// The range of `v` less its `SHAFT_TAIL` at each end (`None` if empty or not finite).
+fn central(v: &mut [f32]) -> Option<(f32, f32)> {
+    if v.is_empty() || v.iter().any(|x| !x.is_finite()) {
+        return None;
+    }
+    v.sort_unstable_by(f32::total_cmp);
+    let cut = (v.len() as f64 * SHAFT_TAIL) as usize;
+    Some((v[cut], v[v.len() - 1 - cut]))
+}
+
+/// A map's corner (x, z), width and height in texels and texel size over
+/// `footprint` with a margin for the rays between the sampled vertices,
+/// within the receivers' `bounds`, `resolution` texels along its longer side.
+fn map_rectangle(
+    (xz_lo, xz_hi): (glam::Vec2, glam::Vec2),
+    (lo, hi): (Vec3, Vec3),
+    scale: f32,
+    resolution: u32,
+) -> (glam::Vec2, u32, u32, f32) {
+    let margin = (xz_hi - xz_lo).max_element() * 0.1 + 1e-3 * scale;
+    let xz_lo = (xz_lo - margin).max(glam::Vec2::new(lo.x, lo.z));
+    let xz_hi = (xz_hi + margin).min(glam::Vec2::new(hi.x, hi.z));
+    let size = (xz_hi - xz_lo).max(glam::Vec2::splat(1e-6 * scale));
+    let texel = size.max_element() / resolution as f32;
+    let width = ((size.x / texel).ceil() as u32).clamp(1, resolution);
+    let height = ((size.y / texel).ceil() as u32).clamp(1, resolution);
+    (xz_lo, width, height, texel)
+}
+
+/// The light leaving the glass downward: exactly traced exit rays (point,
+/// direction) at up to 4096 vertices per light.
+fn exit_rays(scene: &SceneData, channels: u32) -> Vec<(Vec3, Vec3)> {
     let geometry = scene.geometry();
     let glass = Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
     let stride = (scene.glass_vertices.len() / 4096).max(1);
-    let mut xz_lo = glam::Vec2::splat(f32::INFINITY);
-    let mut xz_hi = glam::Vec2::splat(f32::NEG_INFINITY);
+    let mut out = Vec::new();
     for light in &scene.lights {
         for v in scene.glass_vertices.iter().step_by(stride) {
             let (lit, dir) = light_at_vertex(light, &geometry, v);
@@ -219,17 +350,29 @@ fn exit_footprint(scene: &SceneData, channels: u32, heights: [f32; 2]) -> Option
                     v.object,
                     false,
                 );
-                if path.status != PATH_OUT || path.direction.y >= 0.0 {
-                    continue;
+                if path.status == PATH_OUT && path.direction.y < 0.0 {
+                    out.push((path.position, path.direction));
                 }
-                for y in heights {
-                    let t = (y - path.position.y) / path.direction.y;
-                    if t >= 0.0 {
-                        let q = path.position + path.direction * t;
-                        xz_lo = xz_lo.min(glam::Vec2::new(q.x, q.z));
-                        xz_hi = xz_hi.max(glam::Vec2::new(q.x, q.z));
-                    }
-                }
+            }
+        }
+    }
+    out
+}
+
+/// Where the exit rays cross the planes at `heights` (the lowest and the
+/// highest), as x-z bounds; `None` if there is nowhere.
+fn footprint(rays: &[(Vec3, Vec3)], heights: [f32; 2]) -> Option<(glam::Vec2, glam::Vec2)> {
+    let mut xz_lo = glam::Vec2::splat(f32::INFINITY);
+    let mut xz_hi = glam::Vec2::splat(f32::NEG_INFINITY);
+    let mut add = |q: Vec3| {
+        xz_lo = xz_lo.min(glam::Vec2::new(q.x, q.z));
+        xz_hi = xz_hi.max(glam::Vec2::new(q.x, q.z));
+    };
+    for &(p, d) in rays {
+        for y in heights {
+            let t = (y - p.y) / d.y;
+            if t >= 0.0 {
+                add(p + d * t);
             }
         }
     }
@@ -446,6 +589,21 @@ impl Setup {
             1
         }
     }
+    /// Whether the caustic shafts run (glass, light on it, a scattering medium).
+    pub fn shafts_on(&self) -> bool {
+        self.enabled && self.shafts.planes > 0
+    }
+    pub fn shaft_map_invocations(&self) -> u64 {
+        let p = &self.shafts;
+        p.light_count as u64 * p.triangle_count as u64 * p.channels as u64 * p.planes as u64
+    }
+    pub fn shaft_map_words(&self) -> u64 {
+        if self.shafts_on() {
+            words_for(map_bins(&self.shafts)) as u64
+        } else {
+            1
+        }
+    }
 }
 
 pub static CAUSTICS_PARAMS: Resource = Resource {
@@ -471,6 +629,22 @@ pub static CAUSTICS_MAPS: Resource =
 /// Caustic radiance per pixel (rgb; w = 0).
 pub static CAUSTICS_RADIANCE: Resource =
     Resource { binding: 35, name: "caustics radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
+
+/// The shaft maps' parameters (`Setup::shafts`).
+pub static CAUSTIC_SHAFT_PARAMS: Resource = Resource {
+    binding: 79,
+    name: "caustic shaft parameters",
+    kind: ResourceKind::Scene(|s| bytemuck::bytes_of(&s.caustics.shafts)),
+};
+/// The shaft maps' fixed-point words, as `CAUSTICS_MAPS`.
+pub static CAUSTIC_SHAFT_MAPS: Resource = Resource {
+    binding: 80,
+    name: "caustic shaft maps",
+    kind: ResourceKind::Frame(|s| s.caustics.shaft_map_words() * 4),
+};
+/// Caustic light scattered toward the eye per pixel (rgb; w = 0).
+pub static CAUSTIC_SHAFTS_RADIANCE: Resource =
+    Resource { binding: 81, name: "caustic shafts radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
 
 fn skip(scene: &SceneData) -> Option<Plan> {
     (!scene.caustics.enabled).then(|| Plan::skip(scene.caustics.reason.clone()))
@@ -664,14 +838,41 @@ pub struct CausticsMaps;
 
 /// The maps' densities (rgb, W/m^2 of the plane) per texel, decoded.
 pub fn decode_maps(scene: &SceneData, words: &[u32]) -> Vec<Vec4> {
-    let p = &scene.caustics.params;
-    let texels = map_bins(p) / MAP_BINS;
-    (0..texels)
+    decode(&scene.caustics.params, words)
+}
+
+/// The densities (rgb) per texel of maps of `p`, decoded.
+fn decode(p: &CausticsParams, words: &[u32]) -> Vec<Vec4> {
+    let bins = texel_bins(p);
+    (0..map_bins(p) / bins)
         .map(|t| {
-            let b = t * MAP_BINS;
+            let b = t * bins;
             Vec4::new(read_bin(words, p, b), read_bin(words, p, b + 1), read_bin(words, p, b + 2), 0.0)
         })
         .collect()
+}
+
+/// Every lit triangle's illumination volume rasterised into maps of `p`
+/// (`words` words) on the CPU (`rasterize`).
+fn draw_maps(
+    scene: &SceneData,
+    common: &CommonParams,
+    p: &CausticsParams,
+    words: u64,
+    frame: &Frame,
+    progress: &ProgressBar,
+) -> Buffer {
+    let glass = glass(scene);
+    // Zeroed pages the rasteriser never reaches are never touched: most
+    // of a map holds no light.
+    let mut maps = Buffer::zeroed::<u32>(words as usize);
+    let atomics = crate::cpu::as_atomics(maps.as_mut_slice::<u32>());
+    let rays = frame.get::<ExitRay>(&CAUSTICS_RAYS);
+    let invocations = p.light_count * p.triangle_count * p.channels * p.planes;
+    for_each_index(invocations, progress, |i| {
+        rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, &mut CpuAtomics(atomics));
+    });
+    maps
 }
 
 impl Pass for CausticsMaps {
@@ -704,17 +905,8 @@ impl Pass for CausticsMaps {
         )
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let (glass, p) = (glass(scene), &scene.caustics.params);
-        // Zeroed pages the rasteriser never reaches are never touched: most
-        // of a map holds no light.
-        let mut maps = Buffer::zeroed::<u32>(scene.caustics.map_words() as usize);
-        {
-            let atomics = crate::cpu::as_atomics(maps.as_mut_slice::<u32>());
-            let rays = frame.get::<ExitRay>(&CAUSTICS_RAYS);
-            for_each_index(scene.caustics.map_invocations() as u32, progress, |i| {
-                rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, &mut CpuAtomics(atomics));
-            });
-        }
+        let c = &scene.caustics;
+        let maps = draw_maps(scene, common, &c.params, c.map_words(), frame, progress);
         frame.insert(&CAUSTICS_MAPS, maps);
     }
     fn keeps(&self) -> &'static [&'static Resource] {
@@ -799,5 +991,116 @@ impl Pass for Caustics {
         // 2e-3 of the peak, 1 % of the values free to differ.
         let (g, c) = (gpu.get::<Vec4>(&CAUSTICS_RADIANCE), cpu.get::<Vec4>(&CAUSTICS_RADIANCE));
         compare_rgb("caustics radiance", g, c, 2e-3, c.len() * 3 / 100 + 1)
+    }
+}
+
+/// Skips the caustic shafts where they do not run.
+fn skip_shafts(scene: &SceneData) -> Option<Plan> {
+    skip(scene).or_else(|| (!scene.caustics.shafts_on()).then(|| Plan::skip(scene.caustics.shafts_reason.clone())))
+}
+
+/// The shaft maps' densities (rgb, W/m^2 of the plane) per texel, decoded.
+pub fn decode_shaft_maps(scene: &SceneData, words: &[u32]) -> Vec<Vec4> {
+    decode(&scene.caustics.shafts, words)
+}
+
+pub struct CausticShaftMaps;
+
+impl Pass for CausticShaftMaps {
+    fn name(&self) -> &'static str {
+        "caustics.shaft_maps"
+    }
+    fn kernel(&self) -> &'static str {
+        "caustics::caustic_shaft_maps_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, LIGHTS, LIGHT_MAPS, GLASS_VERTICES, GLASS_TRIANGLES, CAUSTICS_RAYS, CAUSTIC_SHAFT_PARAMS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![CAUSTIC_SHAFT_MAPS]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(s) = skip_shafts(scene) {
+            return s;
+        }
+        let p = &scene.caustics.shafts;
+        Plan::run(
+            format!(
+                "illumination volumes cut by {} shaft plane(s) {:.3} m apart into {}x{} maps (Iwasaki 2002)",
+                p.planes, p.plane_spacing, p.map_width, p.map_height
+            ),
+            scene.caustics.shaft_map_invocations(),
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let c = &scene.caustics;
+        let maps = draw_maps(scene, common, &c.shafts, c.shaft_map_words(), frame, progress);
+        frame.insert(&CAUSTIC_SHAFT_MAPS, maps);
+    }
+    fn keeps(&self) -> &'static [&'static Resource] {
+        resources![CAUSTIC_SHAFT_MAPS]
+    }
+    fn compare(&self, scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // As the caustics maps (the same rasteriser).
+        let g = decode_shaft_maps(scene, gpu.get::<u32>(&CAUSTIC_SHAFT_MAPS));
+        let c = decode_shaft_maps(scene, cpu.get::<u32>(&CAUSTIC_SHAFT_MAPS));
+        compare_rgb("caustic shaft maps", &g, &c, 1e-3, c.len() * 3 / 100 + 1)
+    }
+}
+
+pub struct CausticShafts;
+
+impl Pass for CausticShafts {
+    fn name(&self) -> &'static str {
+        "caustics.shafts"
+    }
+    fn kernel(&self) -> &'static str {
+        "caustics::caustic_shafts_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, GBUFFER, CAUSTIC_SHAFT_PARAMS, CAUSTIC_SHAFT_MAPS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![CAUSTIC_SHAFTS_RADIANCE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn radiance_layer(&self) -> Option<&'static Resource> {
+        Some(&CAUSTIC_SHAFTS_RADIANCE)
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(s) = skip_shafts(scene) {
+            return s;
+        }
+        Plan::run(
+            format!(
+                "caustic light shafts: the shaft maps read at {} intervals along each view ray",
+                scene.caustics.shafts.shaft_steps
+            ),
+            0,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.caustics.shafts;
+        frame.write_all::<Vec4>(&CAUSTIC_SHAFTS_RADIANCE, common.band_pixels as usize, |f, out| {
+            let gbuffer = f.get::<GBufferTexel>(&GBUFFER);
+            let words = f.get::<u32>(&CAUSTIC_SHAFT_MAPS);
+            for_each_invocation(out, common.band_start, progress, |i, v| {
+                let local = i - common.band_start;
+                *v = caustic_shafts_pixel(local, common, p, words, &gbuffer[local as usize]);
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Reads of maps that agree to 1e-3 of their peak, summed over the
+        // intervals, along view rays whose ends (the G-buffer's distance,
+        // the box's faces) differ by rounding: 2e-3 of the peak, 1 % of the
+        // values free to differ.
+        let (g, c) = (gpu.get::<Vec4>(&CAUSTIC_SHAFTS_RADIANCE), cpu.get::<Vec4>(&CAUSTIC_SHAFTS_RADIANCE));
+        compare_rgb("caustic shafts radiance", g, c, 2e-3, c.len() * 3 / 100 + 1)
     }
 }

@@ -16,6 +16,15 @@
 //! refraction at every interface with the Fresnel transmittance as weight,
 //! and paths that meet total internal reflection dropped.
 //!
+//! In a scattering `[medium]` the same paths give the caustic light
+//! shafts (`caustic_shaft_image`): every segment of a path that met glass,
+//! outside the glass, is sampled at `MEDIUM_SAMPLES` stratified points,
+//! each connected to the camera (next-event estimation toward the eye): its
+//! flux times `sigma_s ds p(cos) e^(-sigma_t r)`, over `r^2` and the pixel's
+//! solid angle, is the pixel's mean radiance (the pixel it projects to,
+//! unobstructed). No planes, no maps, no interpolation: the method's
+//! shortcuts are all absent.
+//!
 //! A line light emits from its whole segment: each of its paths starts at
 //! a uniformly chosen point of it (not at the point lights the kernels see).
 
@@ -145,6 +154,20 @@ fn glass_objects(data: &SceneData) -> Vec<(DVec3, f64)> {
 /// A_pixel cos^3(camera))` (without the albedo / pi), if the point is in
 /// the image and the camera sees it (nothing, glass included, in between).
 fn camera_splat(data: &SceneData, x: DVec3, normal: DVec3) -> Option<(usize, f64, f64)> {
+    let (index, factor, to_cam, dist) = camera_projection(data, x)?;
+    let cos_x = normal.dot(to_cam);
+    let eps = epsilon(x);
+    if cos_x <= 0.0 || nearest(data, x + normal * eps, to_cam, eps, dist - eps).is_some() {
+        return None;
+    }
+    Some((index, cos_x * factor, dist))
+}
+
+/// Where the pinhole camera sees `x`, if in the image (whether anything is
+/// in between not tested): pixel index, `1 / (r^2 A_pixel cos^3(camera))`
+/// (the factor that turns an intensity there into the pixel's mean
+/// radiance), the unit direction toward the camera and the distance.
+fn camera_projection(data: &SceneData, x: DVec3) -> Option<(usize, f64, DVec3, f64)> {
     let p = &data.common;
     let cam = d3(p.camera_position);
     let (f, r, u) = (d3(p.camera_forward), d3(p.camera_right), d3(p.camera_up));
@@ -153,31 +176,56 @@ fn camera_splat(data: &SceneData, x: DVec3, normal: DVec3) -> Option<(usize, f64
     if z <= 0.0 {
         return None;
     }
-    let ndc_x = v.dot(r) / (z * r.length_squared());
-    let ndc_y = v.dot(u) / (z * u.length_squared());
-    let px = (ndc_x + 1.0) * 0.5 * p.width as f64;
-    let py = (1.0 - ndc_y) * 0.5 * p.height as f64;
+    let px = (v.dot(r) / (z * r.length_squared()) + 1.0) * 0.5 * p.width as f64;
+    let py = (1.0 - v.dot(u) / (z * u.length_squared())) * 0.5 * p.height as f64;
     if !(px >= 0.0 && py >= 0.0 && px < p.width as f64 && py < p.height as f64) {
         return None;
     }
     let dist = v.length();
-    let to_cam = -v / dist;
-    let cos_x = normal.dot(to_cam);
-    if cos_x <= 0.0 {
-        return None;
-    }
-    let eps = epsilon(x);
-    if nearest(data, x + normal * eps, to_cam, eps, dist - eps).is_some() {
-        return None;
-    }
-    let cos_cam = z / dist;
     let pixel_area = (2.0 * r.length() / p.width as f64) * (2.0 * u.length() / p.height as f64);
     let index = py as usize * p.width as usize + px as usize;
-    Some((index, cos_x / (dist * dist * pixel_area * cos_cam.powi(3)), dist))
+    Some((index, 1.0 / (dist * dist * pixel_area * (z / dist).powi(3)), -v / dist, dist))
+}
+
+/// Points per path segment the medium estimate connects to the camera.
+pub const MEDIUM_SAMPLES: u32 = 8;
+
+/// What the light tracer splats: the caustic on the surfaces, or the
+/// caustic light the medium scatters toward the eye.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Splat {
+    Surfaces,
+    Medium,
+}
+
+/// The camera's view of a point in the medium (`camera_projection`), if
+/// nothing is in between.
+fn camera_view(data: &SceneData, x: DVec3) -> Option<(usize, f64, DVec3, f64)> {
+    let (index, factor, to_cam, dist) = camera_projection(data, x)?;
+    let eps = epsilon(x);
+    nearest(data, x, to_cam, eps, dist - eps).is_none().then_some((index, factor, to_cam, dist))
+}
+
+/// Splats the light a path segment from `o` along `d` over `[0, length]`
+/// (flux `weight` at `o`) scatters toward the camera: `MEDIUM_SAMPLES`
+/// stratified points, each `length / MEDIUM_SAMPLES` of it.
+fn splat_segment(data: &SceneData, o: DVec3, d: DVec3, length: f64, weight: DVec3, rng: &mut Rng, image: &mut [DVec3]) {
+    let c = &data.common;
+    let (sigma_t, sigma_s) = (d3(c.sigma_t), d3(c.sigma_s));
+    let ds = length / MEDIUM_SAMPLES as f64;
+    for k in 0..MEDIUM_SAMPLES {
+        let s = (k as f64 + rng.next()) * ds;
+        let x = o + d * s;
+        if let Some((index, factor, to_cam, dist)) = camera_view(data, x) {
+            let f = slicelight_shaders::phase::evaluate(c.phase_kind, d.dot(to_cam) as f32, c.phase_g) as f64;
+            image[index] += weight * sigma_s * (-sigma_t * (s + dist)).exp() * (f * factor * ds);
+        }
+    }
 }
 
 /// Follows one path of flux `weight` (W per channel; with `channel`, that
-/// channel alone) from `o` in direction `d`, and splats it where it lands.
+/// channel alone) from `o` in direction `d`, and splats it where it lands
+/// (`Splat::Surfaces`) or along the way after glass (`Splat::Medium`).
 #[allow(clippy::too_many_arguments)]
 fn trace_path(
     data: &SceneData,
@@ -186,6 +234,7 @@ fn trace_path(
     mut weight: DVec3,
     channel: Option<usize>,
     transmission_only: bool,
+    splat: Splat,
     rng: &mut Rng,
     image: &mut [DVec3],
 ) {
@@ -194,7 +243,13 @@ fn trace_path(
     let mut met_glass = false;
     for _ in 0..MAX_BOUNCES {
         let eps = epsilon(o);
-        let Some(hit) = nearest(data, o, d, eps, f64::INFINITY) else {
+        let hit = nearest(data, o, d, eps, f64::INFINITY);
+        if splat == Splat::Medium && met_glass && inside.is_none() {
+            // Light escaping the scene: its medium up to 40 optical depths.
+            let far = 40.0 / sigma_t.min_element().max(1e-9);
+            splat_segment(data, o, d, hit.as_ref().map_or(far, |h| h.t.min(far)), weight, rng, image);
+        }
+        let Some(hit) = hit else {
             return;
         };
         let p = o + d * hit.t;
@@ -203,7 +258,7 @@ fn trace_path(
             None => weight *= (-sigma_t * hit.t).exp(),
         }
         if !is_glass(data, &hit) {
-            if inside.is_some() || !met_glass {
+            if inside.is_some() || !met_glass || splat == Splat::Medium {
                 return;
             }
             let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
@@ -264,6 +319,19 @@ fn toward_sphere(pos: DVec3, center: DVec3, radius: f64, rng: &mut Rng) -> (DVec
 /// pixel sees, W/(m^2 sr) per channel, from `paths` paths per light, glass
 /// object and channel traced as described in the module docs.
 pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only: bool) -> Vec<DVec3> {
+    light_trace(data, paths, seed, transmission_only, Splat::Surfaces)
+}
+
+/// The caustic light the medium scatters toward the eye (the caustic
+/// shafts) each pixel sees, W/(m^2 sr) per channel, from `paths` paths per
+/// light, glass object and channel (see the module docs).
+pub fn caustic_shaft_image(data: &SceneData, paths: u64, seed: u64, transmission_only: bool) -> Vec<DVec3> {
+    light_trace(data, paths, seed, transmission_only, Splat::Medium)
+}
+
+/// The light tracer: `paths` paths per light, glass object and channel,
+/// splatted as `splat` says.
+fn light_trace(data: &SceneData, paths: u64, seed: u64, transmission_only: bool, splat: Splat) -> Vec<DVec3> {
     let pixels = data.pixel_count() as usize;
     let dispersive =
         data.materials.iter().any(|m| m.kind == MATERIAL_GLASS && slicelight_shaders::glass::dispersive(m));
@@ -310,7 +378,17 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
                             let pos = a + (b - a) * rng.next();
                             let (d, solid_angle) = toward_sphere(pos, center, radius, &mut rng);
                             let flux = line.per_metre.as_dvec3() * ((b - a).length() * solid_angle / paths as f64);
-                            trace_path(data, pos, d, flux * mask, channel, transmission_only, &mut rng, &mut image);
+                            trace_path(
+                                data,
+                                pos,
+                                d,
+                                flux * mask,
+                                channel,
+                                transmission_only,
+                                splat,
+                                &mut rng,
+                                &mut image,
+                            );
                             continue;
                         }
                     };
@@ -341,7 +419,7 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
                     if flux == DVec3::ZERO {
                         continue;
                     }
-                    trace_path(data, o, d, flux * mask, channel, transmission_only, &mut rng, &mut image);
+                    trace_path(data, o, d, flux * mask, channel, transmission_only, splat, &mut rng, &mut image);
                 }
                 image
             },
@@ -357,19 +435,21 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
         )
 }
 
-/// The caustic image at convergence: paths (per light, object and channel)
+/// The light tracer's image (`splat`: the caustic on surfaces, or the
+/// caustic shafts) at convergence: paths (per light, object and channel)
 /// start at `start` and double, each image an independent estimate with
 /// twice the paths of the last, until two successive ones differ by less
 /// than `tolerance` RMS relative to the peak, or `max_paths` is reached.
 /// Returns the last image and its path count.
-pub fn caustic_image_converged(
+pub fn light_trace_converged(
     data: &SceneData,
     start: u64,
     max_paths: u64,
     tolerance: f64,
     transmission_only: bool,
+    splat: Splat,
 ) -> (Vec<DVec3>, u64) {
     crate::reference::converged(start, max_paths, tolerance, |paths, round| {
-        caustic_image(data, paths, round, transmission_only)
+        light_trace(data, paths, round, transmission_only, splat)
     })
 }

@@ -49,12 +49,14 @@
 //! which the mean direction is rebuilt. Only rays going down cross the
 //! planes (light from above the receivers).
 
+use crate::camera::camera_ray;
 use crate::common::surface::{channel_part, shadow_ray_visibility, Receiver};
 use crate::geometry::{trace_object, Geometry, NO_HIT};
 use crate::glam::{Quat, UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::glass::{pick, surface_epsilon, trace_through, Glass, PATH_LOST, PATH_OCCLUDED, PATH_OUT};
-use crate::light::{emitted, light_local, transmittance};
+use crate::light::{emitted, light_local, phi, transmittance};
 use crate::optics;
+use crate::phase;
 use crate::scatter::{scatter_add, AtomicWords, REJECTED_WORD};
 use crate::types::{
     CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
@@ -74,7 +76,7 @@ pub const MAX_SLOPE: f32 = 64.0;
 
 /// The caustics passes' parameter block.
 #[repr(C)]
-#[derive(Copy, Clone, Debug, Default, PartialEq)]
+#[derive(Copy, Clone, Debug, PartialEq)]
 pub struct CausticsParams {
     /// The lowest sample plane's corner: x, y (its height), z, metres; w:
     /// the texel size, metres.
@@ -103,7 +105,59 @@ pub struct CausticsParams {
     pub compressed: u32,
     /// Words per table entry (`PACKED_WORDS` or `ENTRY_WORDS`).
     pub entry_words: u32,
-    pub _pad: [u32; 2],
+    /// Intervals along each view ray through the shaft maps
+    /// (`caustic_shafts_pixel`; 0 in the receivers' maps).
+    pub shaft_steps: u32,
+    pub _pad: u32,
+    /// Shaft maps: the x-z box all their planes cover (min x, min z, max
+    /// x, max z, metres).
+    pub bounds: Vec4,
+    /// Shaft maps: each plane's own square of `map_width` x `map_height`
+    /// texels (corner x, corner z, texel size, metres; w unused), over
+    /// where the light crosses that plane: a bundle narrowing to a focus
+    /// gets texels as fine as it is narrow. The receivers' maps use
+    /// `map_origin` for every plane.
+    pub rects: [Vec4; MAX_SHAFT_PLANES as usize],
+}
+
+impl Default for CausticsParams {
+    /// All zero: no planes, no maps.
+    fn default() -> Self {
+        CausticsParams {
+            map_origin: Vec4::ZERO,
+            rings: 0,
+            azimuths: 0,
+            directions: 0,
+            channels: 0,
+            vertex_count: 0,
+            triangle_count: 0,
+            light_count: 0,
+            planes: 0,
+            map_width: 0,
+            map_height: 0,
+            plane_spacing: 0.0,
+            scale: 0.0,
+            compressed: 0,
+            entry_words: 0,
+            shaft_steps: 0,
+            _pad: 0,
+            bounds: Vec4::ZERO,
+            rects: [Vec4::ZERO; MAX_SHAFT_PLANES as usize],
+        }
+    }
+}
+
+/// Most shaft planes (`CausticsParams::rects`).
+pub const MAX_SHAFT_PLANES: u32 = 64;
+
+/// Plane `k`'s corner (x, z) and texel size (metres; w unused): its own
+/// for the shaft maps, `map_origin`'s for the receivers'.
+pub fn plane_rect(params: &CausticsParams, k: u32) -> Vec4 {
+    if params.shaft_steps > 0 {
+        params.rects[k as usize]
+    } else {
+        Vec4::new(params.map_origin.x, params.map_origin.z, params.map_origin.w, 0.0)
+    }
 }
 
 /// Words of an uncompressed table entry (a `TableEntry`'s twelve f32s).
@@ -227,7 +281,7 @@ mod pod {
     unsafe impl bytemuck::Pod for super::CausticsParams {}
     unsafe impl bytemuck::Zeroable for super::TableEntry {}
     unsafe impl bytemuck::Pod for super::TableEntry {}
-    const _: () = assert!(core::mem::size_of::<super::CausticsParams>() == 80);
+    const _: () = assert!(core::mem::size_of::<super::CausticsParams>() == 96 + 16 * super::MAX_SHAFT_PLANES as usize);
     const _: () = assert!(core::mem::size_of::<super::TableEntry>() == 48);
 }
 
@@ -609,9 +663,20 @@ pub fn triangle_flux(
     Vec4::new(f.x, f.y, f.z, 0.0)
 }
 
-/// Words of the caustics maps: `MAP_BINS` bins per texel of every plane.
+/// Bins per texel: `MAP_BINS` in the receivers' maps; the shaft maps
+/// keep only the three densities (they are read straight up and down, and
+/// the direction is already in them: `rasterize`).
+pub fn texel_bins(params: &CausticsParams) -> u32 {
+    if params.shaft_steps > 0 {
+        3
+    } else {
+        MAP_BINS
+    }
+}
+
+/// Bins of the caustics maps: `texel_bins` per texel of every plane.
 pub fn map_bins(params: &CausticsParams) -> u32 {
-    params.planes * params.map_width * params.map_height * MAP_BINS
+    params.planes * params.map_width * params.map_height * texel_bins(params)
 }
 
 /// Map invocation `index` = `((light * triangle_count + triangle) *
@@ -655,9 +720,14 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
         return;
     }
     let y = params.map_origin.y + k as f32 * params.plane_spacing;
-    let t0 = (y - r0.position.y) / d0.y;
-    let t1 = (y - r1.position.y) / d1.y;
-    let t2 = (y - r2.position.y) / d2.y;
+    let (mut t0, mut t1, mut t2) = ((y - r0.position.y) / d0.y, (y - r1.position.y) / d1.y, (y - r2.position.y) / d2.y);
+    if params.shaft_steps > 0 {
+        // Shaft planes: a ray that leaves the glass below the plane is drawn
+        // where it leaves. Such a plane cuts the glass, which hides it, but
+        // the light just under the glass is read between it and the plane
+        // below: without its light there, the shaft would fade toward the glass.
+        (t0, t1, t2) = (t0.max(0.0), t1.max(0.0), t2.max(0.0));
+    }
     if !(t0 >= 0.0 && t1 >= 0.0 && t2 >= 0.0) {
         return;
     }
@@ -670,16 +740,28 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
     if own_channels == 3 {
         flux = channel_part(flux, c, 3);
     }
+    let w = (d0 + d1 + d2).normalize();
+    if params.shaft_steps > 0 {
+        // Shaft maps: the light scattered toward the eye, `p(cos a) / |w_y|`
+        // at the cross-section's centroid (Iwasaki 2002 weighs each
+        // volume's cross-section by the phase function toward the eye).
+        // The mean of the rays crossing a texel would not do: where they
+        // cross from all sides (under a lens, around its focus) the phase
+        // of their mean direction is not their mean phase.
+        let q = (r0.position.xyz() + d0 * t0 + r1.position.xyz() + d1 * t1 + r2.position.xyz() + d2 * t2) / 3.0;
+        let to_eye = (common.camera_position.xyz() - q).normalize();
+        flux *= phase::evaluate(common.phase_kind, w.dot(to_eye), common.phase_g) / -w.y;
+    }
     if !(flux.x > 0.0 || flux.y > 0.0 || flux.z > 0.0) {
         return;
     }
     // The cross-section in texel coordinates (texel centres at integers).
-    let texel = params.map_origin.w;
-    let origin = params.map_origin.xyz();
+    let rect = plane_rect(params, k);
+    let texel = rect.z;
+    let origin = Vec3::new(rect.x, 0.0, rect.y);
     let (ax, az) = to_texel(r0.position.xyz() + d0 * t0, origin, texel);
     let (bx, bz) = to_texel(r1.position.xyz() + d1 * t1, origin, texel);
     let (cx, cz) = to_texel(r2.position.xyz() + d2 * t2, origin, texel);
-    let w = (d0 + d1 + d2).normalize();
     let slope_x = (w.x / -w.y).clamp(-MAX_SLOPE, MAX_SLOPE);
     let slope_z = (w.z / -w.y).clamp(-MAX_SLOPE, MAX_SLOPE);
     // Oriented so that the edge functions are non-negative inside.
@@ -863,7 +945,7 @@ fn deposit<A: AtomicWords + ?Sized>(
     slope_x: f32,
     slope_z: f32,
 ) {
-    let bin = texel * MAP_BINS;
+    let bin = texel * texel_bins(params);
     let s = params.scale;
     if density.x > 0.0 {
         scatter_add(words, bin, density.x, s);
@@ -873,6 +955,9 @@ fn deposit<A: AtomicWords + ?Sized>(
     }
     if density.z > 0.0 {
         scatter_add(words, bin + 2, density.z, s);
+    }
+    if texel_bins(params) < MAP_BINS {
+        return;
     }
     let weight = density.x + density.y + density.z;
     if slope_x > 0.0 {
@@ -894,6 +979,18 @@ pub fn read_bin(words: &[u32], params: &CausticsParams, bin: u32) -> f32 {
     (high as f32 * 4_294_967_296.0 + low as f32) / params.scale
 }
 
+/// `sample_plane` at the point `(x, z)` (metres) of plane `k`; nothing off its map.
+fn sample_at(words: &[u32], params: &CausticsParams, k: u32, x: f32, z: f32) -> (Vec4, f32, f32) {
+    let rect = plane_rect(params, k);
+    let u = (x - rect.x) / rect.z - 0.5;
+    let v = (z - rect.y) / rect.z - 0.5;
+    // Off the map (most of a large floor): no caustic.
+    if !(u > -1.0 && v > -1.0 && u < params.map_width as f32 && v < params.map_height as f32) {
+        return (Vec4::ZERO, 0.0, 0.0);
+    }
+    sample_plane(words, params, k, u, v)
+}
+
 /// Density (rgb) and slopes (w: unused) of one plane at texel coordinates
 /// `(u, v)` (centres at integers), bilinear; zero outside the map.
 fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f32) -> (Vec4, f32, f32) {
@@ -910,16 +1007,17 @@ fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f
         let j = j0 + (corner / 2) as f32;
         let w = if corner % 2 == 1 { fu } else { 1.0 - fu } * if corner / 2 == 1 { fv } else { 1.0 - fv };
         if w > 0.0 && i >= 0.0 && j >= 0.0 && i < params.map_width as f32 && j < params.map_height as f32 {
-            let bin = ((plane * params.map_height + j as u32) * params.map_width + i as u32) * MAP_BINS;
+            let bin = ((plane * params.map_height + j as u32) * params.map_width + i as u32) * texel_bins(params);
             let d = Vec4::new(
                 read_bin(words, params, bin),
                 read_bin(words, params, bin + 1),
                 read_bin(words, params, bin + 2),
                 0.0,
             );
-            // Most texels of a map hold no light: no direction to read.
-            if d.x > 0.0 || d.y > 0.0 || d.z > 0.0 {
-                density += d * w;
+            density += d * w;
+            // Most texels of a map hold no light: no direction to read;
+            // the shaft maps keep none.
+            if (d.x > 0.0 || d.y > 0.0 || d.z > 0.0) && texel_bins(params) == MAP_BINS {
                 sx += (read_bin(words, params, bin + 3) - read_bin(words, params, bin + 4)) * w;
                 sz += (read_bin(words, params, bin + 5) - read_bin(words, params, bin + 6)) * w;
             }
@@ -929,18 +1027,12 @@ fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f
     (density, sx, sz)
 }
 
-/// Caustic irradiance (W/m^2 per channel, w = 0) on a surface at `p` with
-/// unit normal `n` facing the side the light arrives from: the two sample
-/// planes around `p`'s height, interpolated linearly in height (below the
-/// lowest plane and above the highest, the nearest one), each
-/// `density |n . w| / |w_y|` (see the module docs).
-pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Vec3) -> Vec4 {
-    let u = (p.x - params.map_origin.x) / params.map_origin.w - 0.5;
-    let v = (p.z - params.map_origin.z) / params.map_origin.w - 0.5;
-    // Off the maps (most of a large floor): no caustic.
-    if !(u > -1.0 && v > -1.0 && u < params.map_width as f32 && v < params.map_height as f32) {
-        return Vec4::ZERO;
-    }
+/// The caustic light's flow at `p`: the two sample planes around `p`'s
+/// height, interpolated linearly in height (below the lowest plane and
+/// above the highest, the nearest one): the density (W/m^2 of the plane per
+/// channel, w = 0) and the mean ray direction `(s_x, -1, s_z)`, not
+/// normalised (`|w_y| = 1 / len`); no density off the maps.
+pub fn caustic_flow(words: &[u32], params: &CausticsParams, p: Vec3) -> (Vec4, Vec3) {
     let (k0, k1, w) = if params.planes < 2 {
         (0, 0, 0.0)
     } else {
@@ -948,20 +1040,138 @@ pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Ve
         let k0 = (s.floor() as u32).min(params.planes - 2);
         (k0, k0 + 1, s - k0 as f32)
     };
-    let (d0, sx0, sz0) = sample_plane(words, params, k0, u, v);
-    let (d1, sx1, sz1) = if w > 0.0 { sample_plane(words, params, k1, u, v) } else { (Vec4::ZERO, 0.0, 0.0) };
+    let (d0, sx0, sz0) = sample_at(words, params, k0, p.x, p.z);
+    let (d1, sx1, sz1) = if w > 0.0 { sample_at(words, params, k1, p.x, p.z) } else { (Vec4::ZERO, 0.0, 0.0) };
     let density = d0 * (1.0 - w) + d1 * w;
     let weight = density.x + density.y + density.z;
     if weight <= 0.0 || weight.is_nan() {
-        return Vec4::ZERO;
+        return (Vec4::ZERO, Vec3::NEG_Y);
     }
     let sx = (sx0 * (1.0 - w) + sx1 * w) / weight;
     let sz = (sz0 * (1.0 - w) + sz1 * w) / weight;
+    (density, Vec3::new(sx, -1.0, sz))
+}
+
+/// Caustic irradiance (W/m^2 per channel, w = 0) on a surface at `p` with
+/// unit normal `n` facing the side the light arrives from: the flow there
+/// (`caustic_flow`), `density |n . w| / |w_y|` (see the module docs).
+pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Vec3) -> Vec4 {
+    let (density, dir) = caustic_flow(words, params, p);
     // The mean ray direction (sx, -1, sz), normalised: |w_y| = 1 / len.
-    let dir = Vec3::new(sx, -1.0, sz);
     let len = dir.length();
     let cos = (-n.dot(dir) / len).max(0.0);
     density * (cos * len)
+}
+
+/// The span `(t0, t1)` of the view ray `o + t d` (`0 <= t <= t_far`)
+/// between shaft planes `k` and `k + 1`, within the x-z box both their
+/// maps cover (empty: `t1 <= t0`).
+fn slab_span(params: &CausticsParams, o: Vec3, d: Vec3, k: u32, t_far: f32) -> (f32, f32) {
+    let (r0, r1) = (params.rects[k as usize], params.rects[k as usize + 1]);
+    let (s0, s1) = (r0.z * params.map_width as f32, r1.z * params.map_width as f32);
+    let (u0, u1) = (r0.z * params.map_height as f32, r1.z * params.map_height as f32);
+    let y0 = params.map_origin.y + k as f32 * params.plane_spacing;
+    let span = clip_axis(o.y, d.y, y0, y0 + params.plane_spacing, (0.0, t_far));
+    let span = clip_axis(o.x, d.x, r0.x.min(r1.x), (r0.x + s0).max(r1.x + s1), span);
+    clip_axis(o.z, d.z, r0.y.min(r1.y), (r0.y + u0).max(r1.y + u1), span)
+}
+
+/// `(a, b)` narrowed to where `o + t d` lies within `[lo, hi]` on one axis.
+fn clip_axis(o: f32, d: f32, lo: f32, hi: f32, (a, b): (f32, f32)) -> (f32, f32) {
+    if d.abs() < 1e-30 {
+        if o < lo || o > hi {
+            return (1.0, 0.0);
+        }
+        return (a, b);
+    }
+    let (ta, tb) = ((lo - o) / d, (hi - o) / d);
+    (a.max(ta.min(tb)), b.min(ta.max(tb)))
+}
+
+/// Caustic light shafts (Iwasaki, Dobashi and Nishita 2002's virtual
+/// planes, here the illumination volumes' cross-sections on horizontal
+/// shaft planes, `params` the shaft maps'): the refracted light the medium
+/// scatters toward the eye along the view ray of pixel `index` (band
+/// relative), W/(m^2 sr) per channel (w = 0), up to the surface it sees
+/// (`texel`'s distance) and within the maps' box:
+///
+/// `L = sigma_s int sum_i p(cos a_i) E_perp,i(t) e^(-sigma_t t) dt`
+///
+/// (the single-scattering integral of eq. 1 of the 2002 shafts paper with
+/// the caustic light as the source), summed over the illumination volumes
+/// `i` through each point: `E_perp,i = density_i / |w_y,i|` the flux per
+/// unit area across volume `i`'s direction `w_i`, `cos a_i = w_i . (-d)`
+/// toward the eye. The shaft maps hold the sum, `p E_perp` per channel
+/// (W/(m^2 sr); `rasterize` weighs each cross-section by its phase toward
+/// the eye and its `1 / |w_y|`). About `params.shaft_steps` intervals
+/// over the view ray's spans between planes within their maps
+/// (`slab_span`), the maps read at each one's middle straight up and down
+/// (`caustic_flow`; read along the mean ray, or following the planes'
+/// squares, measured no nearer the reference), the eye's transmittance
+/// integrated exactly over each (`phi`): energy-conserving per interval. Light is read where the
+/// planes are (below the lowest and above the highest, none).
+pub fn caustic_shafts_pixel(
+    index: u32,
+    common: &CommonParams,
+    params: &CausticsParams,
+    words: &[u32],
+    texel: &GBufferTexel,
+) -> Vec4 {
+    if params.planes < 2 || params.shaft_steps == 0 {
+        return Vec4::ZERO;
+    }
+    let pixel = index + common.band_start;
+    let (o, d) = camera_ray(common, pixel % common.width, pixel / common.width);
+    let t_far = texel.normal_distance.w;
+    // The view ray within each slab between two planes, clipped to where
+    // the two planes' maps are: first their total length, shared out in
+    // `shaft_steps` intervals, then each walked with its share (a ray
+    // that crosses a narrow bundle in a short clipped span is sampled as
+    // finely as one that runs along a wide one).
+    let mut total = 0.0;
+    let mut k = 0;
+    while k + 1 < params.planes {
+        let (a, b) = slab_span(params, o, d, k, t_far);
+        total += (b - a).max(0.0);
+        k += 1;
+    }
+    if total.is_nan() || total <= 0.0 {
+        return Vec4::ZERO;
+    }
+    let step = total / params.shaft_steps as f32;
+    let sigma = common.sigma_t;
+    let mut sum = Vec4::ZERO;
+    let mut k = 0;
+    while k + 1 < params.planes {
+        let (t0, t1) = slab_span(params, o, d, k, t_far);
+        if t1 > t0 {
+            // No finer than half the slab's texels or height: a read
+            // between them adds nothing but time.
+            let texel = params.rects[k as usize].z.min(params.rects[k as usize + 1].z);
+            let finest = 0.5 * texel.min(params.plane_spacing / d.y.abs().max(1e-6));
+            let n = ((t1 - t0) / step.max(finest)).ceil().max(1.0);
+            let dt = (t1 - t0) / n;
+            let mut i = 0.0;
+            while i < n {
+                let a = t0 + i * dt;
+                let (scattered, _) = caustic_flow(words, params, o + d * (a + 0.5 * dt));
+                if scattered.x > 0.0 || scattered.y > 0.0 || scattered.z > 0.0 {
+                    // int_a^(a + dt) e^(-sigma t) dt = dt e^(-sigma a) phi(sigma dt), per channel.
+                    let through = Vec4::new(
+                        (-sigma.x * a).exp() * phi(sigma.x * dt),
+                        (-sigma.y * a).exp() * phi(sigma.y * dt),
+                        (-sigma.z * a).exp() * phi(sigma.z * dt),
+                        0.0,
+                    );
+                    sum += scattered * through * dt;
+                }
+                i += 1.0;
+            }
+        }
+        k += 1;
+    }
+    let l = sum * common.sigma_s;
+    Vec4::new(l.x, l.y, l.z, 0.0)
 }
 
 /// The caustic light a receiver (`surface::receiver`: the surface a view
@@ -1097,6 +1307,48 @@ pub fn caustics_maps_kernel(
     if index < p.light_count * p.triangle_count * p.channels * p.planes {
         let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
         rasterize(index, &common[0], p, lights, light_map, &glass, rays, words);
+    }
+}
+
+/// The shaft maps (`caustic_shafts_pixel`): the same illumination volumes
+/// as `caustics_maps_kernel`, cut by the shaft planes (`params`, binding 79)
+/// into their own maps. GPU only, as that kernel.
+#[cfg(target_arch = "spirv")]
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn caustic_shaft_maps_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 33)] rays: &[ExitRay],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 79)] params: &[CausticsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 80)] words: &mut [u32],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index < p.light_count * p.triangle_count * p.channels * p.planes {
+        let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
+        rasterize(index, &common[0], p, lights, light_map, &glass, rays, words);
+    }
+}
+
+#[spirv(compute(threads(64)))]
+pub fn caustic_shafts_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 79)] params: &[CausticsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 80)] words: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 81)] radiance: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    if index < common[0].band_pixels {
+        radiance[index as usize] = caustic_shafts_pixel(index, &common[0], &params[0], words, &gbuffer[index as usize]);
     }
 }
 

@@ -180,14 +180,7 @@ pub const DEEP: f32 = 1e20;
 /// `e^-tau (1/mu_s + 1/mu_v)`); the rest is extrapolated.
 pub const DEEP_OPTICAL_DEPTH: f32 = 6.0;
 
-/// `(1 - e^-x) / x`, 1 at 0, without cancellation for small `|x|`.
-pub fn phi(x: f32) -> f32 {
-    if x.abs() < 1e-3 {
-        1.0 - x * (0.5 - x / 6.0)
-    } else {
-        (1.0 - (-x).exp()) / x
-    }
-}
+pub use crate::light::phi;
 
 fn phi3(v: Vec3) -> Vec3 {
     Vec3::new(phi(v.x), phi(v.y), phi(v.z))

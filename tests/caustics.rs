@@ -647,53 +647,60 @@ fn stress_collapsing_cross_sections_and_broken_meshes() {
     assert!(lens.caustics.enabled && planes[0] > 0.85 * falling && planes[0] <= falling, "{planes:?} of {falling}");
 }
 
-/// Caustic light shafts (issue 26): the glass ball hung in fog under a
-/// spotlight, the `caustics.shafts` layer against the light tracer's medium
-/// estimate (`caustic_shaft_image`: every path segment after the glass
-/// connected to the eye; transmission only, the paths the method models)
-/// over the pixels that see no glass, at 160x120 with 16 samples per pixel
-/// (both are pixel means). The floor's caustic is unchanged by the shafts.
+/// Caustic light shafts (issue 26): the glass ball and the knot hung in fog
+/// under spotlights, the `caustics.shafts` layer against the light tracer's
+/// medium estimate (`caustic_shaft_image`: every path segment after the
+/// glass connected to the eye; transmission only, the paths the method
+/// models) over the pixels that see no glass, at 160x120 with 16 samples
+/// per pixel (both are pixel means).
 #[test]
 fn caustic_shafts_in_fog_match_the_light_tracer() {
-    let data = shrink("caustics_fog_ball.toml", 160, 120, 16, "");
-    assert!(data.caustics.shafts_on(), "shafts are built: {}", data.caustics.shafts_reason);
-    let r = render_checked(&data, "caustics_fog_ball");
-    let keep = not_glass(&data);
-    let shafts = to_f64(layer(&r, "caustics.shafts"));
-    let (traced, paths) = slicelight::caustics::reference::light_trace_converged(
-        &data,
-        1 << 18,
-        1 << 23,
-        2e-3,
-        true,
-        slicelight::caustics::reference::Splat::Medium,
-    );
-    let d = difference(&select(&shafts, &keep), &select(&traced, &keep), data.exposure);
-    let peak = select(&traced, &keep).iter().map(|v| v.max_element()).fold(0.0, f64::max);
-    let sum = |v: &[DVec3]| select(v, &keep).iter().map(|v| v.x).sum::<f64>();
-    // Within the shafts (the reference over a tenth of its peak): RMS relative to the peak.
-    let lit: Vec<usize> = (0..traced.len()).filter(|&i| keep[i] && traced[i].max_element() > 0.1 * peak).collect();
-    let within = (lit.iter().map(|&i| (shafts[i] - traced[i]).length_squared() / 3.0).sum::<f64>()
-        / lit.len().max(1) as f64)
-        .sqrt()
-        / peak;
-    println!(
-        "caustic shafts vs light tracer ({paths} paths): RMS {:.3} % (8-bit), max {:.2} %; peak {peak:.4} W/(m^2 sr); within the {} shaft pixels {:.2} % of the peak; sums {:.4} vs {:.4}",
-        d.rms_8bit_percent,
-        d.max_8bit_percent,
-        lit.len(),
-        within * 100.0,
-        sum(&shafts),
-        sum(&traced)
-    );
-    assert!(peak * data.exposure as f64 > 0.02, "the shafts are visible in the reference: peak {peak}");
-    assert!(d.rms_8bit_percent < 2.0, "the issue's 2 % RMS (8-bit): {d:?}");
-    // Within the shafts the planes (3.9 cm apart) and texels blur the focus
-    // under the ball, where the light changes within a plane's spacing:
-    // measured 6.2 % of the peak with the defaults (3.6 % with 64 steps).
-    assert!(within < 0.10, "within the shafts: {:.2} % of the peak", within * 100.0);
-    // The light scattered toward the eye in all: measured 1.1 % apart.
-    assert!((sum(&shafts) / sum(&traced) - 1.0).abs() < 0.05, "{} against {}", sum(&shafts), sum(&traced));
+    for name in ["caustics_fog_ball", "caustics_fog_knot"] {
+        let data = shrink(&format!("{name}.toml"), 160, 120, 16, "");
+        assert!(data.caustics.shafts_on(), "{name}: shafts are built: {}", data.caustics.shafts_reason);
+        let r = render_checked(&data, name);
+        let keep = not_glass(&data);
+        let shafts = to_f64(layer(&r, "caustics.shafts"));
+        let (traced, paths) = slicelight::caustics::reference::light_trace_converged(
+            &data,
+            1 << 18,
+            1 << 23,
+            2e-3,
+            true,
+            slicelight::caustics::reference::Splat::Medium,
+        );
+        let d = difference(&select(&shafts, &keep), &select(&traced, &keep), data.exposure);
+        let peak = select(&traced, &keep).iter().map(|v| v.max_element()).fold(0.0, f64::max);
+        let sum = |v: &[DVec3]| select(v, &keep).iter().map(|v| v.x).sum::<f64>();
+        // Within the shafts (the reference over a tenth of its peak): RMS relative to the peak.
+        let lit: Vec<usize> = (0..traced.len()).filter(|&i| keep[i] && traced[i].max_element() > 0.1 * peak).collect();
+        let within = (lit.iter().map(|&i| (shafts[i] - traced[i]).length_squared() / 3.0).sum::<f64>()
+            / lit.len().max(1) as f64)
+            .sqrt()
+            / peak;
+        println!(
+            "{name}: caustic shafts vs light tracer ({paths} paths): RMS {:.3} % (8-bit), max {:.2} %; peak {peak:.4} W/(m^2 sr); within the {} shaft pixels {:.2} % of the peak; sums {:.4} vs {:.4}",
+            d.rms_8bit_percent,
+            d.max_8bit_percent,
+            lit.len(),
+            within * 100.0,
+            sum(&shafts),
+            sum(&traced)
+        );
+        assert!(peak * data.exposure as f64 > 0.01, "{name}: the shafts are visible in the reference: peak {peak}");
+        assert!(d.rms_8bit_percent < 2.0, "{name}: the issue's 2 % RMS (8-bit): {d:?}");
+        // Within the shafts the planes (4 to 5 cm apart) and texels blur the
+        // focus under the glass, where the light changes within a plane's
+        // spacing: measured 6.2 % of the peak on the ball with the defaults
+        // (3.6 % with 64 steps), 6.0 % on the knot (whose reference stops
+        // at 8 million paths, short of converging to 2e-3).
+        assert!(within < 0.10, "{name}: within the shafts: {:.2} % of the peak", within * 100.0);
+        // The light scattered toward the eye in all: measured 1.1 % apart on
+        // the ball, 3.6 % on the knot (the rays the maps leave off at their
+        // sides, and the knot's tube refracting light upward, not drawn).
+        let ratio = sum(&shafts) / sum(&traced);
+        assert!((ratio - 1.0).abs() < 0.05, "{name}: {} against {}", sum(&shafts), sum(&traced));
+    }
 }
 
 /// Energy (issue 26): the light on the floor and the light the medium

@@ -90,6 +90,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "caustics.maps",
         "caustics",
         "caustics.shaft_maps",
+        "caustics.shaft_resolve",
         "caustics.shafts",
         "sky_transmittance",
         "sky_view",

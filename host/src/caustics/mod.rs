@@ -13,8 +13,8 @@ use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use slicelight_shaders::caustics::{
     caustic_shafts_pixel, caustics_pixel, light_at_vertex, load_entry, lookup, map_bins, rasterize, read_bin,
-    store_entry, table_entry, table_slot, texel_bins, triangle_flux, CausticsParams, ExitRay, TableEntry, ENTRY_WORDS,
-    MAX_SHAFT_PLANES, MAX_SLOPE, PACKED_WORDS,
+    resolve_texel, store_entry, table_entry, table_slot, texel_bins, triangle_flux, CausticsParams, ExitRay,
+    TableEntry, ENTRY_WORDS, MAX_SHAFT_PLANES, MAX_SLOPE, PACKED_WORDS,
 };
 use slicelight_shaders::glass::{dispersive, trace_through, Glass, PATH_OUT};
 use slicelight_shaders::scatter::{words_for, CpuAtomics};
@@ -23,8 +23,15 @@ use slicelight_shaders::types::{CommonParams, GBufferTexel, MATERIAL_GLASS, NO_O
 use crate::passes::*;
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
-pub static PASSES: &[&dyn Pass] =
-    &[&CausticsTable, &CausticsLookup, &CausticsMaps, &Caustics, &CausticShaftMaps, &CausticShafts];
+pub static PASSES: &[&dyn Pass] = &[
+    &CausticsTable,
+    &CausticsLookup,
+    &CausticsMaps,
+    &Caustics,
+    &CausticShaftMaps,
+    &CausticShaftResolve,
+    &CausticShafts,
+];
 
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family =
@@ -597,6 +604,14 @@ impl Setup {
         let p = &self.shafts;
         p.light_count as u64 * p.triangle_count as u64 * p.channels as u64 * p.planes as u64
     }
+    /// Texels of the shaft maps over all planes (1 without them: a buffer is never empty).
+    pub fn shaft_texels(&self) -> u64 {
+        if self.shafts_on() {
+            self.shafts.planes as u64 * self.shafts.map_width as u64 * self.shafts.map_height as u64
+        } else {
+            1
+        }
+    }
     pub fn shaft_map_words(&self) -> u64 {
         if self.shafts_on() {
             words_for(map_bins(&self.shafts)) as u64
@@ -641,6 +656,12 @@ pub static CAUSTIC_SHAFT_MAPS: Resource = Resource {
     binding: 80,
     name: "caustic shaft maps",
     kind: ResourceKind::Frame(|s| s.caustics.shaft_map_words() * 4),
+};
+/// The shaft maps' texels as f32 (`resolve_texel`), every plane's in turn.
+pub static CAUSTIC_SHAFT_TEXELS: Resource = Resource {
+    binding: 82,
+    name: "caustic shaft texels",
+    kind: ResourceKind::Frame(|s| s.caustics.shaft_texels() * 16),
 };
 /// Caustic light scattered toward the eye per pixel (rgb; w = 0).
 pub static CAUSTIC_SHAFTS_RADIANCE: Resource =
@@ -1051,6 +1072,48 @@ impl Pass for CausticShaftMaps {
     }
 }
 
+pub struct CausticShaftResolve;
+
+impl Pass for CausticShaftResolve {
+    fn name(&self) -> &'static str {
+        "caustics.shaft_resolve"
+    }
+    fn kernel(&self) -> &'static str {
+        "caustics::caustic_shaft_resolve_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![CAUSTIC_SHAFT_PARAMS, CAUSTIC_SHAFT_MAPS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![CAUSTIC_SHAFT_TEXELS]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(s) = skip_shafts(scene) {
+            return s;
+        }
+        Plan::run("the shaft maps' fixed-point sums as f32 texels", scene.caustics.shaft_texels())
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.caustics.shafts;
+        frame.write_all::<Vec4>(&CAUSTIC_SHAFT_TEXELS, scene.caustics.shaft_texels() as usize, |f, out| {
+            let words = f.get::<u32>(&CAUSTIC_SHAFT_MAPS);
+            for_each_invocation(out, 0, progress, |i, v| *v = resolve_texel(i, p, words));
+        });
+    }
+    fn keeps(&self) -> &'static [&'static Resource] {
+        resources![CAUSTIC_SHAFT_TEXELS]
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // The same words converted the same way: to within f32 rounding of
+        // the conversion (2^-24 of each value, far under 1e-6 of the peak).
+        let (g, c) = (gpu.get::<Vec4>(&CAUSTIC_SHAFT_TEXELS), cpu.get::<Vec4>(&CAUSTIC_SHAFT_TEXELS));
+        compare_rgb("caustic shaft texels", g, c, 1e-6, 0)
+    }
+}
+
 pub struct CausticShafts;
 
 impl Pass for CausticShafts {
@@ -1061,7 +1124,7 @@ impl Pass for CausticShafts {
         "caustics::caustic_shafts_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, CAUSTIC_SHAFT_PARAMS, CAUSTIC_SHAFT_MAPS]
+        resources![COMMON, GBUFFER, CAUSTIC_SHAFT_PARAMS, CAUSTIC_SHAFT_TEXELS]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![CAUSTIC_SHAFTS_RADIANCE]
@@ -1088,10 +1151,10 @@ impl Pass for CausticShafts {
         let p = &scene.caustics.shafts;
         frame.write_all::<Vec4>(&CAUSTIC_SHAFTS_RADIANCE, common.band_pixels as usize, |f, out| {
             let gbuffer = f.get::<GBufferTexel>(&GBUFFER);
-            let words = f.get::<u32>(&CAUSTIC_SHAFT_MAPS);
+            let texels = f.get::<Vec4>(&CAUSTIC_SHAFT_TEXELS);
             for_each_invocation(out, common.band_start, progress, |i, v| {
                 let local = i - common.band_start;
-                *v = caustic_shafts_pixel(local, common, p, words, &gbuffer[local as usize]);
+                *v = caustic_shafts_pixel(local, common, p, texels, &gbuffer[local as usize]);
             });
         });
     }

@@ -1052,6 +1052,54 @@ pub fn caustic_flow(words: &[u32], params: &CausticsParams, p: Vec3) -> (Vec4, V
     (density, Vec3::new(sx, -1.0, sz))
 }
 
+/// Texel `index` (over all planes) of the shaft maps as f32: its three
+/// densities (`p E_perp`, W/(m^2 sr); w = 0), resolved once from the
+/// fixed-point words so that the march reads one `Vec4` per corner instead
+/// of three 64-bit sums (`caustic_shaft_resolve_kernel`).
+pub fn resolve_texel(index: u32, params: &CausticsParams, words: &[u32]) -> Vec4 {
+    let b = index * texel_bins(params);
+    Vec4::new(read_bin(words, params, b), read_bin(words, params, b + 1), read_bin(words, params, b + 2), 0.0)
+}
+
+/// The resolved shaft maps at `p` (`resolve_texel`): each of the two planes
+/// around its height bilinear in its own square (`plane_rect`), the two
+/// interpolated linearly in height, as `caustic_flow` reads the receivers'
+/// maps; none off a map.
+pub fn shaft_light(texels: &[Vec4], params: &CausticsParams, p: Vec3) -> Vec4 {
+    let s = ((p.y - params.map_origin.y) / params.plane_spacing).clamp(0.0, (params.planes - 1) as f32);
+    let k0 = (s.floor() as u32).min(params.planes - 2);
+    let w = s - k0 as f32;
+    let below = resolved_at(texels, params, k0, p.x, p.z);
+    let above = if w > 0.0 { resolved_at(texels, params, k0 + 1, p.x, p.z) } else { Vec4::ZERO };
+    below * (1.0 - w) + above * w
+}
+
+/// Plane `k` of the resolved shaft maps at `(x, z)`, bilinear (texel
+/// centres at integers); zero off its map.
+fn resolved_at(texels: &[Vec4], params: &CausticsParams, k: u32, x: f32, z: f32) -> Vec4 {
+    let rect = params.rects[k as usize];
+    let u = (x - rect.x) / rect.z - 0.5;
+    let v = (z - rect.y) / rect.z - 0.5;
+    if !(u > -1.0 && v > -1.0 && u < params.map_width as f32 && v < params.map_height as f32) {
+        return Vec4::ZERO;
+    }
+    let (i0, j0) = (u.floor(), v.floor());
+    let (fu, fv) = (u - i0, v - j0);
+    let low = texel_at(texels, params, k, i0, j0) * (1.0 - fu) + texel_at(texels, params, k, i0 + 1.0, j0) * fu;
+    let high =
+        texel_at(texels, params, k, i0, j0 + 1.0) * (1.0 - fu) + texel_at(texels, params, k, i0 + 1.0, j0 + 1.0) * fu;
+    low * (1.0 - fv) + high * fv
+}
+
+/// Texel `(i, j)` of plane `k` of the resolved shaft maps; zero off the map.
+fn texel_at(texels: &[Vec4], params: &CausticsParams, k: u32, i: f32, j: f32) -> Vec4 {
+    if i >= 0.0 && j >= 0.0 && i < params.map_width as f32 && j < params.map_height as f32 {
+        texels[((k * params.map_height + j as u32) * params.map_width + i as u32) as usize]
+    } else {
+        Vec4::ZERO
+    }
+}
+
 /// Caustic irradiance (W/m^2 per channel, w = 0) on a surface at `p` with
 /// unit normal `n` facing the side the light arrives from: the flow there
 /// (`caustic_flow`), `density |n . w| / |w_y|` (see the module docs).
@@ -1106,7 +1154,7 @@ fn clip_axis(o: f32, d: f32, lo: f32, hi: f32, (a, b): (f32, f32)) -> (f32, f32)
 /// the eye and its `1 / |w_y|`). About `params.shaft_steps` intervals
 /// over the view ray's spans between planes within their maps
 /// (`slab_span`), the maps read at each one's middle straight up and down
-/// (`caustic_flow`; read along the mean ray, or following the planes'
+/// (`shaft_light`; read along the mean ray, or following the planes'
 /// squares, measured no nearer the reference), the eye's transmittance
 /// integrated exactly over each (`phi`): energy-conserving per interval. Light is read where the
 /// planes are (below the lowest and above the highest, none).
@@ -1114,7 +1162,7 @@ pub fn caustic_shafts_pixel(
     index: u32,
     common: &CommonParams,
     params: &CausticsParams,
-    words: &[u32],
+    texels: &[Vec4],
     texel: &GBufferTexel,
 ) -> Vec4 {
     if params.planes < 2 || params.shaft_steps == 0 {
@@ -1128,9 +1176,22 @@ pub fn caustic_shafts_pixel(
     // `shaft_steps` intervals, then each walked with its share (a ray
     // that crosses a narrow bundle in a short clipped span is sampled as
     // finely as one that runs along a wide one).
+    // Only the slabs the ray meets within the box all the maps cover (none: no light).
+    let b = params.bounds;
+    let y0 = params.map_origin.y;
+    let top = y0 + (params.planes - 1) as f32 * params.plane_spacing;
+    let (t0, t1) = clip_axis(o.y, d.y, y0, top, (0.0, t_far));
+    let (t0, t1) = clip_axis(o.x, d.x, b.x, b.z, (t0, t1));
+    let (t0, t1) = clip_axis(o.z, d.z, b.y, b.w, (t0, t1));
+    if t0.is_nan() || t1.is_nan() || t1 <= t0 {
+        return Vec4::ZERO;
+    }
+    let (ya, yb) = (o.y + d.y * t0, o.y + d.y * t1);
+    let first = (((ya.min(yb) - y0) / params.plane_spacing).floor().max(0.0) as u32).min(params.planes - 2);
+    let last = (((ya.max(yb) - y0) / params.plane_spacing).floor().max(0.0) as u32).min(params.planes - 2);
     let mut total = 0.0;
-    let mut k = 0;
-    while k + 1 < params.planes {
+    let mut k = first;
+    while k <= last {
         let (a, b) = slab_span(params, o, d, k, t_far);
         total += (b - a).max(0.0);
         k += 1;
@@ -1141,8 +1202,8 @@ pub fn caustic_shafts_pixel(
     let step = total / params.shaft_steps as f32;
     let sigma = common.sigma_t;
     let mut sum = Vec4::ZERO;
-    let mut k = 0;
-    while k + 1 < params.planes {
+    let mut k = first;
+    while k <= last {
         let (t0, t1) = slab_span(params, o, d, k, t_far);
         if t1 > t0 {
             // No finer than half the slab's texels or height: a read
@@ -1154,7 +1215,7 @@ pub fn caustic_shafts_pixel(
             let mut i = 0.0;
             while i < n {
                 let a = t0 + i * dt;
-                let (scattered, _) = caustic_flow(words, params, o + d * (a + 0.5 * dt));
+                let scattered = shaft_light(texels, params, o + d * (a + 0.5 * dt));
                 if scattered.x > 0.0 || scattered.y > 0.0 || scattered.z > 0.0 {
                     // int_a^(a + dt) e^(-sigma t) dt = dt e^(-sigma a) phi(sigma dt), per channel.
                     let through = Vec4::new(
@@ -1343,12 +1404,29 @@ pub fn caustic_shafts_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 79)] params: &[CausticsParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 80)] words: &[u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 81)] radiance: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 82)] texels: &[Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     if index < common[0].band_pixels {
-        radiance[index as usize] = caustic_shafts_pixel(index, &common[0], &params[0], words, &gbuffer[index as usize]);
+        radiance[index as usize] =
+            caustic_shafts_pixel(index, &common[0], &params[0], texels, &gbuffer[index as usize]);
+    }
+}
+
+/// The shaft maps resolved to f32 texels (`resolve_texel`).
+#[spirv(compute(threads(64)))]
+pub fn caustic_shaft_resolve_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 79)] params: &[CausticsParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 80)] words: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 82)] texels: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index < p.planes * p.map_width * p.map_height {
+        texels[index as usize] = resolve_texel(index, p, words);
     }
 }
 

@@ -231,7 +231,7 @@ struct BenchArgs {
     /// Short for --family sea (scenes/sea_open, sea_calm_noon).
     #[arg(long, conflicts_with = "sky")]
     sea: bool,
-    /// Short for --family caustics (scenes/caustics_ball, caustics_knot).
+    /// Short for --family caustics (scenes/caustics_ball, caustics_knot, caustics_fog_ball).
     #[arg(long, conflicts_with_all = ["sky", "sea"])]
     caustics: bool,
     /// Backends to time (give it more than once).

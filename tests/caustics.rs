@@ -113,6 +113,21 @@ fn ball_scene(extra_object: &str, light: &str, camera: &str, glass: &str) -> Str
 const CAMERA: &str = "position = [0.0, 2.6, 4.2]\nlook_at = [0.0, 0.4, 0.0]";
 const LIGHT: &str = "[[point_light]]\nposition = [1.5, 4.0, -1.0]\nintensity = [30.0, 30.0, 30.0]";
 
+/// The flux (W per channel, before the glass: transmittance 1) that falls
+/// on the glass's lit triangles from all the lights.
+fn flux_on_glass(data: &SceneData) -> DVec3 {
+    let mut entering = DVec3::ZERO;
+    for light in &data.lights {
+        for t in &data.glass_triangles {
+            let [a, b, c] = t.vertices.map(|i| data.glass_vertices[i as usize].position.truncate());
+            let f =
+                slicelight_shaders::caustics::triangle_flux(&data.common, light, &data.light_map, a, b, c, Vec4::ONE);
+            entering += f.truncate().as_dvec3();
+        }
+    }
+    entering
+}
+
 /// The flux on each sample plane (W, summed over channels) and the flux
 /// that falls on the glass's lit triangles (an upper bound: transmittance
 /// 1); checks the first is never above the second, and returns both.
@@ -123,15 +138,7 @@ fn flux_check(data: &SceneData, r: &slicelight::render::Rendered, what: &str) ->
     let report = r.stats.passes.iter().find(|p| p.name == "caustics.maps").and_then(|p| p.report.clone());
     let report = report.unwrap_or_default();
     let p = &data.caustics.params;
-    let mut entering = 0.0f64;
-    for light in &data.lights {
-        for t in &data.glass_triangles {
-            let [a, b, c] = t.vertices.map(|i| data.glass_vertices[i as usize].position.truncate());
-            let f =
-                slicelight_shaders::caustics::triangle_flux(&data.common, light, &data.light_map, a, b, c, Vec4::ONE);
-            entering += (f.x + f.y + f.z) as f64;
-        }
-    }
+    let entering = flux_on_glass(data).element_sum();
     // Parse "[r, g, b]" groups from the report.
     let mut planes = Vec::new();
     for group in report.split('[').skip(1) {
@@ -649,7 +656,7 @@ fn stress_collapsing_cross_sections_and_broken_meshes() {
 
 /// Caustic light shafts (issue 26): the glass ball and the knot hung in fog
 /// under spotlights, the `caustics.shafts` layer against the light tracer's
-/// medium estimate (`caustic_shaft_image`: every path segment after the
+/// medium estimate (`Splat::Medium`: every path segment after the
 /// glass connected to the eye; transmission only, the paths the method
 /// models) over the pixels that see no glass, at 160x120 with 16 samples
 /// per pixel (both are pixel means).
@@ -731,22 +738,7 @@ fn caustic_shafts_and_floor_never_hold_more_than_fell_on_the_glass() {
         ] {
             pass.run_cpu(&data, &data.common, &mut frame, &hidden);
         }
-        let mut entering = 0.0f64;
-        for light in &data.lights {
-            for t in &data.glass_triangles {
-                let [a, b, c] = t.vertices.map(|i| data.glass_vertices[i as usize].position.truncate());
-                let f = slicelight_shaders::caustics::triangle_flux(
-                    &data.common,
-                    light,
-                    &data.light_map,
-                    a,
-                    b,
-                    c,
-                    Vec4::ONE,
-                );
-                entering += f.x as f64;
-            }
-        }
+        let entering = flux_on_glass(&data).x;
         let p = &data.caustics.params;
         let floor_maps =
             slicelight::caustics::decode_maps(&data, frame.get::<u32>(&slicelight::caustics::CAUSTICS_MAPS));
@@ -815,11 +807,7 @@ fn caustic_shafts_at_their_edges() {
         ("shaft_steps = 1", "caustics.shaft_steps"),
         ("shaft_steps = 257", "caustics.shaft_steps"),
     ] {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("scene.toml");
-        std::fs::write(&path, format!("{text}\n[caustics]\n{line}\n")).unwrap();
-        let Err(e) = slicelight::scene::load(&path) else { panic!("{line} is refused") };
-        let message = format!("{e:#}");
+        let message = common::scene_error(&format!("{text}\n[caustics]\n{line}\n"));
         assert!(message.contains(field), "{line}: {message}");
     }
 }

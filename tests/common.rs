@@ -24,3 +24,15 @@ pub fn scene_with_files(toml: &str, files: &[(&str, String)]) -> slicelight::sce
     std::fs::write(&path, toml).unwrap();
     slicelight::scene::load(&path).unwrap()
 }
+
+/// The error loading a scene from `toml` gives (written to a fresh
+/// temporary folder), with its causes; panics if the scene loads.
+pub fn scene_error(toml: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, toml).unwrap();
+    match slicelight::scene::load(&path) {
+        Ok(_) => panic!("the scene loads, but should be refused:\n{toml}"),
+        Err(e) => format!("{e:#}"),
+    }
+}

@@ -208,12 +208,8 @@ fn the_view_from_under_the_water_holds_at_its_edges() {
         );
         assert_eq!(data.sea.params.underwater != 0, depth >= 0.0, "{what}");
     }
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("bottom_above.toml");
-    std::fs::write(&path, under_text(5.0, [0.0, 0.0, -1.0], (8, 8), 30.0, "depth_m = 4.0", "")).unwrap();
-    let refused = slicelight::scene::load(&path);
-    let Err(e) = refused else { panic!("a bottom above the eye is refused") };
-    let message = format!("{e:#}");
+    // A bottom above the eye is refused.
+    let message = common::scene_error(&under_text(5.0, [0.0, 0.0, -1.0], (8, 8), 30.0, "depth_m = 4.0", ""));
     assert!(message.contains("sea.depth_m") && message.contains("below the camera"), "{message}");
     // The shafts' settings out of range: the field named.
     for (line, field) in [
@@ -221,10 +217,8 @@ fn the_view_from_under_the_water_holds_at_its_edges() {
         ("shaft_steps = 65", "sea.shaft_steps"),
         ("shaft_depth_m = -1.0", "sea.shaft_depth_m"),
     ] {
-        std::fs::write(&path, under_text(5.0, [0.0, 0.0, -1.0], (8, 8), 30.0, &format!("depth_m = 12.0\n{line}"), ""))
-            .unwrap();
-        let Err(e) = slicelight::scene::load(&path) else { panic!("{line} is refused") };
-        let message = format!("{e:#}");
+        let extra = format!("depth_m = 12.0\n{line}");
+        let message = common::scene_error(&under_text(5.0, [0.0, 0.0, -1.0], (8, 8), 30.0, &extra, ""));
         assert!(message.contains(field), "{line}: {message}");
     }
 }

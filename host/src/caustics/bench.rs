@@ -16,7 +16,7 @@
 //!
 //! In a scene whose medium scatters (`caustics_fog_ball`) the error is the
 //! caustic light shafts' (the `caustics.shafts` layer) against the light
-//! tracer's medium estimate (`caustic_shaft_image`), over the same pixels,
+//! tracer's medium estimate (`Splat::Medium`), over the same pixels,
 //! and the sweep adds the shaft planes, the shaft maps' resolution and the
 //! steps along each view ray.
 

@@ -12,9 +12,9 @@ use anyhow::{bail, ensure, Result};
 use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use slicelight_shaders::caustics::{
-    caustic_shafts_pixel, caustics_pixel, light_at_vertex, load_entry, lookup, map_bins, rasterize, read_bin,
-    resolve_texel, store_entry, table_entry, table_slot, texel_bins, triangle_flux, CausticsParams, ExitRay,
-    TableEntry, ENTRY_WORDS, MAX_SHAFT_PLANES, MAX_SLOPE, PACKED_WORDS,
+    caustic_shafts_pixel, caustics_pixel, light_at_vertex, load_entry, lookup, map_bins, map_invocations, map_texels,
+    rasterize, resolve_texel, store_entry, table_entry, table_slot, triangle_flux, CausticsParams, ExitRay, TableEntry,
+    ENTRY_WORDS, MAX_SHAFT_PLANES, MAX_SLOPE, PACKED_WORDS,
 };
 use slicelight_shaders::glass::{dispersive, trace_through, Glass, PATH_OUT};
 use slicelight_shaders::scatter::{words_for, CpuAtomics};
@@ -586,8 +586,7 @@ impl Setup {
         p.light_count as u64 * p.vertex_count as u64 * p.channels as u64
     }
     pub fn map_invocations(&self) -> u64 {
-        let p = &self.params;
-        p.light_count as u64 * p.triangle_count as u64 * p.channels as u64 * p.planes as u64
+        map_invocations(&self.params) as u64
     }
     pub fn map_words(&self) -> u64 {
         if self.enabled {
@@ -601,13 +600,12 @@ impl Setup {
         self.enabled && self.shafts.planes > 0
     }
     pub fn shaft_map_invocations(&self) -> u64 {
-        let p = &self.shafts;
-        p.light_count as u64 * p.triangle_count as u64 * p.channels as u64 * p.planes as u64
+        map_invocations(&self.shafts) as u64
     }
     /// Texels of the shaft maps over all planes (1 without them: a buffer is never empty).
     pub fn shaft_texels(&self) -> u64 {
         if self.shafts_on() {
-            self.shafts.planes as u64 * self.shafts.map_width as u64 * self.shafts.map_height as u64
+            map_texels(&self.shafts) as u64
         } else {
             1
         }
@@ -862,15 +860,9 @@ pub fn decode_maps(scene: &SceneData, words: &[u32]) -> Vec<Vec4> {
     decode(&scene.caustics.params, words)
 }
 
-/// The densities (rgb) per texel of maps of `p`, decoded.
+/// The densities (rgb) per texel of maps of `p`, decoded (`resolve_texel`).
 fn decode(p: &CausticsParams, words: &[u32]) -> Vec<Vec4> {
-    let bins = texel_bins(p);
-    (0..map_bins(p) / bins)
-        .map(|t| {
-            let b = t * bins;
-            Vec4::new(read_bin(words, p, b), read_bin(words, p, b + 1), read_bin(words, p, b + 2), 0.0)
-        })
-        .collect()
+    (0..map_texels(p)).map(|t| resolve_texel(t, p, words)).collect()
 }
 
 /// Every lit triangle's illumination volume rasterised into maps of `p`
@@ -889,8 +881,7 @@ fn draw_maps(
     let mut maps = Buffer::zeroed::<u32>(words as usize);
     let atomics = crate::cpu::as_atomics(maps.as_mut_slice::<u32>());
     let rays = frame.get::<ExitRay>(&CAUSTICS_RAYS);
-    let invocations = p.light_count * p.triangle_count * p.channels * p.planes;
-    for_each_index(invocations, progress, |i| {
+    for_each_index(map_invocations(p), progress, |i| {
         rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, &mut CpuAtomics(atomics));
     });
     maps

@@ -17,7 +17,7 @@
 //! and paths that meet total internal reflection dropped.
 //!
 //! In a scattering `[medium]` the same paths give the caustic light
-//! shafts (`caustic_shaft_image`): every segment of a path that met glass,
+//! shafts (`Splat::Medium`): every segment of a path that met glass,
 //! outside the glass, is sampled at `MEDIUM_SAMPLES` stratified points,
 //! each connected to the camera (next-event estimation toward the eye): its
 //! flux times `sigma_s ds p(cos) e^(-sigma_t r)`, over `r^2` and the pixel's
@@ -322,15 +322,9 @@ pub fn caustic_image(data: &SceneData, paths: u64, seed: u64, transmission_only:
     light_trace(data, paths, seed, transmission_only, Splat::Surfaces)
 }
 
-/// The caustic light the medium scatters toward the eye (the caustic
-/// shafts) each pixel sees, W/(m^2 sr) per channel, from `paths` paths per
-/// light, glass object and channel (see the module docs).
-pub fn caustic_shaft_image(data: &SceneData, paths: u64, seed: u64, transmission_only: bool) -> Vec<DVec3> {
-    light_trace(data, paths, seed, transmission_only, Splat::Medium)
-}
-
 /// The light tracer: `paths` paths per light, glass object and channel,
-/// splatted as `splat` says.
+/// splatted as `splat` says (`Splat::Medium`: the caustic light the medium
+/// scatters toward the eye, the caustic shafts, W/(m^2 sr) per channel).
 fn light_trace(data: &SceneData, paths: u64, seed: u64, transmission_only: bool, splat: Splat) -> Vec<DVec3> {
     let pixels = data.pixel_count() as usize;
     let dispersive =

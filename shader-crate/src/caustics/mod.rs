@@ -674,9 +674,20 @@ pub fn texel_bins(params: &CausticsParams) -> u32 {
     }
 }
 
+/// Texels of the caustics maps over all their planes.
+pub fn map_texels(params: &CausticsParams) -> u32 {
+    params.planes * params.map_width * params.map_height
+}
+
 /// Bins of the caustics maps: `texel_bins` per texel of every plane.
 pub fn map_bins(params: &CausticsParams) -> u32 {
-    params.planes * params.map_width * params.map_height * texel_bins(params)
+    map_texels(params) * texel_bins(params)
+}
+
+/// Invocations of the maps' rasteriser (`rasterize`): every light,
+/// triangle, channel and plane.
+pub fn map_invocations(params: &CausticsParams) -> u32 {
+    params.light_count * params.triangle_count * params.channels * params.planes
 }
 
 /// Map invocation `index` = `((light * triangle_count + triangle) *
@@ -979,18 +990,6 @@ pub fn read_bin(words: &[u32], params: &CausticsParams, bin: u32) -> f32 {
     (high as f32 * 4_294_967_296.0 + low as f32) / params.scale
 }
 
-/// `sample_plane` at the point `(x, z)` (metres) of plane `k`; nothing off its map.
-fn sample_at(words: &[u32], params: &CausticsParams, k: u32, x: f32, z: f32) -> (Vec4, f32, f32) {
-    let rect = plane_rect(params, k);
-    let u = (x - rect.x) / rect.z - 0.5;
-    let v = (z - rect.y) / rect.z - 0.5;
-    // Off the map (most of a large floor): no caustic.
-    if !(u > -1.0 && v > -1.0 && u < params.map_width as f32 && v < params.map_height as f32) {
-        return (Vec4::ZERO, 0.0, 0.0);
-    }
-    sample_plane(words, params, k, u, v)
-}
-
 /// Density (rgb) and slopes (w: unused) of one plane at texel coordinates
 /// `(u, v)` (centres at integers), bilinear; zero outside the map.
 fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f32) -> (Vec4, f32, f32) {
@@ -1007,17 +1006,16 @@ fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f
         let j = j0 + (corner / 2) as f32;
         let w = if corner % 2 == 1 { fu } else { 1.0 - fu } * if corner / 2 == 1 { fv } else { 1.0 - fv };
         if w > 0.0 && i >= 0.0 && j >= 0.0 && i < params.map_width as f32 && j < params.map_height as f32 {
-            let bin = ((plane * params.map_height + j as u32) * params.map_width + i as u32) * texel_bins(params);
+            let bin = ((plane * params.map_height + j as u32) * params.map_width + i as u32) * MAP_BINS;
             let d = Vec4::new(
                 read_bin(words, params, bin),
                 read_bin(words, params, bin + 1),
                 read_bin(words, params, bin + 2),
                 0.0,
             );
-            density += d * w;
-            // Most texels of a map hold no light: no direction to read;
-            // the shaft maps keep none.
-            if (d.x > 0.0 || d.y > 0.0 || d.z > 0.0) && texel_bins(params) == MAP_BINS {
+            // Most texels of a map hold no light: no direction to read.
+            if d.x > 0.0 || d.y > 0.0 || d.z > 0.0 {
+                density += d * w;
                 sx += (read_bin(words, params, bin + 3) - read_bin(words, params, bin + 4)) * w;
                 sz += (read_bin(words, params, bin + 5) - read_bin(words, params, bin + 6)) * w;
             }
@@ -1027,29 +1025,16 @@ fn sample_plane(words: &[u32], params: &CausticsParams, plane: u32, u: f32, v: f
     (density, sx, sz)
 }
 
-/// The caustic light's flow at `p`: the two sample planes around `p`'s
-/// height, interpolated linearly in height (below the lowest plane and
-/// above the highest, the nearest one): the density (W/m^2 of the plane per
-/// channel, w = 0) and the mean ray direction `(s_x, -1, s_z)`, not
-/// normalised (`|w_y| = 1 / len`); no density off the maps.
-pub fn caustic_flow(words: &[u32], params: &CausticsParams, p: Vec3) -> (Vec4, Vec3) {
-    let (k0, k1, w) = if params.planes < 2 {
-        (0, 0, 0.0)
-    } else {
-        let s = ((p.y - params.map_origin.y) / params.plane_spacing).clamp(0.0, (params.planes - 1) as f32);
-        let k0 = (s.floor() as u32).min(params.planes - 2);
-        (k0, k0 + 1, s - k0 as f32)
-    };
-    let (d0, sx0, sz0) = sample_at(words, params, k0, p.x, p.z);
-    let (d1, sx1, sz1) = if w > 0.0 { sample_at(words, params, k1, p.x, p.z) } else { (Vec4::ZERO, 0.0, 0.0) };
-    let density = d0 * (1.0 - w) + d1 * w;
-    let weight = density.x + density.y + density.z;
-    if weight <= 0.0 || weight.is_nan() {
-        return (Vec4::ZERO, Vec3::NEG_Y);
+/// The two sample planes around height `y` and the weight of the upper
+/// one, for interpolating linearly in height (below the lowest plane and
+/// above the highest, the nearest one; with one plane, that plane).
+fn planes_around(params: &CausticsParams, y: f32) -> (u32, u32, f32) {
+    if params.planes < 2 {
+        return (0, 0, 0.0);
     }
-    let sx = (sx0 * (1.0 - w) + sx1 * w) / weight;
-    let sz = (sz0 * (1.0 - w) + sz1 * w) / weight;
-    (density, Vec3::new(sx, -1.0, sz))
+    let s = ((y - params.map_origin.y) / params.plane_spacing).clamp(0.0, (params.planes - 1) as f32);
+    let k0 = (s.floor() as u32).min(params.planes - 2);
+    (k0, k0 + 1, s - k0 as f32)
 }
 
 /// Texel `index` (over all planes) of the shaft maps as f32: its three
@@ -1063,14 +1048,12 @@ pub fn resolve_texel(index: u32, params: &CausticsParams, words: &[u32]) -> Vec4
 
 /// The resolved shaft maps at `p` (`resolve_texel`): each of the two planes
 /// around its height bilinear in its own square (`plane_rect`), the two
-/// interpolated linearly in height, as `caustic_flow` reads the receivers'
-/// maps; none off a map.
+/// interpolated linearly in height, as `caustic_irradiance` reads the
+/// receivers' maps; none off a map.
 pub fn shaft_light(texels: &[Vec4], params: &CausticsParams, p: Vec3) -> Vec4 {
-    let s = ((p.y - params.map_origin.y) / params.plane_spacing).clamp(0.0, (params.planes - 1) as f32);
-    let k0 = (s.floor() as u32).min(params.planes - 2);
-    let w = s - k0 as f32;
+    let (k0, k1, w) = planes_around(params, p.y);
     let below = resolved_at(texels, params, k0, p.x, p.z);
-    let above = if w > 0.0 { resolved_at(texels, params, k0 + 1, p.x, p.z) } else { Vec4::ZERO };
+    let above = if w > 0.0 { resolved_at(texels, params, k1, p.x, p.z) } else { Vec4::ZERO };
     below * (1.0 - w) + above * w
 }
 
@@ -1101,11 +1084,29 @@ fn texel_at(texels: &[Vec4], params: &CausticsParams, k: u32, i: f32, j: f32) ->
 }
 
 /// Caustic irradiance (W/m^2 per channel, w = 0) on a surface at `p` with
-/// unit normal `n` facing the side the light arrives from: the flow there
-/// (`caustic_flow`), `density |n . w| / |w_y|` (see the module docs).
+/// unit normal `n` facing the side the light arrives from: the two sample
+/// planes around `p`'s height, interpolated linearly in height (below the
+/// lowest plane and above the highest, the nearest one), each
+/// `density |n . w| / |w_y|` (see the module docs).
 pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Vec3) -> Vec4 {
-    let (density, dir) = caustic_flow(words, params, p);
+    let u = (p.x - params.map_origin.x) / params.map_origin.w - 0.5;
+    let v = (p.z - params.map_origin.z) / params.map_origin.w - 0.5;
+    // Off the maps (most of a large floor): no caustic.
+    if !(u > -1.0 && v > -1.0 && u < params.map_width as f32 && v < params.map_height as f32) {
+        return Vec4::ZERO;
+    }
+    let (k0, k1, w) = planes_around(params, p.y);
+    let (d0, sx0, sz0) = sample_plane(words, params, k0, u, v);
+    let (d1, sx1, sz1) = if w > 0.0 { sample_plane(words, params, k1, u, v) } else { (Vec4::ZERO, 0.0, 0.0) };
+    let density = d0 * (1.0 - w) + d1 * w;
+    let weight = density.x + density.y + density.z;
+    if weight <= 0.0 || weight.is_nan() {
+        return Vec4::ZERO;
+    }
+    let sx = (sx0 * (1.0 - w) + sx1 * w) / weight;
+    let sz = (sz0 * (1.0 - w) + sz1 * w) / weight;
     // The mean ray direction (sx, -1, sz), normalised: |w_y| = 1 / len.
+    let dir = Vec3::new(sx, -1.0, sz);
     let len = dir.length();
     let cos = (-n.dot(dir) / len).max(0.0);
     density * (cos * len)
@@ -1156,8 +1157,9 @@ fn clip_axis(o: f32, d: f32, lo: f32, hi: f32, (a, b): (f32, f32)) -> (f32, f32)
 /// (`slab_span`), the maps read at each one's middle straight up and down
 /// (`shaft_light`; read along the mean ray, or following the planes'
 /// squares, measured no nearer the reference), the eye's transmittance
-/// integrated exactly over each (`phi`): energy-conserving per interval. Light is read where the
-/// planes are (below the lowest and above the highest, none).
+/// integrated exactly over each (`phi`): energy-conserving per interval.
+/// Light is read where the planes are (below the lowest and above the
+/// highest, none).
 pub fn caustic_shafts_pixel(
     index: u32,
     common: &CommonParams,
@@ -1171,11 +1173,6 @@ pub fn caustic_shafts_pixel(
     let pixel = index + common.band_start;
     let (o, d) = camera_ray(common, pixel % common.width, pixel / common.width);
     let t_far = texel.normal_distance.w;
-    // The view ray within each slab between two planes, clipped to where
-    // the two planes' maps are: first their total length, shared out in
-    // `shaft_steps` intervals, then each walked with its share (a ray
-    // that crosses a narrow bundle in a short clipped span is sampled as
-    // finely as one that runs along a wide one).
     // Only the slabs the ray meets within the box all the maps cover (none: no light).
     let b = params.bounds;
     let y0 = params.map_origin.y;
@@ -1189,6 +1186,11 @@ pub fn caustic_shafts_pixel(
     let (ya, yb) = (o.y + d.y * t0, o.y + d.y * t1);
     let first = (((ya.min(yb) - y0) / params.plane_spacing).floor().max(0.0) as u32).min(params.planes - 2);
     let last = (((ya.max(yb) - y0) / params.plane_spacing).floor().max(0.0) as u32).min(params.planes - 2);
+    // The view ray within each slab between two planes, clipped to where
+    // the two planes' maps are: first their total length, shared out in
+    // `shaft_steps` intervals, then each walked with its share (a ray
+    // that crosses a narrow bundle in a short clipped span is sampled as
+    // finely as one that runs along a wide one).
     let mut total = 0.0;
     let mut k = first;
     while k <= last {
@@ -1365,7 +1367,7 @@ pub fn caustics_maps_kernel(
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
-    if index < p.light_count * p.triangle_count * p.channels * p.planes {
+    if index < map_invocations(p) {
         let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
         rasterize(index, &common[0], p, lights, light_map, &glass, rays, words);
     }
@@ -1391,7 +1393,7 @@ pub fn caustic_shaft_maps_kernel(
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
-    if index < p.light_count * p.triangle_count * p.channels * p.planes {
+    if index < map_invocations(p) {
         let glass = Glass { vertices: glass_vertices, triangles: glass_triangles };
         rasterize(index, &common[0], p, lights, light_map, &glass, rays, words);
     }
@@ -1425,7 +1427,7 @@ pub fn caustic_shaft_resolve_kernel(
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
-    if index < p.planes * p.map_width * p.map_height {
+    if index < map_texels(p) {
         texels[index as usize] = resolve_texel(index, p, words);
     }
 }

@@ -811,3 +811,88 @@ fn caustic_shafts_at_their_edges() {
         assert!(message.contains(field), "{line}: {message}");
     }
 }
+
+/// The glass ball of Fig. 8(a) (its default 96 x 64 segments) under a
+/// spotlight, seen close over its shadow at 96 x 72: the issue's "tried as a
+/// new user would" view (`scenes/caustics_ball_shadow.toml`).
+fn shadow_view() -> String {
+    let spotlight = "[[spotlight]]\nposition = [1.5, 4.0, -1.0]\ndirection = [-1.5, -3.5, 1.0]\ncutoff_deg = 20.0\n\
+                     beam_deg = 17.0\nintensity = [30.0, 30.0, 30.0]";
+    let camera = "position = [-1.2, 1.6, 1.6]\nlook_at = [-0.25, 0.0, 0.15]";
+    ball_scene("", spotlight, camera, "ior = 1.5")
+        .replace("resolution = [64, 48]", "resolution = [96, 72]")
+        .replace("segments = [48, 32]", "")
+}
+
+/// A `(2 r + 1)`-square box blur of a `w`-wide image (edges clamped).
+fn blur(v: &[DVec3], w: usize, r: i64) -> Vec<DVec3> {
+    let h = v.len() / w;
+    (0..v.len())
+        .map(|i| {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            let mut s = DVec3::ZERO;
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let (xx, yy) = ((x + dx).clamp(0, w as i64 - 1), (y + dy).clamp(0, h as i64 - 1));
+                    s += v[yy as usize * w + xx as usize];
+                }
+            }
+            s / ((2 * r + 1) * (2 * r + 1)) as f64
+        })
+        .collect()
+}
+
+#[test]
+fn the_balls_shadow_holds_the_light_tracers_halo() {
+    // Around the focus in the ball's shadow lies a faint halo across the
+    // whole shadow: light that entered the outer zone (over 0.9 of the
+    // radius from the light's axis) and leaves near the bottom of the ball
+    // almost level. There the triangles' corners send their exit rays both
+    // up and down, and the maps dropped such triangles whole: the halo
+    // showed as spokes and dark wedges (which moved when the ball's mesh was
+    // turned and thinned only with 16 times the vertices, while exact
+    // traces at the vertices kept them: not the table). Now such triangles
+    // are cut into parts with rays traced inside them. Measured over the
+    // shadow's pixels more than 16 pixels (a sixth of the width) from the
+    // focus's peak, 5 x 5-blurred against the light tracer's noise.
+    let mut data = common::scene_from_str(&shadow_view());
+    data.set_samples_per_pixel(16).unwrap();
+    let w = data.width() as usize;
+    let r = render_checked(&data, "shadow view");
+    let direct = slicelight::reference::render_surfaces(&data);
+    let keep = not_glass(&data);
+    let traced = caustic_image(&data, 4 << 20, 1, true);
+    let traced2 = caustic_image(&data, 4 << 20, 2, true);
+    let method = to_f64(layer(&r, "caustics"));
+    let at = (0..traced.len()).max_by(|a, b| traced[*a].x.total_cmp(&traced[*b].x)).unwrap();
+    let far = |i: usize| ((i % w) as f64 - (at % w) as f64).hypot((i / w) as f64 - (at / w) as f64) > 16.0;
+    let halo: Vec<usize> = (0..keep.len()).filter(|&i| keep[i] && direct[i].x == 0.0 && far(i)).collect();
+    let (bm, bt, bt2) = (blur(&method, w, 2), blur(&traced, w, 2), blur(&traced2, w, 2));
+    // RMS of the difference relative to the halo's mean, and the ratio of
+    // the light in it.
+    let over = |a: &[DVec3], b: &[DVec3]| {
+        let d2 = halo.iter().map(|&i| (a[i].x - b[i].x).powi(2)).sum::<f64>();
+        let (sum_a, sum_b) = (halo.iter().map(|&i| a[i].x).sum::<f64>(), halo.iter().map(|&i| b[i].x).sum::<f64>());
+        ((d2 / halo.len() as f64).sqrt() / (sum_b / halo.len() as f64), sum_a / sum_b)
+    };
+    let (rms, ratio) = over(&bm, &bt);
+    let (noise, noise_ratio) = over(&bt2, &bt);
+    println!(
+        "halo ({} px): method vs tracer {:.1} % RMS of the halo's mean (blurred 5 x 5), light {:.3} of the tracer's; \
+         tracer vs tracer {:.1} %, light {:.3}",
+        halo.len(),
+        100.0 * rms,
+        ratio,
+        100.0 * noise,
+        noise_ratio
+    );
+    assert!(halo.len() > 1000, "only {} halo pixels", halo.len());
+    assert!(noise < 0.3, "the tracer's own noise {noise} is too large to judge by");
+    // Bounds, between what the method now measures and what it did with
+    // the triangles dropped (see docs/caustics.md): the halo's light within
+    // 15 % of the tracer's (now 9.5 % over, was 26.5 % short); its pattern
+    // within 0.6 of its mean (now 0.46, was 0.96; the tracer's own noise
+    // 0.25).
+    assert!((ratio - 1.0).abs() < 0.15, "the halo holds {ratio} of the tracer's light");
+    assert!(rms < 0.6, "the halo differs by {rms} of its mean");
+}

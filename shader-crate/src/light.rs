@@ -135,6 +135,21 @@ pub fn angle_from_axis(r: f32, z: f32) -> f32 {
     }
 }
 
+/// `atan2(y, x)` in `(-pi, pi]`, radians, to within a few f32 ulps on
+/// every backend (`angle_from_axis` in each quadrant; 0 at the origin).
+pub fn atan2_accurate(y: f32, x: f32) -> f32 {
+    if x == 0.0 && y == 0.0 {
+        return 0.0;
+    }
+    let a = angle_from_axis(y.abs(), x.abs());
+    let a = if x < 0.0 { core::f32::consts::PI - a } else { a };
+    if y < 0.0 {
+        -a
+    } else {
+        a
+    }
+}
+
 /// A spot's hard edge at the point `(x, y, z)` of its frame: 1 inside the
 /// cone (`z > 0`, `r <= z tan(cutoff)`), else 0; and `r`, the distance from
 /// the axis.

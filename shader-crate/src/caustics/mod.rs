@@ -975,10 +975,9 @@ impl RayField<'_> {
     /// weights. At a corner, the corner's own ray (the lookup's). Where no
     /// corner's table says the light leaves, the straight blend.
     fn ray(&self, u: f32, v: f32) -> (Vec3, Vec3, Vec4) {
-        let straight = self.blended(u, v);
         let (w0, w1, w2) = (1.0 - u - v, u, v);
         if !self.refine || w0 >= 1.0 || w1 >= 1.0 || w2 >= 1.0 {
-            return straight;
+            return self.blended(u, v);
         }
         let p = self.v0.position.xyz() * w0 + self.v1.position.xyz() * w1 + self.v2.position.xyz() * w2;
         let n = (self.v0.normal.xyz() * w0 + self.v1.normal.xyz() * w1 + self.v2.normal.xyz() * w2).normalize();
@@ -992,7 +991,7 @@ impl RayField<'_> {
         let (o2, d2, t2, s2) = self.turned(&self.v2, w2, p, n, l);
         let sum = s0 + s1 + s2;
         if sum <= 0.0 || sum.is_nan() {
-            return straight;
+            return self.blended(u, v);
         }
         ((o0 + o1 + o2) / sum, (d0 + d1 + d2).normalize(), (t0 + t1 + t2) / sum)
     }

@@ -217,29 +217,38 @@ fn thin_metaball_against_reference(lights: &str, worst_bound: f64) {
     assert!(worst < worst_bound, "worst pixel {worst}");
 }
 
-/// The default, multiple scattering by octaves, against the Monte Carlo
-/// reference (all orders) on the cumulus at 24x18 pixel centres. Measured
-/// (docs/volumes.md): the whole image's energy 0.972 of the reference's and
-/// 5.7 % RMS (8-bit); single scattering on the same pixels is 0.657 and
-/// 19.2 %. The issue asks 5 % energy and 3 % RMS: the octaves meet the
-/// first here, not the second. The bounds hold the octaves at least twice
-/// as close as single scattering in both: what a change to the octaves'
-/// defaults must keep.
+/// The default, multiple scattering by delta-Eddington columns, against
+/// the Monte Carlo reference (all orders) on the cumulus at 24x18 pixel
+/// centres, beside the octaves and single scattering on the same pixels.
+/// Measured (docs/volumes.md): columns energy 0.990, 4.46 % RMS (8-bit);
+/// octaves 0.972, 5.69 %; single scattering 0.657, 19.2 %. The issue asks
+/// 5 % energy and 3 % RMS: the columns meet the first here, not the
+/// second. The bounds hold most of what the columns gained over the
+/// octaves (RMS below 5 %, energy within 5 %) and keep them at least
+/// twice as close as single scattering.
 #[test]
 fn multiple_scattering_against_monte_carlo() {
+    use slicelight::volumes::Scattering;
     let data = shipped("cloud_cumulus", 24, 18);
-    assert!(data.volumes.params.octaves > 1, "multiple scattering is the default");
+    assert!(data.volumes.params.columns == 1, "multiple scattering by columns is the default");
     let (reference, _) = slicelight::reference::render_converged(&data, 3e-3);
-    let multiple = difference(&to_f64(&cpu_image(&data)), &reference, data.exposure);
-    let single = data.reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single).unwrap();
-    let single = difference(&to_f64(&cpu_image(&single)), &reference, data.exposure);
+    let against = |d: &SceneData| difference(&to_f64(&cpu_image(d)), &reference, data.exposure);
+    let columns = against(&data);
+    let octaves = against(&data.reconfigure(|f| f.volumes.scattering = Scattering::Octaves).unwrap());
+    let single = against(&data.reconfigure(|f| f.volumes.scattering = Scattering::Single).unwrap());
     println!(
-        "cumulus 24x18 against Monte Carlo: octaves {:.3} energy, {:.2} % RMS; single {:.3} energy, {:.2} % RMS",
-        multiple.energy_ratio, multiple.rms_8bit_percent, single.energy_ratio, single.rms_8bit_percent
+        "cumulus 24x18 against Monte Carlo: columns {:.3} energy, {:.2} % RMS; octaves {:.3}, {:.2} %; single {:.3}, {:.2} %",
+        columns.energy_ratio,
+        columns.rms_8bit_percent,
+        octaves.energy_ratio,
+        octaves.rms_8bit_percent,
+        single.energy_ratio,
+        single.rms_8bit_percent
     );
     assert!(single.energy_ratio < 0.95, "single scattering misses the higher orders: {single:?}");
-    assert!((multiple.energy_ratio - 1.0).abs() < 0.5 * (single.energy_ratio - 1.0).abs(), "{multiple:?}");
-    assert!(multiple.rms_8bit_percent < 0.5 * single.rms_8bit_percent, "{multiple:?} against {single:?}");
+    assert!((columns.energy_ratio - 1.0).abs() < 0.05, "{columns:?}");
+    assert!(columns.rms_8bit_percent < 5.0, "{columns:?}");
+    assert!(columns.rms_8bit_percent < 0.5 * single.rms_8bit_percent, "{columns:?} against {single:?}");
 }
 
 /// The Monte Carlo walk counting order 1 only agrees with the quadrature
@@ -431,9 +440,13 @@ fn bad_volumes_name_the_field() {
     let volume = "min = [0.0, 0.0, 0.0]\nmax = [1.0, 1.0, 1.0]";
     for (settings, field) in [
         ("scattering = \"single\"\noctaves = 4", "volumes.octaves"),
-        ("octaves = 0", "volumes.octaves"),
-        ("octave_scattering = 0.9\noctave_extinction = 0.5", "volumes.octave_scattering"),
-        ("octave_phase = 1.5", "volumes.octave_phase"),
+        ("octaves = 4", "volumes.octaves"),
+        ("scattering = \"octaves\"\noctaves = 0", "volumes.octaves"),
+        ("column_width = 0.0", "volumes.column_width"),
+        ("column_width = nan", "volumes.column_width"),
+        ("scattering = \"octaves\"\ncolumn_width = 2.0", "volumes.column_width"),
+        ("scattering = \"octaves\"\noctave_scattering = 0.9\noctave_extinction = 0.5", "volumes.octave_scattering"),
+        ("scattering = \"octaves\"\noctave_phase = 1.5", "volumes.octave_phase"),
         ("scattering = \"all\"", "scattering"),
     ] {
         let e = load_error(&format!("{base}\n{volume}\n[volumes]\n{settings}"));
@@ -974,4 +987,120 @@ fn the_automaton_steps_with_the_scene_time() {
     still.steps_per_second = Some(-1.0);
     let err = slicelight::volumes::automaton::configure_at("volume[0]", 0, &still, lo, hi, 1.0).unwrap_err();
     assert!(err.to_string().starts_with("volume[0].automaton.steps_per_second"), "{err}");
+}
+
+/// Light of irradiance 1 entering a plane-parallel slab `depth` optical
+/// depths thick along its normal, by exact 1D transport in f64: photons
+/// fly exponential free paths, scatter with albedo `omega` by the
+/// Henyey-Greenstein phase function `g` (no delta scaling, no P1: none of
+/// `column_channel`'s shortcuts). Returns the reflected and transmitted
+/// shares (direct included) and their standard errors.
+fn slab_monte_carlo(omega: f64, g: f64, depth: f64, photons: u32, seed: u64) -> ((f64, f64), (f64, f64)) {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let (mut up, mut down) = (0u32, 0u32);
+    for _ in 0..photons {
+        let (mut z, mut mu) = (0.0f64, 1.0f64);
+        loop {
+            z += mu * -(1.0 - rng.random::<f64>()).ln();
+            if z < 0.0 {
+                up += 1;
+                break;
+            }
+            if z > depth {
+                down += 1;
+                break;
+            }
+            if rng.random::<f64>() >= omega {
+                break;
+            }
+            // Henyey-Greenstein's cosine to the old direction, then the new
+            // direction's cosine to the slab normal.
+            let xi: f64 = rng.random();
+            let cos = if g.abs() < 1e-6 {
+                2.0 * xi - 1.0
+            } else {
+                let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * xi);
+                (1.0 + g * g - s * s) / (2.0 * g)
+            };
+            let sin = (1.0 - cos * cos).max(0.0).sqrt();
+            let phi = 2.0 * std::f64::consts::PI * rng.random::<f64>();
+            mu = (mu * cos + (1.0 - mu * mu).max(0.0).sqrt() * sin * phi.cos()).clamp(-1.0, 1.0);
+        }
+    }
+    let share = |k: u32| {
+        let p = k as f64 / photons as f64;
+        (p, (p * (1.0 - p) / photons as f64).sqrt())
+    };
+    (share(up), share(down))
+}
+
+/// `column_channel`'s reflected and transmitted light against exact 1D
+/// transport (`slab_monte_carlo`) for cloud droplets (albedo 0.99 and
+/// 0.9, Henyey-Greenstein g = 0.85) from optical depth 1 to 64, with no
+/// lateral leakage (width 1e6). The delta-Eddington approximation's own
+/// error is a few hundredths of the incident light at normal incidence
+/// (Joseph, Wiscombe and Weinman 1976 report up to 0.03-0.05 for thin
+/// layers). Measured: within 0.0096 of the exact shares in all eight
+/// cases (100 000 photons each); the bound is 0.015 plus four standard
+/// errors. A sign or factor slip in the boundary conditions moves the
+/// reflectance by tenths.
+#[test]
+fn columns_match_exact_slab_transport() {
+    use slicelight_shaders::volumes::column_channel;
+    for omega in [0.99f32, 0.9] {
+        for depth in [1.0f32, 4.0, 16.0, 64.0] {
+            let g = 0.85f32;
+            let (_, fluence_top, _) = column_channel(omega, g, g * g, 0.0, depth, 1e6);
+            // Marshak's conditions: the diffuse light leaving a face is half
+            // the fluence there; the direct beam's (scaled) remainder leaves
+            // the far face.
+            let (scaled_direct, fluence_bottom, _) = column_channel(omega, g, g * g, depth, depth, 1e6);
+            let reflected = 0.5 * fluence_top as f64;
+            let transmitted = 0.5 * fluence_bottom as f64 + scaled_direct as f64;
+            let ((r, r_se), (t, t_se)) = slab_monte_carlo(omega as f64, g as f64, depth as f64, 100_000, 7);
+            println!(
+                "omega {omega} g {g} depth {depth}: reflected {reflected:.4} (exact {r:.4} +- {r_se:.4}), transmitted {transmitted:.4} (exact {t:.4} +- {t_se:.4})"
+            );
+            assert!((reflected - r).abs() < 0.015 + 4.0 * r_se, "reflected {reflected} against {r}");
+            assert!((transmitted - t).abs() < 0.015 + 4.0 * t_se, "transmitted {transmitted} against {t}");
+        }
+    }
+}
+
+/// `column_channel` at the edges of its parameters: albedo 0 to 1 (1 is
+/// held at `MAX_COLUMN_ALBEDO`), asymmetry -0.9 to 0.95, depths 0 to 10^4,
+/// widths 1e-3 to 1e6, and the particular solution's singular `k = 1`
+/// (albedo 0.6, g 0: `3 (1 - w) = 1.2` before the lateral term; the sweep
+/// over widths crosses it). Everything finite and the direct beam in
+/// [0, 1]; no light created: what leaves both faces plus the direct beam
+/// is at most what entered (Marshak's half-fluences), and without
+/// absorption or lateral leakage it is all of it up to depth 10, within
+/// what `MAX_COLUMN_ALBEDO` absorbs (1e-4 of the fluence, at most 3 here,
+/// per unit depth) plus 1e-3 for f32.
+#[test]
+fn columns_conserve_energy_at_the_edges() {
+    use slicelight_shaders::volumes::{column_channel, MAX_COLUMN_ALBEDO};
+    for omega in [0.0f32, 0.3, 0.6, 0.9, 0.99, 1.0] {
+        for g in [-0.9f32, -0.3, 0.0, 0.58, 0.85, 0.95] {
+            for depth in [0.0f32, 1e-4, 0.1, 1.0, 10.0, 100.0, 1e4] {
+                for width in [1e-3f32, 0.3, 1.0, 1.75, 10.0, 1e6] {
+                    let at = |tau: f32| column_channel(omega, g, g * g, tau, depth, width);
+                    for tau in [0.0, 0.5 * depth, depth] {
+                        let (d, f, j) = at(tau);
+                        assert!(d.is_finite() && f.is_finite() && j.is_finite(), "{omega} {g} {depth} {width} {tau}");
+                        assert!((0.0..=1.0).contains(&d), "direct {d}");
+                    }
+                    let (_, top, _) = at(0.0);
+                    let (direct, bottom, _) = at(depth);
+                    let out = 0.5 * (top + bottom) + direct;
+                    assert!(out <= 1.0 + 1e-3, "{omega} {g} {depth} {width}: {out} leaves");
+                    if omega >= MAX_COLUMN_ALBEDO && width >= 1e6 && depth <= 10.0 {
+                        let held = (1.0 - MAX_COLUMN_ALBEDO) * 3.0 * depth + 1e-3;
+                        assert!((out - 1.0).abs() < held, "{g} {depth}: {out} leaves without absorption");
+                    }
+                }
+            }
+        }
+    }
 }

@@ -716,7 +716,7 @@ pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> 
         return (filter(surfaces.iter().map(|s| s.0).collect()), 0);
     }
     let (image, samples) = converged(64, 65536, tolerance, |samples, _| with_inscatter(samples as u32));
-    if !(data.volumes.enabled && data.volumes.params.octaves > 1) {
+    if !(data.volumes.enabled && data.volumes.params.all_orders()) {
         return (image, samples as u32);
     }
     // Multiple scattering: the volumes' orders 2 and up by random walks,

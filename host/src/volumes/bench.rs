@@ -7,12 +7,14 @@
 //!   quadrature reference (`volumes::reference`);
 //! - `light-grid`: the transmittance volume's nodes (`n` a side), single
 //!   scattering, against the same reference;
+//! - `columns`: multiple scattering by delta-Eddington columns (the
+//!   default) at column widths 1, 1.75 (the default) and 3, against the
+//!   Monte Carlo reference for all orders (`volumes::montecarlo`);
 //! - `octaves`: multiple scattering by 1 (single scattering), 2, 4, 8 and
-//!   12 octaves at the default factors, against the Monte Carlo reference
-//!   for all orders (`volumes::montecarlo`);
+//!   12 of Wrenninge's octaves at the default factors, against the same;
 //! - `splatting` (scenes whose volumes are all metaballs): Dobashi et al.
 //!   2000's billboards (`volumes::splat`), single scattering against the
-//!   quadrature and the default octaves against Monte Carlo.
+//!   quadrature and the default columns against Monte Carlo.
 //!
 //! Error is the RMS and largest difference of the 8-bit images (the
 //! scene's exposure) at a lattice of pixel centres, % of 255, and the
@@ -39,27 +41,32 @@ pub struct Config {
     pub planes: Option<u32>,
     /// Transmittance-volume nodes a side (`None`: the default).
     pub light_grid: Option<u32>,
-    /// Octaves (1: single scattering).
+    /// Octaves (1: single scattering) where `column_width` is `None`.
     pub octaves: u32,
+    /// Multiple scattering by columns of this width (`column_light`).
+    pub column_width: Option<f32>,
     /// Splatting (`splat`) instead of slices.
     pub splatting: bool,
 }
 
 /// The sweep's configurations; `splattable`: the scene's volumes are all
 /// metaballs, so the `splatting` series (single scattering, and the default
-/// octaves) runs too.
+/// columns) runs too.
 pub fn sweep(quick: bool, splattable: bool) -> Vec<Config> {
-    let base = Config { series: "", planes: None, light_grid: None, octaves: 1, splatting: false };
+    let base = Config { series: "", planes: None, light_grid: None, octaves: 1, column_width: None, splatting: false };
     let planes: &[u32] = if quick { &[32, 128, 512] } else { &[16, 32, 64, 128, 256, 512, 1024] };
     let grids: &[u32] = if quick { &[16, 64, 128] } else { &[16, 32, 64, 128, 256] };
     let octaves: &[u32] = if quick { &[1, 8] } else { &[1, 2, 4, 8, 12] };
+    let widths: &[f32] = if quick { &[super::COLUMN_WIDTH] } else { &[1.0, super::COLUMN_WIDTH, 3.0] };
     let mut v = Vec::new();
     v.extend(planes.iter().map(|&n| Config { series: "planes", planes: Some(n), ..base }));
     v.extend(grids.iter().map(|&n| Config { series: "light-grid", light_grid: Some(n), ..base }));
     v.extend(octaves.iter().map(|&n| Config { series: "octaves", octaves: n, ..base }));
+    v.extend(widths.iter().map(|&w| Config { series: "columns", column_width: Some(w), ..base }));
     if splattable {
-        let octaves = [1, super::OCTAVES];
-        v.extend(octaves.iter().map(|&n| Config { series: "splatting", octaves: n, splatting: true, ..base }));
+        let splats = Config { series: "splatting", splatting: true, ..base };
+        v.push(splats);
+        v.push(Config { column_width: Some(super::COLUMN_WIDTH), ..splats });
     }
     v
 }
@@ -72,11 +79,14 @@ fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
         s.light_grid = c.light_grid.map(|n| [n; 3]);
         let method = if c.splatting { super::Method::Splatting } else { super::Method::Slices };
         f.volume.iter_mut().for_each(|v| v.method = method);
-        if c.octaves == 1 {
-            s.scattering = Scattering::Single;
-            s.octaves = None;
-        } else {
+        s.octaves = None;
+        s.column_width = c.column_width;
+        if c.column_width.is_some() {
             s.scattering = Scattering::Multiple;
+        } else if c.octaves == 1 {
+            s.scattering = Scattering::Single;
+        } else {
+            s.scattering = Scattering::Octaves;
             s.octaves = Some(c.octaves);
         }
     })
@@ -131,14 +141,15 @@ pub fn run(
         anyhow::ensure!(data.volumes.enabled, "{}: no [[volume]] to benchmark", path.display());
         let pixels = crate::bench::pixel_lattice(data, stride);
         let mut references = Vec::new();
-        for octaves in [1, 8] {
-            let d = configure(data, &Config { series: "", planes: None, light_grid: None, octaves, splatting: false })?;
+        for column_width in [None, Some(super::COLUMN_WIDTH)] {
+            let single = column_width.is_none();
+            let c = Config { series: "", planes: None, light_grid: None, octaves: 1, column_width, splatting: false };
+            let d = configure(data, &c)?;
             let t = std::time::Instant::now();
-            let (values, _) =
-                crate::reference::render_converged_at(&d, &pixels, if octaves == 1 { 2e-4 } else { 3e-3 });
+            let (values, _) = crate::reference::render_converged_at(&d, &pixels, if single { 2e-4 } else { 3e-3 });
             eprintln!(
                 "{name}: {} reference at {} pixels, {:.1} s",
-                if octaves == 1 { "single-scattering" } else { "Monte Carlo" },
+                if single { "single-scattering" } else { "Monte Carlo" },
                 pixels.len(),
                 t.elapsed().as_secs_f64()
             );
@@ -171,7 +182,7 @@ pub fn run(
                     };
                 let img = &timed.last.image;
                 let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
-                let all_orders = c.series == "octaves" || c.octaves > 1;
+                let all_orders = c.octaves > 1 || c.column_width.is_some();
                 let reference = &references[if all_orders { 1 } else { 0 }];
                 let diff = crate::metrics::difference(&at, reference, data.exposure);
                 let row = Row {
@@ -188,12 +199,13 @@ pub fn run(
                     energy_ratio: diff.energy_ratio,
                 };
                 eprintln!(
-                    "{name:>16} {:>4} {:<10} planes={:<5} light-grid={:<5} octaves={:<2} {:>8.4} s (grids {:.4} s, volumes {:.4} s)  rms {:.3}%  max {:.2}%  energy {:.3}",
+                    "{name:>16} {:>4} {:<10} planes={:<5} light-grid={:<5} octaves={:<2} columns={:<5} {:>8.4} s (grids {:.4} s, volumes {:.4} s)  rms {:.3}%  max {:.2}%  energy {:.3}",
                     row.backend,
                     c.series,
                     c.planes.map_or("auto".to_string(), |n| n.to_string()),
                     c.light_grid.map_or("auto".to_string(), |n| n.to_string()),
                     c.octaves,
+                    c.column_width.map_or("-".to_string(), |w| w.to_string()),
                     row.median_seconds,
                     row.grids_median_seconds,
                     row.volumes_median_seconds,
@@ -214,14 +226,14 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     let mut out = Vec::new();
     writeln!(
         out,
-        "scene,width,height,backend,series,planes,light_grid,octaves,median_seconds,grids_median_seconds,volumes_median_seconds,rms_8bit_percent,max_8bit_percent,energy_ratio"
+        "scene,width,height,backend,series,planes,light_grid,octaves,column_width,median_seconds,grids_median_seconds,volumes_median_seconds,rms_8bit_percent,max_8bit_percent,energy_ratio"
     )?;
     let auto = |v: Option<u32>| v.map_or("auto".to_string(), |n| n.to_string());
     for r in rows {
         let c = &r.config;
         writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5}",
+            "{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5}",
             r.scene,
             r.width,
             r.height,
@@ -230,6 +242,7 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
             auto(c.planes),
             auto(c.light_grid),
             c.octaves,
+            c.column_width.map_or("none".to_string(), |w| w.to_string()),
             r.median_seconds,
             r.grids_median_seconds,
             r.volumes_median_seconds,

@@ -171,11 +171,16 @@ pub struct Settings {
     /// Transmittance-volume nodes per light: across x, across y, along the
     /// light (default: a density cell apart, at most `MAX_DEFAULT_NODES`).
     pub light_grid: Option<[u32; 3]>,
-    /// `"multiple"` (the default): all orders by Wrenninge's octaves;
-    /// `"single"`: single scattering.
+    /// `"multiple"` (the default): all orders by delta-Eddington columns;
+    /// `"octaves"`: all orders by Wrenninge's octaves; `"single"`: single
+    /// scattering.
     #[serde(default)]
     pub scattering: Scattering,
-    /// With `"multiple"`: the octaves' count and their factors on the
+    /// With `"multiple"`: the medium's lateral extent around a light
+    /// column as a multiple of the column's depth (`COLUMN_WIDTH` by
+    /// default; `column_light`).
+    pub column_width: Option<f32>,
+    /// With `"octaves"`: the octaves' count and their factors on the
     /// scattering coefficient, the light's optical depth and the phase
     /// function's asymmetry (`OCTAVES`, `OCTAVE_*` by default).
     pub octaves: Option<u32>,
@@ -190,6 +195,33 @@ pub enum Scattering {
     Single,
     #[default]
     Multiple,
+    Octaves,
+}
+
+/// The default `column_width`: chosen against the Monte Carlo reference
+/// on thin, medium and dense clouds (`docs/volumes.md`, "Multiple
+/// scattering"); 1 would be a ball's (as wide as deep).
+pub const COLUMN_WIDTH: f32 = 1.75;
+
+/// How a scene's volumes scatter: `(columns, width)` for `column_light`
+/// and `(count, a, b, c)` for the octaves (count 1: none).
+struct Orders {
+    columns: bool,
+    width: f32,
+    octaves: (u32, f32, f32, f32),
+}
+
+fn orders(settings: &Settings) -> Result<Orders> {
+    let octaves = octaves(settings)?;
+    let columns = settings.scattering == Scattering::Multiple;
+    if !columns && settings.column_width.is_some() {
+        bail!(invalid("volumes.column_width", "none unless scattering = \"multiple\"", "a value"));
+    }
+    let width = settings.column_width.unwrap_or(COLUMN_WIDTH);
+    if !(width > 0.0 && width <= 1000.0) {
+        bail!(invalid("volumes.column_width", "a positive multiple of a column's depth, at most 1000", width));
+    }
+    Ok(Orders { columns, width, octaves })
 }
 
 /// Default octaves of multiple scattering and their factors (`a`, `b`, `c`
@@ -208,9 +240,9 @@ fn octaves(settings: &Settings) -> Result<(u32, f32, f32, f32)> {
         ("octave_extinction", settings.octave_extinction.is_some()),
         ("octave_phase", settings.octave_phase.is_some()),
     ];
-    if settings.scattering == Scattering::Single {
+    if settings.scattering != Scattering::Octaves {
         if let Some((name, _)) = given.iter().find(|(_, g)| *g) {
-            bail!(invalid(&format!("volumes.{name}"), "no octaves with scattering = \"single\"", "a value"));
+            bail!(invalid(&format!("volumes.{name}"), "none unless scattering = \"octaves\"", "a value"));
         }
         return Ok((1, 1.0, 1.0, 1.0));
     }
@@ -729,7 +761,8 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
             nodes
         ));
     }
-    let (octave_count, a, b, c) = octaves(settings)?;
+    let orders = orders(settings)?;
+    let (octave_count, a, b, c) = orders.octaves;
     let params = VolumesParams {
         volume_count: volumes.len() as u32,
         plane_count: planes,
@@ -742,6 +775,8 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
         octave_scattering: a,
         octave_extinction: b,
         octave_phase: c,
+        columns: orders.columns as u32,
+        column_width: orders.width,
         automaton_volume,
         method: if list[0].method == Method::Splatting { METHOD_SPLATTING } else { METHOD_SLICES },
         ball_count: balls.len() as u32,
@@ -768,10 +803,12 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
     })
 }
 
-/// The scattering a volume renderer's plan names: single, or the octaves
-/// and their factors.
+/// The scattering a volume renderer's plan names: single, the columns
+/// and their width, or the octaves and their factors.
 fn scattering_label(p: &VolumesParams) -> String {
-    if p.octaves > 1 {
+    if p.columns != 0 {
+        format!("multiple scattering (delta-Eddington columns, width {})", p.column_width)
+    } else if p.octaves > 1 {
         format!(
             "multiple scattering ({} octaves, a {} b {} c {})",
             p.octaves, p.octave_scattering, p.octave_extinction, p.octave_phase

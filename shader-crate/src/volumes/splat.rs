@@ -38,7 +38,7 @@
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use super::{light_at, octave_light, FogShare, GpuMetaball, GpuVolume, VolumesParams};
+use super::{light_at, scattered_light, FogShare, GpuMetaball, GpuVolume, VolumesParams};
 use crate::camera::{camera_ray, ray_direction};
 use crate::geometry::box_span;
 use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
@@ -176,7 +176,7 @@ fn boxed_chord(ball: &GpuMetaball, v: &GpuVolume, o: Vec3, u: Vec3, t0: f32, t1:
 /// `lists` if `listed`; in the balls' order either way, so the sums are
 /// the same bits as over every ball): over `t` in `[0, t_max]` (from `p` to
 /// the light) and over `(-inf, t_max]` (the light's whole ray through the
-/// volumes, for the octaves' `thick`).
+/// volumes, for multiple scattering, `scattered_light`).
 #[allow(clippy::too_many_arguments)]
 fn optical_depths(
     volumes: &[GpuVolume],
@@ -207,7 +207,7 @@ fn optical_depths(
 /// Step 1 for metaball `j`: its billboard's colour (the light reaching its
 /// centre from every light, attenuated by all metaballs' chords toward
 /// that light, scattered toward the eye by its volume's phase function and
-/// albedo, with the octaves of `octave_light`), its distance from the eye,
+/// albedo, with multiple scattering by `scattered_light`), its distance from the eye,
 /// and its rank: the number of metaballs whose centres are nearer the eye
 /// (equal distances by index), so that ranks are a permutation of
 /// `0..ball_count` on every backend.
@@ -249,8 +249,7 @@ pub fn splat_ball(
             let t_max = if source.kind == LIGHT_DIRECTIONAL { f32::MAX } else { (source.position.xyz() - c).length() };
             let on_ray = balls_on_ray(params, &bins[l], lists, source, c);
             let (tau, through) = optical_depths(volumes, balls, lists, on_ray, c, -travel, t_max);
-            let thick = Vec4::ONE - Vec4::new((-through.x).exp(), (-through.y).exp(), (-through.z).exp(), 0.0);
-            light += octave_light(params, vol, e, tau, thick, -travel.dot(view));
+            light += scattered_light(params, vol, e, tau, through, -travel.dot(view));
         }
         l += 1;
     }

@@ -399,10 +399,10 @@ fn a_moved_object_keeps_its_table() {
     let first = common::scene_from_str(&at("[0.0, 0.5, 0.0]"));
     render_checked(&first, "ball");
     let moved = common::scene_from_str(&at("[0.37, 0.5, -0.21]"));
-    assert!(moved.caustics.cached_table.is_some(), "the moved ball did not find its table in the cache");
+    assert!(moved.caustics.has_cached_table(), "the moved ball did not find its table in the cache");
     let cached = render_checked(&moved, "moved ball, cached table");
     let mut fresh = moved.clone();
-    fresh.caustics.cached_table = None;
+    fresh.caustics.forget_cached_table();
     let traced = render_checked(&fresh, "moved ball, traced table");
     let d = difference(&to_f64(layer(&cached, "caustics")), &to_f64(layer(&traced, "caustics")), 1.0);
     println!(
@@ -433,10 +433,10 @@ fn a_turned_object_keeps_its_table() {
     let first = torus("", "[0.0, 0.45, 0.0]");
     render_checked(&first, "torus");
     let turned = torus("rotation = { axis = [1.0, 0.2, 0.0], deg = 35.0 }", "[0.1, 0.5, -0.05]");
-    assert!(turned.caustics.cached_table.is_some(), "the turned torus did not find its table in the cache");
+    assert!(turned.caustics.has_cached_table(), "the turned torus did not find its table in the cache");
     let cached = render_checked(&turned, "turned torus, cached table");
     let mut fresh = turned.clone();
-    fresh.caustics.cached_table = None;
+    fresh.caustics.forget_cached_table();
     let traced = render_checked(&fresh, "turned torus, traced table");
     let moved = render_checked(&torus("", "[0.1, 0.5, -0.05]"), "moved torus");
     let caustic = |r: &slicelight::render::Rendered| to_f64(layer(r, "caustics"));

@@ -87,8 +87,8 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
     fog.requested_passes.push("scatter_check".into());
     let mut mapped = window_scene();
     mapped.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
-    let mut direct = sky("sky_sunset", 180, 120);
-    direct.sky.params.use_sky_view = 0;
+    let direct =
+        sky("sky_sunset", 180, 120).reconfigure(|f| f.sky.as_mut().expect("a [sky]").sky_view = false).unwrap();
     vec![
         ("fog_spot", fog),
         ("fog_spot, tables", tables),
@@ -159,7 +159,7 @@ fn turned_torus() -> SceneData {
             "material = { kind = \"glass\", ior = 1.5 }\nrotation = { axis = [1.0, 0.2, 0.0], deg = 35.0 }",
         );
     let mut data = common::scene_from_str(&text);
-    data.caustics.cached_table = None;
+    data.caustics.forget_cached_table();
     data
 }
 
@@ -168,7 +168,7 @@ fn turned_torus() -> SceneData {
 /// kernel itself is compared).
 fn traced(name: &str, width: u32, height: u32) -> SceneData {
     let mut data = sky(name, width, height);
-    data.caustics.cached_table = None;
+    data.caustics.forget_cached_table();
     data
 }
 

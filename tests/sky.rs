@@ -115,10 +115,11 @@ fn sky_matches_reference_for_every_sun_angle() {
         let pixels = sky_pixels(&data, 2);
         let (refvals, _) = reference::render_converged_at(&data, &pixels, 2e-4);
         for (mode, per_pixel) in [("sky-view table", false), ("per pixel", true)] {
-            let mut data = data.clone();
-            if per_pixel {
-                data.sky.params.use_sky_view = 0;
-            }
+            let data = if per_pixel {
+                data.reconfigure(|f| f.sky.as_mut().expect("a [sky]").sky_view = false).unwrap()
+            } else {
+                data.clone()
+            };
             let (image, _) = render::render(&data, &Backend::Cpu, false).unwrap();
             let values = rgb(&image, &pixels);
             assert!(values.iter().all(|v| v.is_finite() && v.min_element() >= 0.0));

@@ -505,6 +505,31 @@ mod tests {
         assert!(worst < 5e-7, "worst relative error {worst:e}");
     }
 
+    /// `atan2_accurate` against f64 `atan2` around the whole circle (every
+    /// quadrant, the axes, and radii from 1e-6 to 1e6): within 4e-7 rad
+    /// absolute (a few f32 ulps of pi), the signs of zero as f32's `atan2`
+    /// gives them except `(-0, x < 0)` (`pi`, never `-pi`: the range is
+    /// `(-pi, pi]`), and 0 at the origin.
+    #[test]
+    fn atan2_accurate_matches_atan2_around_the_circle() {
+        let mut worst = 0.0f64;
+        for k in 0..36_000 {
+            let angle = -std::f64::consts::PI + (k as f64 + 0.5) * std::f64::consts::TAU / 36_000.0;
+            for radius in [1e-6f64, 1.0, 1e6] {
+                let (y, x) = ((radius * angle.sin()) as f32, (radius * angle.cos()) as f32);
+                let exact = (y as f64).atan2(x as f64);
+                worst = worst.max((atan2_accurate(y, x) as f64 - exact).abs());
+            }
+        }
+        assert!(worst < 4e-7, "worst absolute error {worst:e} rad");
+        assert_eq!(atan2_accurate(0.0, 0.0), 0.0);
+        assert_eq!(atan2_accurate(0.0, 1.0), 0.0);
+        assert_eq!(atan2_accurate(1.0, 0.0), core::f32::consts::FRAC_PI_2);
+        assert_eq!(atan2_accurate(-1.0, 0.0), -core::f32::consts::FRAC_PI_2);
+        assert_eq!(atan2_accurate(0.0, -1.0), core::f32::consts::PI);
+        assert_eq!(atan2_accurate(-0.0, -1.0), core::f32::consts::PI);
+    }
+
     fn spot(cutoff_deg: f32, beam_deg: f32) -> GpuLight {
         GpuLight {
             position: Vec4::ZERO,

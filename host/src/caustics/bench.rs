@@ -262,7 +262,7 @@ pub fn run(
                 let (mut tables, mut frames) = (Vec::new(), Vec::new());
                 for _ in 0..repeats.max(1) {
                     let mut fresh = data.clone();
-                    fresh.caustics.cached_table = None;
+                    fresh.caustics.forget_cached_table();
                     let (_, st) = render::render(&fresh, backend, false)?;
                     let table = st.seconds_of(&[&super::CausticsTable]);
                     tables.push(table);

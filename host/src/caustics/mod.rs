@@ -92,8 +92,9 @@ impl Default for Settings {
 #[derive(Debug, Clone, Default)]
 pub struct Setup {
     pub enabled: bool,
-    /// The whole light transport table, when every glass object's is in the cache.
-    pub cached_table: Option<Buffer>,
+    /// The whole light transport table, when every glass object's is in
+    /// the cache (`has_cached_table`, `forget_cached_table`).
+    cached_table: Option<Buffer>,
     /// Where each glass object's table is kept, and its entries in the table.
     pub cache_files: Vec<CacheFile>,
     /// Vertex-channels the table holds (`GlassVertex::table_block` of the end).
@@ -554,6 +555,18 @@ pub mod cache {
 }
 
 impl Setup {
+    /// Whether every glass object's table came from the disk cache.
+    pub fn has_cached_table(&self) -> bool {
+        self.cached_table.is_some()
+    }
+
+    /// Forgets the table the disk cache gave, so the table kernel traces it
+    /// again (benches and the equivalence tests time and compare the
+    /// kernel itself).
+    pub fn forget_cached_table(&mut self) {
+        self.cached_table = None;
+    }
+
     /// Entries of the table: `directions` per vertex and channel it traces.
     pub fn table_len(&self) -> u64 {
         self.table_blocks as u64 * self.params.directions as u64

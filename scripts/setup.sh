@@ -2,9 +2,10 @@
 # Installs what slicelight needs and a fresh machine lacks: the pinned Rust-GPU
 # nightly (from rust-toolchain.toml) and, on Debian/Ubuntu, a Vulkan loader
 # with lavapipe (Mesa's Vulkan device on the CPU) so the GPU backend and the
-# GPU-vs-CPU tests run without a GPU, the DejaVu fonts for the benchmark's
-# plots, and the X11 libraries and tools of the viewer and its tests (Xvfb,
-# xdotool, xwd). Safe to run again: it skips what is there.
+# GPU-vs-CPU tests run without a GPU, a C compiler where there is none, the
+# DejaVu fonts for the benchmark's plots, and the X11 libraries and tools of
+# the viewer and its tests (Xvfb, xdotool, xwd). Safe to run again: it skips
+# what is there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -24,6 +25,9 @@ have_vulkan() {
 }
 missing=()
 have_vulkan || missing+=(mesa-vulkan-drivers libvulkan1)
+# A C compiler: Rust links with it, and the OpenVDB reader's Blosc
+# decompressor (blosc-src) is C built at compile time.
+command -v cc >/dev/null 2>&1 || missing+=(gcc libc6-dev)
 # The font of `slicelight bench`'s plot labels.
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || missing+=(fonts-dejavu-core)
 # `slicelight view`'s window (X11, loaded at run time) and its tests: an X

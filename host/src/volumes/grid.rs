@@ -1,5 +1,6 @@
 //! Density grids from files: Mitsuba's `.vol` format (version 3, float32,
-//! one channel), read whole and checked, and written (for tests and tools).
+//! one channel), read whole and checked, and written (for tests and tools);
+//! and OpenVDB float grids (`read_vdb`, through the `vdb-rs` crate).
 //!
 //! The layout (Mitsuba 3's `GridVolume` reads the same bytes): the bytes
 //! `V O L`, the version byte 3, then little-endian `i32` encoding (1:
@@ -60,6 +61,105 @@ pub fn parse_vol(field: &str, path: &Path, bytes: &[u8]) -> Result<Grid> {
         return Err(fail(format!("the density at cell ({x}, {y}, {z}) is {v}, expected a finite value >= 0")));
     }
     Ok(Grid { cells: [nx as u32, ny as u32, nz as u32], values })
+}
+
+/// Whether `file` names an OpenVDB file (by its extension, `.vdb`).
+pub fn is_vdb(file: &str) -> bool {
+    Path::new(file).extension().is_some_and(|e| e.eq_ignore_ascii_case("vdb"))
+}
+
+/// Reads an OpenVDB file's float grid `name` (default: the grid named
+/// `density`, else the file's only grid) as a dense grid over the bounding
+/// box of its active voxels and tiles: cell `i` holds voxel `min + i`, so
+/// the `[[volume]]`'s box spans the voxels' unit cubes `[min - 0.5, max +
+/// 0.5]` as it spans a `.vol` file's cells (the file's own transform is
+/// not used: the box places the grid). Inactive voxels are 0 (a fog
+/// volume's background); grids saved as half floats are refused. A grid of
+/// more than `max_cells` voxels is box-filtered by the smallest whole
+/// factor `k` per axis that fits: each cell the mean of a `k^3` block.
+/// Every active value must be finite and non-negative; `field` names the
+/// scene field in errors.
+pub fn read_vdb(field: &str, path: &Path, name: Option<&str>, max_cells: u64) -> Result<Grid> {
+    crate::output::regular_file(&format!("{field}.file"), path, crate::output::MAX_DATA_BYTES)?;
+    let fail = |what: String| anyhow::anyhow!("{field}.file: {}: {what}", path.display());
+    let file = std::fs::File::open(path).map_err(|e| fail(format!("cannot open it: {e}")))?;
+    // vdb-rs may panic on a malformed file; that is the file's error here.
+    let read = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> Result<vdb_rs::Grid<f32>> {
+        let mut reader = vdb_rs::VdbReader::new(std::io::BufReader::new(file))
+            .map_err(|e| fail(format!("not an OpenVDB file vdb-rs can read ({e})")))?;
+        let mut names = reader.available_grids();
+        names.sort();
+        let chosen = match name {
+            Some(n) if names.iter().any(|m| m == n) => n.to_string(),
+            Some(n) => {
+                return Err(anyhow::anyhow!(
+                    "{field}.name: {}: no grid named {n:?}; the file holds {names:?}",
+                    path.display()
+                ))
+            }
+            None if names.iter().any(|m| m == "density") => "density".to_string(),
+            None if names.len() == 1 => names[0].clone(),
+            None => return Err(fail(format!("holds the grids {names:?}: name one with `name`"))),
+        };
+        let descriptor = &reader.grid_descriptors[&chosen];
+        let kind = &descriptor.grid_type;
+        if !kind.starts_with("Tree_float_") {
+            return Err(fail(format!("grid {chosen:?} is a {kind}, expected a float grid (Tree_float_*)")));
+        }
+        if descriptor.meta_data.is_half_float() {
+            // vdb-rs 0.6 reads a half-float grid's node headers as f32 and
+            // then asks for exabytes (an abort, not an error): refused here.
+            return Err(fail(format!(
+                "grid {chosen:?} is saved as half floats, which the vdb-rs reader cannot read; \
+                 save it as 32-bit floats (OpenVDB: saveFloatAsHalf = false)"
+            )));
+        }
+        reader.read_grid::<f32>(&chosen).map_err(|e| fail(format!("grid {chosen:?}: {e}")))
+    }));
+    let grid = match read {
+        Ok(r) => r?,
+        Err(_) => return Err(fail("vdb-rs could not parse it (it panicked)".into())),
+    };
+    // The active voxels' and tiles' bounds, index space, inclusive.
+    let (mut lo, mut hi) = (glam::IVec3::splat(i32::MAX), glam::IVec3::splat(i32::MIN));
+    for (at, value, level) in grid.iter() {
+        if !(value.is_finite() && value >= 0.0) {
+            let at = at.as_ivec3();
+            return Err(fail(format!(
+                "the density at voxel ({}, {}, {}) is {value}, expected a finite value >= 0",
+                at.x, at.y, at.z
+            )));
+        }
+        let at = glam::IVec3::new(at.x as i32, at.y as i32, at.z as i32);
+        lo = lo.min(at);
+        hi = hi.max(at + glam::IVec3::splat(level.scale() as i32 - 1));
+    }
+    if lo.x > hi.x {
+        // No active voxel: an empty cloud.
+        return Ok(Grid { cells: [1, 1, 1], values: vec![0.0] });
+    }
+    let extent = (hi - lo + glam::IVec3::ONE).as_i64vec3();
+    let cells_at = |k: i64| (extent + glam::I64Vec3::splat(k - 1)) / k;
+    let mut k = 1i64;
+    while cells_at(k).element_product() as u64 > max_cells || cells_at(k).max_element() > 4096 {
+        k += 1;
+    }
+    let n = cells_at(k);
+    let mut values = vec![0.0f32; n.element_product() as usize];
+    let weight = 1.0 / (k * k * k) as f32;
+    for (at, value, level) in grid.iter() {
+        let at = glam::I64Vec3::new(at.x as i64, at.y as i64, at.z as i64) - lo.as_i64vec3();
+        let size = level.scale() as i64;
+        for z in at.z..at.z + size {
+            for y in at.y..at.y + size {
+                for x in at.x..at.x + size {
+                    let c = glam::I64Vec3::new(x, y, z) / k;
+                    values[((c.z * n.y + c.y) * n.x + c.x) as usize] += value * weight;
+                }
+            }
+        }
+    }
+    Ok(Grid { cells: [n.x as u32, n.y as u32, n.z as u32], values })
 }
 
 /// The bytes of a `.vol` file holding `grid` (bounding box `[0, 1]^3`).

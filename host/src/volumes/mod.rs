@@ -127,11 +127,13 @@ pub struct Volume {
 }
 
 /// `grid = { file = "..." }`: a Mitsuba `.vol` file (version 3, float32,
-/// one channel), relative to the scene file.
+/// one channel) or an OpenVDB file (`.vdb`, a float grid: `name`, by
+/// default `density` or the file's only grid), relative to the scene file.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridFile {
     pub file: String,
+    pub name: Option<String>,
 }
 
 #[derive(Debug, Default, Deserialize, Clone, Copy, PartialEq)]
@@ -431,7 +433,14 @@ fn volume(field: &str, v: &Volume, base: &Path) -> Result<(GpuVolume, Vec<GpuMet
                     "a value"
                 ));
             }
-            Some(grid::read_vol(&format!("{field}.grid.file"), &base.join(&g.file))?)
+            let path = base.join(&g.file);
+            if grid::is_vdb(&g.file) {
+                Some(grid::read_vdb(&format!("{field}.grid"), &path, g.name.as_deref(), MAX_DEFAULT_CELLS)?)
+            } else if g.name.is_some() {
+                bail!(invalid(&format!("{field}.grid.name"), "none for a .vol file (it holds one grid)", "a name"));
+            } else {
+                Some(grid::read_vol(&format!("{field}.grid.file"), &path)?)
+            }
         }
         None => None,
     };

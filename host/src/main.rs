@@ -637,10 +637,6 @@ fn view_command(args: ViewArgs) -> Result<()> {
     let base = scene::load(&scene)?;
     let size = size.unwrap_or([base.width(), base.height()]);
     let views = slicelight::view::headless(&scene, base, backend, size, frames)?;
-    let mut text = String::from("view,seconds,render_seconds\n");
-    for (k, (s, st)) in views.iter().enumerate() {
-        text += &format!("{k},{s:.6},{:.6}\n", st.total_seconds);
-    }
     let median = slicelight::bench::median;
     let last = &views[views.len() - 1].1;
     say(&format!(
@@ -670,7 +666,19 @@ fn view_command(args: ViewArgs) -> Result<()> {
         say(&format!("  {name:<24} {time}{note}"));
     }
     if let Some(path) = csv {
-        output::write_atomically(&path, text.as_bytes())?;
+        /// One CSV line per view: its whole time and the render's.
+        #[derive(serde::Serialize)]
+        struct Record {
+            view: usize,
+            seconds: f64,
+            render_seconds: f64,
+        }
+        let rows = views.iter().enumerate().map(|(view, (s, st))| Record {
+            view,
+            seconds: *s,
+            render_seconds: st.total_seconds,
+        });
+        slicelight::bench::write_csv(&path, rows)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

@@ -22,7 +22,6 @@
 
 use anyhow::Result;
 use glam::DVec3;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::bench::{median, BenchScene};
@@ -318,38 +317,53 @@ pub fn run(
     Ok(rows)
 }
 
+/// One CSV line of the sweep (`write_csv`).
+#[derive(serde::Serialize)]
+struct Record<'a> {
+    scene: &'a str,
+    backend: &'a str,
+    series: &'a str,
+    rings: u32,
+    azimuths: u32,
+    directions: u32,
+    vertices: u32,
+    compression: bool,
+    planes: u32,
+    map_resolution: u32,
+    shaft_planes: u32,
+    shaft_resolution: u32,
+    shaft_steps: u32,
+    measured: &'a str,
+    table_median_seconds: f64,
+    frame_median_seconds: f64,
+    rms_8bit_percent: f64,
+    max_8bit_percent: f64,
+}
+
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(
-        out,
-        "scene,backend,series,rings,azimuths,directions,vertices,compression,planes,map_resolution,shaft_planes,shaft_resolution,shaft_steps,measured,table_median_seconds,frame_median_seconds,rms_8bit_percent,max_8bit_percent"
-    )?;
-    for r in rows {
-        let c = &r.config;
-        writeln!(
-            out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.5},{:.5}",
-            r.scene,
-            r.backend,
-            c.series,
-            c.directions[0],
-            c.directions[1],
-            1 + c.directions[0] * c.directions[1],
-            r.vertices,
-            c.compression,
-            c.planes,
-            c.map_resolution,
-            c.shaft_planes,
-            c.shaft_resolution,
-            c.shaft_steps,
-            if r.shafts { "caustic shafts" } else { "image" },
-            r.table_median_seconds,
-            r.frame_median_seconds,
-            r.rms_8bit_percent,
-            r.max_8bit_percent
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(
+        path,
+        rows.iter().map(|r| Record {
+            scene: &r.scene,
+            backend: r.backend,
+            series: r.config.series,
+            rings: r.config.directions[0],
+            azimuths: r.config.directions[1],
+            directions: 1 + r.config.directions[0] * r.config.directions[1],
+            vertices: r.vertices,
+            compression: r.config.compression,
+            planes: r.config.planes,
+            map_resolution: r.config.map_resolution,
+            shaft_planes: r.config.shaft_planes,
+            shaft_resolution: r.config.shaft_resolution,
+            shaft_steps: r.config.shaft_steps,
+            measured: if r.shafts { "caustic shafts" } else { "image" },
+            table_median_seconds: r.table_median_seconds,
+            frame_median_seconds: r.frame_median_seconds,
+            rms_8bit_percent: r.rms_8bit_percent,
+            max_8bit_percent: r.max_8bit_percent,
+        }),
+    )
 }
 
 /// `precompute`: the table's time against vertices x directions; else the

@@ -22,13 +22,15 @@
 
 use anyhow::{Context, Result};
 use glam::DVec3;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::bench::{time_renders, BenchScene, Options};
 use crate::passes::Pass;
 use crate::scene::SceneData;
 
+/// One row of the sweep, and its CSV line (`write_csv`: the fields in
+/// order, `None` as an empty field).
+#[derive(serde::Serialize)]
 pub struct Row {
     pub scene: String,
     pub backend: &'static str,
@@ -175,24 +177,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
 }
 
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(out, "scene,backend,series,size,median_seconds,seconds_per_step,rms_8bit_percent,max_8bit_percent")?;
-    let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6}"));
-    for r in rows {
-        writeln!(
-            out,
-            "{},{},{},{},{:.6},{},{},{}",
-            r.scene,
-            r.backend,
-            r.series,
-            r.size,
-            r.median_seconds,
-            opt(r.seconds_per_step),
-            opt(r.rms_8bit_percent),
-            opt(r.max_8bit_percent)
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(path, rows)
 }
 
 /// The mesh series' error against the median render time, one line per

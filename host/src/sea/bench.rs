@@ -14,7 +14,6 @@ use anyhow::{Context, Result};
 use glam::{DVec3, Vec3, Vec4};
 use plotters::prelude::*;
 use rayon::prelude::*;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::bench::{time_renders, BenchScene, Options};
@@ -314,41 +313,64 @@ pub fn run(
     Ok(rows)
 }
 
+/// One CSV line of the sweep (`write_csv`).
+#[derive(serde::Serialize)]
+struct Record<'a> {
+    scene: &'a str,
+    backend: &'a str,
+    series: &'a str,
+    planes: u32,
+    directions: u32,
+    map: u32,
+    depth_table: u32,
+    median_seconds: f64,
+    maps_median_seconds: f64,
+    per_pixel_median_seconds: f64,
+    rms_relative_percent: f64,
+    max_relative_percent: f64,
+}
+
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(
-        out,
-        "scene,backend,series,planes,directions,map,depth_table,median_seconds,maps_median_seconds,per_pixel_median_seconds,rms_relative_percent,max_relative_percent"
-    )?;
-    for r in rows {
-        let c = &r.config;
-        writeln!(
-            out,
-            "{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5}",
-            r.scene,
-            r.backend,
-            c.series,
-            c.planes,
-            c.directions(),
-            c.map,
-            c.table,
-            r.median_seconds,
-            r.maps_median_seconds,
-            r.pixels_median_seconds,
-            100.0 * r.rms_relative,
-            100.0 * r.max_relative
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(
+        path,
+        rows.iter().map(|r| Record {
+            scene: &r.scene,
+            backend: r.backend,
+            series: r.config.series,
+            planes: r.config.planes,
+            directions: r.config.directions(),
+            map: r.config.map,
+            depth_table: r.config.table,
+            median_seconds: r.median_seconds,
+            maps_median_seconds: r.maps_median_seconds,
+            per_pixel_median_seconds: r.pixels_median_seconds,
+            rms_relative_percent: 100.0 * r.rms_relative,
+            max_relative_percent: 100.0 * r.max_relative,
+        }),
+    )
+}
+
+/// One CSV line of a convergence curve (`write_convergence`).
+#[derive(serde::Serialize)]
+struct ConvergenceRecord<'a> {
+    scene: &'a str,
+    sweep: &'a str,
+    count: u32,
+    max_step_relative: f64,
+    max_error_relative: f64,
 }
 
 fn write_convergence(path: &Path, curves: &[Convergence]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(out, "scene,sweep,count,max_step_relative,max_error_relative")?;
-    for c in curves {
-        writeln!(out, "{},{},{},{:.6e},{:.6e}", c.scene, c.what, c.count, c.step, c.error)?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(
+        path,
+        curves.iter().map(|c| ConvergenceRecord {
+            scene: &c.scene,
+            sweep: c.what,
+            count: c.count,
+            max_step_relative: c.step,
+            max_error_relative: c.error,
+        }),
+    )
 }
 
 /// Largest error (% of the reference) against the median map-pass time on

@@ -17,7 +17,6 @@
 use anyhow::{Context, Result};
 use glam::DVec3;
 use rayon::prelude::*;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::bench::{time_renders, BenchScene};
@@ -184,30 +183,41 @@ pub fn run(
     Ok(outputs)
 }
 
+/// One CSV line of the sweep (`write_csv`).
+#[derive(serde::Serialize)]
+struct Record<'a> {
+    scene: &'a str,
+    backend: &'a str,
+    series: &'a str,
+    planes: u32,
+    directions: u32,
+    shaft_planes: u32,
+    shaft_steps: u32,
+    median_seconds: f64,
+    order2_median_seconds: f64,
+    shafts_median_seconds: f64,
+    rms_8bit_percent: f64,
+    max_8bit_percent: f64,
+    rms_relative: f64,
+}
+
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(
-        out,
-        "scene,backend,series,planes,directions,shaft_planes,shaft_steps,median_seconds,order2_median_seconds,shafts_median_seconds,rms_8bit_percent,max_8bit_percent,rms_relative"
-    )?;
-    for r in rows {
-        writeln!(
-            out,
-            "{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.4},{:.4},{:.3e}",
-            r.scene,
-            r.backend,
-            r.config.series,
-            r.config.planes,
-            3 * r.config.polar * r.config.polar,
-            r.config.shaft_planes,
-            r.config.shaft_steps,
-            r.seconds,
-            r.order2_seconds,
-            r.shafts_seconds,
-            r.rms_8bit,
-            r.max_8bit,
-            r.rms_relative
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(
+        path,
+        rows.iter().map(|r| Record {
+            scene: &r.scene,
+            backend: r.backend,
+            series: r.config.series,
+            planes: r.config.planes,
+            directions: 3 * r.config.polar * r.config.polar,
+            shaft_planes: r.config.shaft_planes,
+            shaft_steps: r.config.shaft_steps,
+            median_seconds: r.seconds,
+            order2_median_seconds: r.order2_seconds,
+            shafts_median_seconds: r.shafts_seconds,
+            rms_8bit_percent: r.rms_8bit,
+            max_8bit_percent: r.max_8bit,
+            rms_relative: r.rms_relative,
+        }),
+    )
 }

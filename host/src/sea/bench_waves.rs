@@ -14,7 +14,6 @@
 
 use anyhow::{Context, Result};
 use glam::Vec4;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::bench::{time_renders, BenchScene};
@@ -25,7 +24,8 @@ use crate::sea::Waves;
 /// Samples per pixel of the point-sampled reference (quick: 64).
 pub const REFERENCE_SPP: u32 = 1024;
 
-/// One render of the sweep.
+/// One render of the sweep, and its CSV line (`write_csv`).
+#[derive(serde::Serialize)]
 pub struct Row {
     pub scene: String,
     pub backend: &'static str,
@@ -33,7 +33,9 @@ pub struct Row {
     pub spp: u32,
     pub median_seconds: f64,
     /// 8-bit RMS, % of the range, below the horizon and in the band nearest it.
+    #[serde(rename = "rms_8bit_percent_below_horizon")]
     pub rms_8bit_percent: f64,
+    #[serde(rename = "rms_8bit_percent_nearest")]
     pub band_rms_8bit_percent: f64,
 }
 
@@ -139,16 +141,7 @@ pub fn run(
 }
 
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(out, "scene,backend,filter,spp,median_seconds,rms_8bit_percent_below_horizon,rms_8bit_percent_nearest")?;
-    for r in rows {
-        writeln!(
-            out,
-            "{},{},{},{},{:.6},{:.4},{:.4}",
-            r.scene, r.backend, r.filter, r.spp, r.median_seconds, r.rms_8bit_percent, r.band_rms_8bit_percent
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(path, rows)
 }
 
 /// Error nearest the horizon against the median frame time, one line per

@@ -11,7 +11,6 @@ use anyhow::Result;
 use glam::DVec3;
 use plotters::prelude::*;
 use serde::Serialize;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::bench::{
@@ -198,40 +197,57 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
     Ok(rows)
 }
 
+/// One CSV line of the sweep (`write_csv`).
+#[derive(serde::Serialize)]
+struct Record<'a> {
+    scene: &'a str,
+    width: u32,
+    height: u32,
+    backend: &'a str,
+    series: &'a str,
+    planes: u32,
+    subplanes: u32,
+    mode: String,
+    table_size: u32,
+    analytic_inverse_square: bool,
+    jitter: bool,
+    quantize_8bit: bool,
+    median_seconds: f64,
+    shafts_median_seconds: f64,
+    rms_8bit_percent: f64,
+    max_8bit_percent: f64,
+    rms_relative: f64,
+    max_relative: f64,
+    shaft_samples: u64,
+    shaft_samples_naive: u64,
+}
+
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(
-        out,
-        "scene,width,height,backend,series,planes,subplanes,mode,table_size,analytic_inverse_square,jitter,quantize_8bit,median_seconds,shafts_median_seconds,rms_8bit_percent,max_8bit_percent,rms_relative,max_relative,shaft_samples,shaft_samples_naive"
-    )?;
-    for r in rows {
-        let c = &r.config;
-        writeln!(
-            out,
-            "{},{},{},{},{},{},{},{:?},{},{},{},{},{:.6},{:.6},{:.5},{:.5},{:.3e},{:.3e},{},{}",
-            r.scene,
-            r.width,
-            r.height,
-            r.backend,
-            c.series,
-            c.planes,
-            c.subplanes,
-            c.mode,
-            c.table_size,
-            c.analytic_inverse_square,
-            c.jitter,
-            c.quantize_8bit,
-            r.median_seconds,
-            r.shafts_median_seconds,
-            r.rms_8bit_percent,
-            r.max_8bit_percent,
-            r.rms_relative,
-            r.max_relative,
-            r.shaft_samples,
-            r.shaft_samples_naive
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(
+        path,
+        rows.iter().map(|r| Record {
+            scene: &r.scene,
+            width: r.width,
+            height: r.height,
+            backend: r.backend,
+            series: r.config.series,
+            planes: r.config.planes,
+            subplanes: r.config.subplanes,
+            mode: format!("{:?}", r.config.mode),
+            table_size: r.config.table_size,
+            analytic_inverse_square: r.config.analytic_inverse_square,
+            jitter: r.config.jitter,
+            quantize_8bit: r.config.quantize_8bit,
+            median_seconds: r.median_seconds,
+            shafts_median_seconds: r.shafts_median_seconds,
+            rms_8bit_percent: r.rms_8bit_percent,
+            max_8bit_percent: r.max_8bit_percent,
+            rms_relative: r.rms_relative,
+            max_relative: r.max_relative,
+            shaft_samples: r.shaft_samples,
+            shaft_samples_naive: r.shaft_samples_naive,
+        }),
+    )
 }
 
 fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[Series]) -> Result<()> {

@@ -11,7 +11,6 @@
 
 use anyhow::{Context, Result};
 use glam::{DVec3, Vec4Swizzles};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::bench::{time_renders, BenchScene, Options};
@@ -186,36 +185,49 @@ pub fn run(
     Ok(rows)
 }
 
+/// One CSV line of the sweep (`write_csv`).
+#[derive(serde::Serialize)]
+struct Record<'a> {
+    scene: &'a str,
+    width: u32,
+    height: u32,
+    backend: &'a str,
+    series: &'a str,
+    sky_view: bool,
+    view_samples: u32,
+    sky_view_width: u32,
+    sky_view_height: u32,
+    transmittance_width: u32,
+    transmittance_height: u32,
+    median_seconds: f64,
+    tables_median_seconds: f64,
+    sky_median_seconds: f64,
+    rms_relative_percent: f64,
+    max_relative_percent: f64,
+}
+
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(
-        out,
-        "scene,width,height,backend,series,sky_view,view_samples,sky_view_width,sky_view_height,transmittance_width,transmittance_height,median_seconds,tables_median_seconds,sky_median_seconds,rms_relative_percent,max_relative_percent"
-    )?;
-    for r in rows {
-        let c = &r.config;
-        writeln!(
-            out,
-            "{},{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5}",
-            r.scene,
-            r.width,
-            r.height,
-            r.backend,
-            c.series,
-            c.sky_view,
-            c.view_samples,
-            c.sky_view_table[0],
-            c.sky_view_table[1],
-            c.transmittance_table[0],
-            c.transmittance_table[1],
-            r.median_seconds,
-            r.tables_median_seconds,
-            r.sky_median_seconds,
-            100.0 * r.rms_relative,
-            100.0 * r.max_relative
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(
+        path,
+        rows.iter().map(|r| Record {
+            scene: &r.scene,
+            width: r.width,
+            height: r.height,
+            backend: r.backend,
+            series: r.config.series,
+            sky_view: r.config.sky_view,
+            view_samples: r.config.view_samples,
+            sky_view_width: r.config.sky_view_table[0],
+            sky_view_height: r.config.sky_view_table[1],
+            transmittance_width: r.config.transmittance_table[0],
+            transmittance_height: r.config.transmittance_table[1],
+            median_seconds: r.median_seconds,
+            tables_median_seconds: r.tables_median_seconds,
+            sky_median_seconds: r.sky_median_seconds,
+            rms_relative_percent: 100.0 * r.rms_relative,
+            max_relative_percent: 100.0 * r.max_relative,
+        }),
+    )
 }
 
 /// Error against the median render time, one colour per series, one

@@ -19,7 +19,6 @@
 
 use anyhow::Result;
 use glam::{DVec3, Vec3};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::reference::taylor_green;
@@ -27,6 +26,9 @@ use super::{configure, Advection};
 use crate::bench::{time_renders, BenchScene, Options};
 use crate::scene::SceneData;
 
+/// One row of the sweep, and its CSV line (`write_csv`: the fields in
+/// order, `None` as an empty field).
+#[derive(serde::Serialize)]
 pub struct Row {
     pub scene: String,
     pub backend: &'static str,
@@ -192,30 +194,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
 }
 
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(
-        out,
-        "scene,backend,series,advection,size,seconds_per_step,median_seconds,error_percent,max_8bit_percent,iterations,divergence"
-    )?;
-    let opt = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.6e}"));
-    for r in rows {
-        writeln!(
-            out,
-            "{},{},{},{},{},{},{},{},{},{},{}",
-            r.scene,
-            r.backend,
-            r.series,
-            r.advection,
-            r.size,
-            opt(r.seconds_per_step),
-            opt(r.median_seconds),
-            opt(r.error_percent),
-            opt(r.max_8bit_percent),
-            r.iterations.map_or(String::new(), |i| i.to_string()),
-            opt(r.divergence)
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(path, rows)
 }
 
 /// The Taylor-Green series: time per step against the viscosity's error,

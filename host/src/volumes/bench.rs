@@ -24,7 +24,6 @@
 
 use anyhow::{Context, Result};
 use glam::DVec3;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::Scattering;
@@ -222,36 +221,48 @@ pub fn run(
     Ok(rows)
 }
 
+/// One CSV line of the sweep (`write_csv`).
+#[derive(serde::Serialize)]
+struct Record<'a> {
+    scene: &'a str,
+    width: u32,
+    height: u32,
+    backend: &'a str,
+    series: &'a str,
+    planes: String,
+    light_grid: String,
+    octaves: u32,
+    column_width: String,
+    median_seconds: f64,
+    grids_median_seconds: f64,
+    volumes_median_seconds: f64,
+    rms_8bit_percent: f64,
+    max_8bit_percent: f64,
+    energy_ratio: f64,
+}
+
 fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
-    let mut out = Vec::new();
-    writeln!(
-        out,
-        "scene,width,height,backend,series,planes,light_grid,octaves,column_width,median_seconds,grids_median_seconds,volumes_median_seconds,rms_8bit_percent,max_8bit_percent,energy_ratio"
-    )?;
     let auto = |v: Option<u32>| v.map_or("auto".to_string(), |n| n.to_string());
-    for r in rows {
-        let c = &r.config;
-        writeln!(
-            out,
-            "{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5}",
-            r.scene,
-            r.width,
-            r.height,
-            r.backend,
-            c.series,
-            auto(c.planes),
-            auto(c.light_grid),
-            c.octaves,
-            c.column_width.map_or("none".to_string(), |w| w.to_string()),
-            r.median_seconds,
-            r.grids_median_seconds,
-            r.volumes_median_seconds,
-            r.rms_8bit_percent,
-            r.max_8bit_percent,
-            r.energy_ratio
-        )?;
-    }
-    crate::output::write_atomically(path, &out)
+    crate::bench::write_csv(
+        path,
+        rows.iter().map(|r| Record {
+            scene: &r.scene,
+            width: r.width,
+            height: r.height,
+            backend: r.backend,
+            series: r.config.series,
+            planes: auto(r.config.planes),
+            light_grid: auto(r.config.light_grid),
+            octaves: r.config.octaves,
+            column_width: r.config.column_width.map_or("none".to_string(), |w| w.to_string()),
+            median_seconds: r.median_seconds,
+            grids_median_seconds: r.grids_median_seconds,
+            volumes_median_seconds: r.volumes_median_seconds,
+            rms_8bit_percent: r.rms_8bit_percent,
+            max_8bit_percent: r.max_8bit_percent,
+            energy_ratio: r.energy_ratio,
+        }),
+    )
 }
 
 /// Error against the median render time, one line per scene, backend and

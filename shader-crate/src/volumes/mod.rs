@@ -923,12 +923,19 @@ pub fn column_light(
         direct * p + diffuse
     };
     let (s, t) = (vol.sigma_s, vol.sigma_t);
-    e * Vec4::new(
-        channel(s.x, t.x, tau.x, through.x),
-        channel(s.y, t.y, tau.y, through.y),
-        channel(s.z, t.z, tau.z, through.z),
-        0.0,
-    )
+    let x = channel(s.x, t.x, tau.x, through.x);
+    // A grey medium (clouds, smoke) gives every channel the same inputs,
+    // so the same bits: solve the slab once.
+    let grey = s.y == s.x
+        && s.z == s.x
+        && t.y == t.x
+        && t.z == t.x
+        && tau.y == tau.x
+        && tau.z == tau.x
+        && through.y == through.x
+        && through.z == through.x;
+    let (y, z) = if grey { (x, x) } else { (channel(s.y, t.y, tau.y, through.y), channel(s.z, t.z, tau.z, through.z)) };
+    e * Vec4::new(x, y, z, 0.0)
 }
 
 #[cfg(test)]

@@ -123,14 +123,13 @@ pub fn read_vdb(field: &str, path: &Path, name: Option<&str>, max_cells: u64) ->
     // The active voxels' and tiles' bounds, index space, inclusive.
     let (mut lo, mut hi) = (glam::IVec3::splat(i32::MAX), glam::IVec3::splat(i32::MIN));
     for (at, value, level) in grid.iter() {
+        let at = glam::IVec3::new(at.x as i32, at.y as i32, at.z as i32);
         if !(value.is_finite() && value >= 0.0) {
-            let at = at.as_ivec3();
             return Err(fail(format!(
                 "the density at voxel ({}, {}, {}) is {value}, expected a finite value >= 0",
                 at.x, at.y, at.z
             )));
         }
-        let at = glam::IVec3::new(at.x as i32, at.y as i32, at.z as i32);
         lo = lo.min(at);
         hi = hi.max(at + glam::IVec3::splat(level.scale() as i32 - 1));
     }

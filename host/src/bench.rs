@@ -23,6 +23,9 @@ pub struct Options {
     pub stride: u32,
     /// A shorter sweep.
     pub quick: bool,
+    /// Smoke: when not empty, time only the fluid's step, at these cube
+    /// sizes (cells a side), leaving out the Taylor-Green and frame series.
+    pub fluid_sizes: Vec<u32>,
     /// Where the CSVs and plots go (created if missing).
     pub out_dir: PathBuf,
 }
@@ -72,8 +75,10 @@ pub fn run(family: Option<&str>, scenes: &[PathBuf], scenes_dir: &Path, opts: &O
             let names: Vec<_> = sweeps.iter().map(|(n, _)| *n).collect();
             bail!("command line: --family: expected one of {}, got {name:?}", names.join(", "));
         };
-        let loaded = sweep
-            .default_scenes()
+        // A step-time sweep (`fluid_sizes`) renders no scene: none is loaded
+        // (loading a smoke scene runs its fluid).
+        let defaults = if opts.fluid_sizes.is_empty() { sweep.default_scenes() } else { &[] };
+        let loaded = defaults
             .iter()
             .map(|s| BenchScene::load(&scenes_dir.join(format!("{s}.toml"))))
             .collect::<Result<Vec<_>>>()?;

@@ -246,6 +246,11 @@ struct BenchArgs {
     /// A shorter sweep (3 plane counts, 3 sub-plane counts, 2 table sizes).
     #[arg(long)]
     quick: bool,
+    /// Smoke: time only the fluid's step (a hot plume, each advection
+    /// scheme, each --backend) at these cube sizes, cells a side, 2 to
+    /// 512; the Taylor-Green and frame series are left out.
+    #[arg(long, value_delimiter = ',')]
+    fluid_sizes: Vec<u32>,
     /// Folder for the CSVs and plots (created if missing).
     #[arg(long, default_value = "bench")]
     out_dir: PathBuf,
@@ -600,7 +605,7 @@ fn reference_command(args: ReferenceArgs) -> Result<()> {
 }
 
 fn bench_command(args: BenchArgs) -> Result<()> {
-    let BenchArgs { scenes, family, sky, sea, caustics, backend, repeats, stride, quick, out_dir } = args;
+    let BenchArgs { scenes, family, sky, sea, caustics, backend, repeats, stride, quick, fluid_sizes, out_dir } = args;
     if repeats == 0 {
         return Err(anyhow!("command line: --repeats: expected at least 1 render per configuration, got 0"));
     }
@@ -610,8 +615,18 @@ fn bench_command(args: BenchArgs) -> Result<()> {
     let family = family.or_else(|| {
         [(sky, "sky"), (sea, "sea"), (caustics, "caustics")].iter().find(|(on, _)| *on).map(|(_, n)| n.to_string())
     });
+    if let Some(n) = fluid_sizes.iter().find(|n| !(2..=512).contains(*n)) {
+        return Err(anyhow!("command line: --fluid-sizes: expected 2 to 512 cells a side, got {n}"));
+    }
+    let family = match family {
+        None if !fluid_sizes.is_empty() && scenes.is_empty() => Some("smoke".to_string()),
+        Some(f) if !fluid_sizes.is_empty() && f != "smoke" => {
+            return Err(anyhow!("command line: --fluid-sizes: only the smoke family has a fluid, not {f}"));
+        }
+        other => other,
+    };
     let backends: Vec<render::Backend> = backend.iter().map(|b| render::Backend::open(*b)).collect::<Result<_>>()?;
-    let opts = slicelight::bench::Options { backends, repeats, stride, quick, out_dir };
+    let opts = slicelight::bench::Options { backends, repeats, stride, quick, fluid_sizes, out_dir };
     let written = slicelight::bench::run(family.as_deref(), &scenes, Path::new("scenes"), &opts)?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     eprintln!("wrote {}", names.join(", "));

@@ -11,7 +11,8 @@
 //!   `--quick`) cells, each scheme, on each backend (the fluid's kernels on
 //!   the device, or their CPU twins): the median time of 5 steps after 5,
 //!   the projection's iterations and the divergence it left (no error
-//!   column: the plume has no closed form);
+//!   column: the plume has no closed form); `--fluid-sizes 64,128,256`
+//!   runs this series alone at the sizes given;
 //! - `frame`: the scene rendered on each backend (the fluid runs at load,
 //!   on the CPU, and is not in the time): median render time and the RMS
 //!   and largest 8-bit error against the f64 reference (`reference`), at a
@@ -124,7 +125,21 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
     let (repeats, quick, stride) = (*repeats, *quick, opts.stride.max(2));
     let mut rows = Vec::new();
     let nu = 0.02;
-    let sizes: &[u32] = if quick { &[32, 64] } else { &[32, 64, 128] };
+    let steps_only = !opts.fluid_sizes.is_empty();
+    let sizes: &[u32] = if steps_only {
+        &[]
+    } else if quick {
+        &[32, 64]
+    } else {
+        &[32, 64, 128]
+    };
+    let step_sizes: &[u32] = if steps_only {
+        &opts.fluid_sizes
+    } else if quick {
+        &[32, 64]
+    } else {
+        &[32, 64, 128]
+    };
     for &(scheme, name) in &SCHEMES {
         for &n in sizes {
             let tg = taylor_green(n, nu, scheme, 1.0);
@@ -140,7 +155,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
             );
             rows.push(row);
         }
-        for &n in if quick { &[32u32, 64][..] } else { &[32, 64, 128][..] } {
+        for &n in step_sizes {
             for backend in backends {
                 let (seconds, iterations, divergence) = plume(n, name, backend)?;
                 let mut row = fluid_row("step", backend.name(), name, n);
@@ -155,7 +170,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
             }
         }
     }
-    for BenchScene { path, name, data } in scenes {
+    for BenchScene { path, name, data } in scenes.iter().filter(|_| !steps_only) {
         anyhow::ensure!(has_smoke(data), "{}: no smoke volume to benchmark", path.display());
         let pixels = crate::bench::pixel_lattice(data, stride);
         let t = std::time::Instant::now();

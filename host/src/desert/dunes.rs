@@ -312,12 +312,35 @@ pub fn run(setup: &Setup, progress: &ProgressBar) -> Vec<UVec2> {
 /// The field the automaton `setup` forms: its slabs after all steps (what
 /// the self-check compares) and its heights (m, the terrain's cells) after
 /// settling to the angle of repose.
+///
+/// The automaton is deterministic, and a scene is built again from its
+/// file for every view the viewer shows and every frame of an animation:
+/// the last `FORMED_KEPT` fields are kept in memory by their settings, so
+/// those rebuilds take no seconds of sand.
 pub fn formed(setup: &Setup, progress: &ProgressBar) -> Result<(Vec<u32>, Vec<f32>)> {
+    let key = format!("{setup:?}");
+    let kept = || FORMED.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, slabs, heights)) = kept().iter().find(|(k, _, _)| *k == key) {
+        progress.inc(setup.dispatches() as u64);
+        return Ok((slabs.clone(), heights.clone()));
+    }
     let slabs: Vec<u32> = run(setup, progress).iter().map(|c| c.x).collect();
     let (settled, _) = settle(&setup.params, &slabs, 1 << 20)?;
     let heights = setup.metres(&settled);
+    let mut fields = kept();
+    if fields.len() >= FORMED_KEPT {
+        fields.remove(0);
+    }
+    fields.push((key, slabs.clone(), heights.clone()));
     Ok((slabs, heights))
 }
+
+/// Fields `formed` keeps: a scene's dunes and ripples, and one edit's.
+const FORMED_KEPT: usize = 4;
+
+/// A kept field: its settings (`Setup`'s `Debug`), slabs and heights.
+type Formed = (String, Vec<u32>, Vec<f32>);
+static FORMED: std::sync::Mutex<Vec<Formed>> = std::sync::Mutex::new(Vec::new());
 
 /// Avalanche rounds (both colours) on `slabs` until nothing moves; returns
 /// the heights and the rounds it took. Each move lowers the sum of squared

@@ -278,6 +278,13 @@ pub trait Pass: Sync {
     fn keeps(&self) -> &'static [&'static Resource] {
         &[]
     }
+    /// Whether a device reads `keeps` back after every frame. A pass whose
+    /// kept outputs are large and serve only a diagnostic `report` says
+    /// false: on a device its report is then absent (the CPU backend's
+    /// results are in memory and cost nothing to keep).
+    fn keeps_on_device(&self) -> bool {
+        true
+    }
     /// Keeps outputs beyond the frame (writes the cache), from the results.
     fn persist(&self, _scene: &SceneData, _results: &Frame) {}
     /// Compares what the GPU wrote with what the CPU wrote, from the same

@@ -407,14 +407,16 @@ impl Memo {
 
 /// What the `Whole` passes write that no running pass reads (a self-check's
 /// accumulators): the frame's results for `Pass::report` and `counters`.
-/// Intermediates such as the shadow maps stay on the device.
-fn final_outputs(running: &[Running]) -> Vec<&'static Resource> {
+/// Intermediates such as the shadow maps stay on the device, and so do
+/// the kept outputs of passes that do not want them read back (`device`;
+/// `Pass::keeps_on_device`).
+fn final_outputs(running: &[Running], device: bool) -> Vec<&'static Resource> {
     let read = |r: &Resource| running.iter().any(|x| x.pass.reads().iter().any(|y| y.binding == r.binding));
     running
         .iter()
         .filter(|r| r.pass.dispatch() == Dispatch::Whole)
         .flat_map(|r| {
-            let keeps = r.pass.keeps();
+            let keeps = if device && !r.pass.keeps_on_device() { &[] } else { r.pass.keeps() };
             r.pass.writes().iter().copied().filter(move |w| !read(w) || keeps.iter().any(|k| k.binding == w.binding))
         })
         .collect()
@@ -500,7 +502,7 @@ impl Work<'_> {
                 }
             }
         }
-        for w in final_outputs(&self.running) {
+        for w in final_outputs(&self.running, false) {
             if let Some(b) = frame.remove(w) {
                 self.result.insert(w, b);
             }
@@ -549,7 +551,7 @@ impl Work<'_> {
                 memo.put(r.pass, *key, outputs);
             }
         }
-        for w in final_outputs(&self.running) {
+        for w in final_outputs(&self.running, true) {
             if let ResourceKind::Frame(len) = w.kind {
                 self.result.insert(w, frame.read(w, len(data))?);
             }

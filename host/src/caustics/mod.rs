@@ -949,6 +949,12 @@ impl Pass for CausticsMaps {
     fn keeps(&self) -> &'static [&'static Resource] {
         resources![CAUSTICS_MAPS]
     }
+    /// The flux report is the CPU backend's: on a device the maps would be
+    /// read back after every frame for it (84 MiB for `caustics_fog_ball`'s
+    /// six 512x512 planes, most of a frame's time on a fast GPU).
+    fn keeps_on_device(&self) -> bool {
+        false
+    }
     fn report(&self, scene: &SceneData, frame: &Frame) -> Result<Option<String>> {
         let words = frame.get::<u32>(&CAUSTICS_MAPS);
         if words.is_empty() {
@@ -1090,9 +1096,6 @@ impl Pass for CausticShaftMaps {
         let maps = draw_maps(scene, common, &c.shafts, c.shaft_map_words(), frame, progress);
         frame.insert(&CAUSTIC_SHAFT_MAPS, maps);
     }
-    fn keeps(&self) -> &'static [&'static Resource] {
-        resources![CAUSTIC_SHAFT_MAPS]
-    }
     fn compare(&self, scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         // As the caustics maps (the same rasteriser).
         let g = decode_shaft_maps(scene, gpu.get::<u32>(&CAUSTIC_SHAFT_MAPS));
@@ -1131,9 +1134,6 @@ impl Pass for CausticShaftResolve {
             let words = f.get::<u32>(&CAUSTIC_SHAFT_MAPS);
             for_each_invocation(out, 0, progress, |i, v| *v = resolve_texel(i, p, words));
         });
-    }
-    fn keeps(&self) -> &'static [&'static Resource] {
-        resources![CAUSTIC_SHAFT_TEXELS]
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         // The same words converted the same way: to within f32 rounding of

@@ -102,6 +102,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("sea_open", sky("sea_open", 180, 120)),
         ("sea_calm_noon", sky("sea_calm_noon", 180, 120)),
         ("sea_shore", sky("sea_shore", 180, 120)),
+        ("sea_pier", sky("sea_pier", 180, 120)),
         ("sea_diver", sky("sea_diver", 180, 120)),
         ("under a shore, a sphere in the water", under_a_shore()),
         ("caustics_ball", traced("caustics_ball", 160, 120)),

@@ -238,6 +238,7 @@ fn stress_image_sizes() {
                 &big.sea.bottom,
                 &[],
                 &big.geometry(),
+                &big.materials,
                 &clouds,
             ),
         ] {
@@ -627,4 +628,62 @@ fn the_rough_reflection_matches_the_f64_reference() {
     let worst = errors.iter().cloned().fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
     println!("{} pixels: RMS {:.2} %, worst {:.2} % at pixel {}", errors.len(), 100.0 * rms, 100.0 * worst.1, worst.0);
     assert!(rms < 0.03 && worst.1 < 0.08, "RMS {rms}, worst {worst:?}");
+}
+
+/// Issue 26, objects under the water seen from above: a diffuse quad 2 m
+/// down in flat water 30 m deep is, to the eye above, what a flat bottom 2
+/// m down of the same albedo is. `sea.bottom` (the object's reflection of
+/// the refracted sun, attenuated up to the surface) and `sea.order1` (the
+/// water's single scattering, now ended at the object) must agree with the
+/// bottom's closed forms at every pixel centre the quad covers, within
+/// f32 rounding of the two paths' depths (the object's is its hit distance
+/// times the refracted ray's cosine): 1e-4 of each layer's peak. And the
+/// quad's own light in air, which the straight view ray would see through
+/// the water, is taken out (`sea.water` is 0 there). Order 2 is left out:
+/// its maps hold the deep bottom's light (see docs/sea.md).
+#[test]
+fn an_object_under_flat_water_is_the_bottom_at_its_depth() {
+    // `sea`'s clear ocean water, sun 40 degrees from the zenith; the extra
+    // lines go into `[sea]`, then the objects.
+    let scene = |depth: &str, object: &str| format!("bottom_albedo = [0.6, 0.5, 0.3]\n{depth}\n{object}");
+    let quad = "[[object]]\ntype = \"quad\"\ncenter = [0.0, -2.0, -10.0]\nu = [60.0, 0.0, 0.0]\nv = [0.0, 0.0, 40.0]\nalbedo = [0.6, 0.5, 0.3]";
+    let with_object = sea(40.0, &scene("depth_m = 30.0", quad));
+    let with_bottom = sea(40.0, &scene("depth_m = 2.0", ""));
+    // The same quad 1 cm above the water: lit in air (the layers are as
+    // the image holds them, after each transmittance).
+    let above = sea(40.0, &scene("depth_m = 30.0", &quad.replace("-2.0, -10.0", "0.01, -10.0")));
+    let lit_in_air = layer(&render_checked(&above, "above"), "surface").to_vec();
+    let a = render_checked(&with_object, "object");
+    let b = render_checked(&with_bottom, "bottom");
+    let (w, h) = (with_object.width(), with_object.height());
+    // The image over the quad is the sea's layers alone: the quad's light
+    // in air (the surface pass's, the sky's on it) is attenuated to 0.
+    let in_air = layer(&a, "surface");
+    let sea: Vec<&[glam::Vec4]> =
+        a.layers.iter().filter(|(n, _)| n.starts_with("sea.")).map(|(_, b)| b.as_slice()).collect();
+    for name in ["sea.bottom", "sea.order1"] {
+        let (x, y) = (layer(&a, name), layer(&b, name));
+        let peak = y.iter().fold(0.0f32, |m, v| m.max(v.truncate().max_element()));
+        assert!(peak > 0.0, "{name}: the bottom's layer is dark");
+        let mut worst = 0.0f32;
+        let mut covered = 0;
+        for i in 0..(w * h) as usize {
+            // The lower half of the image sees the water over the quad.
+            if (i as u32) / w < h / 2 + 2 {
+                continue;
+            }
+            covered += 1;
+            let seen = sea.iter().fold(glam::Vec3::ZERO, |m, l| m + l[i].truncate());
+            let image = a.image[i].truncate();
+            assert!(lit_in_air[i].truncate().max_element() > 0.0, "pixel {i}: the quad above the water is dark");
+            assert_eq!(in_air[i], glam::Vec4::ZERO, "pixel {i}: the quad's light in air is left in");
+            assert!(
+                (image - seen).abs().max_element() <= 1e-5 * image.max_element().max(1e-6),
+                "pixel {i}: the image {image} is not the sea's layers {seen}: the quad's light in air is left in"
+            );
+            worst = worst.max((x[i] - y[i]).truncate().abs().max_element() / peak);
+        }
+        println!("{name}: {covered} pixels, worst difference {worst:.2e} of the peak {peak:.3e}");
+        assert!(covered > 500 && worst <= 1e-4, "{name}: {worst:.3e} of the peak");
+    }
 }

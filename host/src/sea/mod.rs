@@ -1317,7 +1317,8 @@ pub static SEA_WATER: Resource = Resource {
 /// `sea.water`: for an eye under water, what the water does to the light
 /// of the objects it sees (`under::water_transmittance`), which the
 /// framework applies to the layers before it (the objects' light); the
-/// later sea passes attenuate their own.
+/// later sea passes attenuate their own. For an eye above the water, the
+/// objects' light in air taken out where the water hides them (`water_pixel`).
 pub struct SeaWater;
 
 impl Pass for SeaWater {
@@ -1343,11 +1344,14 @@ impl Pass for SeaWater {
         if let Some(skip) = skip_without_sea(scene) {
             return skip;
         }
-        if scene.sea.params.underwater == 0 {
-            return Plan::skip("the eye is above the water");
-        }
         if !scene.has_geometry() {
-            return Plan::skip("no objects under the water");
+            return Plan::skip("no objects");
+        }
+        if scene.sea.params.underwater == 0 {
+            return Plan::run(
+                "objects below the water level: their light in air out where the view ray meets the water first (sea.bottom sees them)",
+                0,
+            );
         }
         Plan::run("the water between the eye and the objects, and above them (the sunlight on them)", 0)
     }
@@ -1625,6 +1629,7 @@ impl Pass for SeaBottom {
             crate::passes::SPHERES,
             crate::passes::TRIANGLES,
             crate::passes::BVH_NODES,
+            crate::passes::MATERIALS,
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
             crate::volumes::OPTICAL_DEPTHS
@@ -1644,7 +1649,14 @@ impl Pass for SeaBottom {
             return skip;
         }
         let p = &scene.sea.params;
+        let objects = !scene.geometry().is_empty();
         if p.depth >= DEEP {
+            if p.underwater == 0 && objects {
+                return Plan::run(
+                    "no bottom: the objects the refracted view rays meet under the water (eq. 9 with 1/pi)",
+                    0,
+                );
+            }
             return Plan::skip("no bottom (neither depth_m nor bottom given)");
         }
         if p.layers > 1 {
@@ -1658,7 +1670,7 @@ impl Pass for SeaBottom {
         }
         // The brightest the bottom can be seen: straight down, sun overhead.
         let brightest = (-p.extinction.truncate() * 2.0 * p.depth).exp() * p.bottom_albedo.truncate();
-        if brightest.max_element() <= 0.0 {
+        if brightest.max_element() <= 0.0 && !objects {
             return Plan::skip("the bottom is black or lies below all light (e^(-2 c d) = 0 in f32)");
         }
         let focus = if p.caustics != 0 { ", the waves' caustic on it" } else { "" };
@@ -1667,7 +1679,7 @@ impl Pass for SeaBottom {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, x| {
-            bottom_pixel(i, common, p, t, bottom, x.caustic, &x.sunlit.geometry, &x.clouds)
+            bottom_pixel(i, common, p, t, bottom, x.caustic, &x.sunlit.geometry, &scene.materials, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

@@ -60,12 +60,12 @@ pub mod under;
 use spirv_std::num_traits::Float;
 
 use crate::camera::{camera_ray, in_image, sample_offset};
-use crate::geometry::Geometry;
+use crate::geometry::{trace_nearest, Geometry, Hit, NO_HIT};
 use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::optics::{reflectance, refract};
 use crate::phase::henyey_greenstein;
 use crate::sky::{sky_radiance, sun_disk, SkyParams};
-use crate::types::{CommonParams, GBufferTexel, GpuLight, NO_OBJECT};
+use crate::types::{CommonParams, GBufferTexel, GpuLight, GpuMaterial, NO_OBJECT};
 use crate::volumes::{light_transmittance, LightGrid};
 use core::f32::consts::{FRAC_1_PI, FRAC_PI_2, PI};
 use spirv_std::spirv;
@@ -768,7 +768,7 @@ pub fn sea_hit(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4],
     let x = index % common.width;
     let y = index / common.width;
     let mut out = SeaView::default();
-    if texel.object != NO_OBJECT || !in_image(common, x, y) {
+    if !in_image(common, x, y) {
         return out;
     }
     let (origin, dir) = camera_ray(common, x, y);
@@ -776,6 +776,12 @@ pub fn sea_hit(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4],
         return out;
     }
     let t = (p.level - origin.y) / dir.y;
+    // An object the straight view ray meets before the water hides it; one
+    // it meets under the water is seen through the surface (`sea.water`
+    // takes its light in air out, `object_under` finds it).
+    if texel.object != NO_OBJECT && texel.normal_distance.w <= t {
+        return out;
+    }
     out.hit = true;
     out.point = origin + dir * t;
     out.dir = dir;
@@ -1019,9 +1025,42 @@ pub fn order1_pixel(
     if !v.hit {
         return Vec4::ZERO;
     }
-    let (depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
+    let (mut depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
+    // The water in front of an object under the surface, not behind it.
+    let object = object_under(&v, depth, &sunlit.geometry);
+    if object.distance != NO_HIT {
+        depth = object.distance * v.view.y.max(1e-4);
+    }
     let shade = clouds.at(p, v.point);
     (order1_radiance(p, v.view, depth, c1) * v.transmission * shade).extend(0.0)
+}
+
+/// What the refracted view ray of an eye above the water meets under the
+/// surface before the bottom `depth` m down (issue 26: a pier's posts, a
+/// hull; `NO_HIT` where nothing): the nearest object along `-v.view` from
+/// where the view ray meets the surface.
+pub fn object_under(v: &SeaView, depth: f32, geometry: &Geometry) -> Hit {
+    let length = depth.min(1e6) / v.view.y.max(1e-4);
+    let eps = 1e-5 * v.point.abs().max_element().max(1.0);
+    trace_nearest(v.point, -v.view, eps, length, geometry)
+}
+
+/// An object under the water seen from above (`object_under`'s `hit`),
+/// below the surface, W/(m^2 sr): eq. 9's Lambertian reflection of the
+/// refracted sun (`lambert_leaving`) at the point's depth, with the
+/// object's albedo and its normal turned toward the eye, shaded by what
+/// stands between it and the sun (`under::sun_visibility`), attenuated
+/// along the `hit.distance` m of water up to the surface. The waves'
+/// caustic is not on it (the caustic map lies on the bottom).
+pub fn object_radiance(p: &SeaParams, v: &SeaView, hit: &Hit, geometry: &Geometry, materials: &[GpuMaterial]) -> Vec3 {
+    let point = v.point - v.view * hit.distance;
+    let depth = (p.level - point.y).max(0.0);
+    let normal = if hit.normal.dot(v.view) < 0.0 { -hit.normal } else { hit.normal };
+    let cos_gamma = normal.dot(-p.sun_in_water.xyz());
+    let albedo = materials[hit.material as usize].albedo.xyz();
+    let eps = 1e-4 * point.abs().max_element().max(1.0);
+    let shade = under::sun_visibility(p, geometry, point + normal * eps);
+    under::lambert_leaving(p, depth, cos_gamma, albedo) * shade * (-p.extinction.xyz() * hit.distance).exp()
 }
 
 /// The weight of layer `j + 1` for a bottom at `depth` between layers `j`
@@ -1157,7 +1196,8 @@ pub fn order2_pixel(
 
 /// Per-pixel kernel, `sea.bottom`: the bottom's reflection of the refracted
 /// sunlight (eq. 9 with `1/pi`) where the view ray meets it, above the
-/// surface. Under water, where the view ray meets the bottom
+/// surface, or an object's where the ray meets one first
+/// (`object_radiance`). Under water, where the view ray meets the bottom
 /// (`under::bottom_leaving`) or its reflection in the surface, attenuated.
 #[allow(clippy::too_many_arguments)]
 pub fn bottom_pixel(
@@ -1168,6 +1208,7 @@ pub fn bottom_pixel(
     bottom: &[f32],
     caustic: &[u32],
     geometry: &Geometry,
+    materials: &[GpuMaterial],
     clouds: &CloudShadow,
 ) -> Vec4 {
     if p.underwater != 0 {
@@ -1197,10 +1238,18 @@ pub fn bottom_pixel(
         return Vec4::ZERO;
     }
     let (depth, cos_gamma) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
-    // Where the view ray meets the bottom: the waves' caustic there.
-    let q = v.point - v.view * (depth / v.view.y);
-    let focus = caustics::caustic_at(p, caustic, q.x, q.z) * under::sun_visibility(p, geometry, q);
-    (bottom_radiance(p, v.view, depth, cos_gamma) * focus * v.transmission * clouds.at(p, v.point)).extend(0.0)
+    let object = object_under(&v, depth, geometry);
+    let light = if object.distance != NO_HIT {
+        object_radiance(p, &v, &object, geometry, materials)
+    } else if depth >= DEEP {
+        Vec3::ZERO
+    } else {
+        // Where the view ray meets the bottom: the waves' caustic there.
+        let q = v.point - v.view * (depth / v.view.y);
+        let focus = caustics::caustic_at(p, caustic, q.x, q.z) * under::sun_visibility(p, geometry, q);
+        bottom_radiance(p, v.view, depth, cos_gamma) * focus
+    };
+    (light * v.transmission * clouds.at(p, v.point)).extend(0.0)
 }
 
 #[spirv(compute(threads(64)))]
@@ -1387,6 +1436,7 @@ pub fn bottom_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 26)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
@@ -1398,8 +1448,17 @@ pub fn bottom_kernel(
         let clouds = CloudShadow { lights, grids, depths };
         let (i, p) = (index as usize, &params[0]);
         let geometry = crate::scene_geometry(common, spheres, triangles, nodes);
-        radiance[i] =
-            bottom_pixel(common.band_start + index, common, p, surface[i], bottom, caustic, &geometry, &clouds);
+        radiance[i] = bottom_pixel(
+            common.band_start + index,
+            common,
+            p,
+            surface[i],
+            bottom,
+            caustic,
+            &geometry,
+            materials,
+            &clouds,
+        );
     }
 }
 
@@ -1440,6 +1499,10 @@ pub fn shaft_maps_kernel(
 
 /// Per-pixel kernel, `sea.water`: for an eye under water, what the water
 /// does to the light of the object the sample sees (`under::water_transmittance`).
+/// For an eye above it, 0 where the straight view ray meets the water
+/// before the object it reaches (that object's light in air is not what
+/// the eye sees: `sea.bottom` and `sea.order1` follow the refracted ray),
+/// else 1.
 pub fn water_pixel(
     index: u32,
     common: &CommonParams,
@@ -1448,6 +1511,10 @@ pub fn water_pixel(
     shafts: &[Vec4],
     texel: &GBufferTexel,
 ) -> Vec4 {
+    if p.underwater == 0 {
+        let under_the_sea = texel.object != NO_OBJECT && surface != Vec4::ZERO;
+        return if under_the_sea { Vec4::ZERO } else { Vec4::ONE };
+    }
     under::water_transmittance(p, shafts, &under::decode(index, common, p, surface), texel.object != NO_OBJECT)
 }
 

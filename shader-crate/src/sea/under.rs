@@ -518,12 +518,16 @@ pub fn depth_under(p: &SeaParams, grid: &[f32], at: Vec3) -> f32 {
 /// at depth `depth` (m) with cosine `cos_gamma` to the sun's beam sends
 /// back, `E_w e^(-c d/mu_s) cos(gamma) albedo/pi`, W/(m^2 sr).
 pub fn bottom_leaving(p: &SeaParams, depth: f32, cos_gamma: f32) -> Vec3 {
+    lambert_leaving(p, depth, cos_gamma, p.bottom_albedo.xyz())
+}
+
+/// Eq. 9's reflection of the refracted sun by a Lambertian surface of
+/// `albedo` at `depth` m whose normal makes `cos_gamma` with the way to
+/// the sun, W/(m^2 sr): `E_w e^(-c d/mu_s) cos(gamma) albedo/pi` (the
+/// bottom's, an object's under the water).
+pub fn lambert_leaving(p: &SeaParams, depth: f32, cos_gamma: f32, albedo: Vec3) -> Vec3 {
     let c = p.extinction.xyz();
-    p.beam_irradiance.xyz()
-        * (-c * (depth / p.sun_in_water.w)).exp()
-        * cos_gamma.max(0.0)
-        * p.bottom_albedo.xyz()
-        * FRAC_1_PI
+    p.beam_irradiance.xyz() * (-c * (depth / p.sun_in_water.w)).exp() * cos_gamma.max(0.0) * albedo * FRAC_1_PI
 }
 
 /// Where the bottom the view ray meets lies and how it faces the sun: its

@@ -176,11 +176,8 @@ fn traced(name: &str, width: u32, height: u32) -> SceneData {
 
 /// A shipped scene at a smaller resolution of the same aspect.
 fn sky(name: &str, width: u32, height: u32) -> SceneData {
-    let mut data = slicelight::scene::load(&common::root().join(format!("scenes/{name}.toml"))).unwrap();
-    data.common.width = width;
-    data.common.height = height;
-    data.common.band_pixels = width * height;
-    data
+    let data = slicelight::scene::load(&common::root().join(format!("scenes/{name}.toml"))).unwrap();
+    data.reconfigure(|f| f.camera.resolution = [width, height]).unwrap()
 }
 
 /// Every registered pass, on every scene that runs it: the CPU runs all

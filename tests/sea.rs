@@ -395,10 +395,8 @@ fn shore_against_a_path_tracer_over_the_height_field() {
     // tracer's standard errors. Its order 2 (4 million paths a channel leave
     // 2 to 5 %) is checked the same way; the deterministic height-field
     // quadrature below is the sharper judge of order 2.
-    let mut data = slicelight::scene::load(&common::root().join("scenes/sea_shore.toml")).unwrap();
-    data.common.width = 72;
-    data.common.height = 48;
-    data.common.band_pixels = 72 * 48;
+    let data = slicelight::scene::load(&common::root().join("scenes/sea_shore.toml")).unwrap();
+    let data = data.reconfigure(|f| f.camera.resolution = [72, 48]).unwrap();
     let r = slicelight::render::render_layers(&data, &slicelight::render::Backend::Cpu, false).unwrap();
     let (o1, o2) = (layer(&r, "sea.order1"), layer(&r, "sea.order2"));
     let p = &data.sea.params;
@@ -468,10 +466,8 @@ fn shore_order2_against_the_height_field_quadrature() {
     // written; without it (`depth_table = 0`) 3.8 %, of which the locally
     // flat water alone (the flat quadrature at the view ray's depth) is
     // 2.5 %. Bounds: 2 % with the table, and it must beat no table.
-    let mut data = slicelight::scene::load(&common::root().join("scenes/sea_shore.toml")).unwrap();
-    data.common.width = 72;
-    data.common.height = 48;
-    data.common.band_pixels = 72 * 48;
+    let data = slicelight::scene::load(&common::root().join("scenes/sea_shore.toml")).unwrap();
+    let data = data.reconfigure(|f| f.camera.resolution = [72, 48]).unwrap();
     let r = slicelight::render::render_layers(&data, &slicelight::render::Backend::Cpu, false).unwrap();
     let o2 = layer(&r, "sea.order2");
     let mut no_table = data.clone();

@@ -284,8 +284,7 @@ fn one_by_one_image() {
 #[test]
 fn clear_air_skips_the_shafts_pass() {
     let toml = stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 30.0, [0.0, 1.5, 6.0], ISO);
-    let mut data = common::scene_from_str(&toml);
-    data.common.sigma_s = Vec4::ZERO;
+    let mut data = common::scene_from_str(&toml).reconfigure(|f| f.medium.sigma_s = [0.0; 3]).unwrap();
     let plan = render::plan(&data);
     let shafts = plan.iter().find(|p| p.name == "shafts").unwrap();
     assert!(!shafts.ran && shafts.reason.contains("does not scatter"), "{shafts:?}");
@@ -453,17 +452,14 @@ fn shadow_maps_default_to_what_they_serve() {
     let fig6 = slicelight::scene::load(&common::root().join("scenes/fig6_sphere.toml")).unwrap();
     let light = fig6.lights[0];
     let at_height = |h: u32, eye: glam::Vec3, look: glam::Vec3| {
-        let mut d = fig6.clone();
-        d.common.height = h;
-        d.common.width = h * 3 / 2;
-        let forward = (look - eye).normalize();
-        let right = forward.cross(glam::Vec3::Y).normalize();
-        let up = right.cross(forward);
-        let tan = (22.5f32).to_radians().tan();
-        d.common.camera_position = eye.extend(1.0);
-        d.common.camera_forward = forward.extend(0.0);
-        d.common.camera_right = (right * tan * 1.5).extend(0.0);
-        d.common.camera_up = (up * tan).extend(0.0);
+        let d = fig6
+            .reconfigure(|f| {
+                f.camera.resolution = [h * 3 / 2, h];
+                f.camera.position = eye.to_array();
+                f.camera.look_at = look.to_array();
+                f.camera.vfov_deg = Some(45.0);
+            })
+            .unwrap();
         shafts_resolution(&d.common, &light, &footprint_rays(&d.common, &d.geometry(), 100.0), 32, 4096)
     };
     let (eye, look) = (glam::Vec3::new(0.0, 1.8, 8.0), glam::Vec3::new(0.0, 1.8, 0.0));

@@ -146,16 +146,13 @@ fn sunlit_scene_matches_reference() {
     // 96x64 the error was 0.32 % with 8 rays, 0.09 % with 64); the same
     // objects, shadows and sky are seen.
     let small = |rays: u32, light: bool| {
-        let mut d = data
-            .reconfigure(|f| {
-                f.camera.resolution = [72, 48];
-                let sky = f.sky.as_mut().unwrap();
-                sky.sky_light_rays = rays;
-                sky.sky_light = light;
-            })
-            .unwrap();
-        d.common.band_pixels = d.pixel_count();
-        d
+        data.reconfigure(|f| {
+            f.camera.resolution = [72, 48];
+            let sky = f.sky.as_mut().unwrap();
+            sky.sky_light_rays = rays;
+            sky.sky_light = light;
+        })
+        .unwrap()
     };
     let shaded = small(8, true);
     assert!(shaded.lights.len() == 1, "the sun is the scene's one light");
@@ -229,10 +226,7 @@ fn sky_is_finite_at_the_edges() {
 #[test]
 fn sky_at_tiny_and_huge_image_sizes() {
     for (w, h) in [(1u32, 1u32), (8192, 4096)] {
-        let mut data = fisheye(8, 45.0, "");
-        data.common.width = w;
-        data.common.height = h;
-        data.common.band_pixels = w * h;
+        let data = fisheye(8, 45.0, "").reconfigure(|f| f.camera.resolution = [w, h]).unwrap();
         let (image, _) = render::render(&data, &Backend::Cpu, false).unwrap();
         assert_eq!(image.len(), (w * h) as usize);
         assert!(image.iter().all(|p| p.is_finite() && p.min_element() >= 0.0), "{w}x{h}");

@@ -126,20 +126,10 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
     let nu = 0.02;
     let steps_only = !opts.fluid_sizes.is_empty();
-    let sizes: &[u32] = if steps_only {
-        &[]
-    } else if quick {
-        &[32, 64]
-    } else {
-        &[32, 64, 128]
-    };
-    let step_sizes: &[u32] = if steps_only {
-        &opts.fluid_sizes
-    } else if quick {
-        &[32, 64]
-    } else {
-        &[32, 64, 128]
-    };
+    let defaults: &[u32] = if quick { &[32, 64] } else { &[32, 64, 128] };
+    // Taylor-Green sizes, plume sizes.
+    let (sizes, step_sizes): (&[u32], &[u32]) =
+        if steps_only { (&[], &opts.fluid_sizes) } else { (defaults, defaults) };
     for &(scheme, name) in &SCHEMES {
         for &n in sizes {
             let tg = taylor_green(n, nu, scheme, 1.0);

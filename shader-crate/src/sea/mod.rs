@@ -1512,7 +1512,8 @@ pub fn water_pixel(
     texel: &GBufferTexel,
 ) -> Vec4 {
     if p.underwater == 0 {
-        let under_the_sea = texel.object != NO_OBJECT && surface != Vec4::ZERO;
+        // (`surface.y > 0`: the sample sees the sea, as `seen_from` reads it.)
+        let under_the_sea = texel.object != NO_OBJECT && surface.y > 0.0;
         return if under_the_sea { Vec4::ZERO } else { Vec4::ONE };
     }
     under::water_transmittance(p, shafts, &under::decode(index, common, p, surface), texel.object != NO_OBJECT)

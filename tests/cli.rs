@@ -472,6 +472,8 @@ fn outputs_never_overwrite_inputs_and_bad_ranges_are_refused() {
         (&["reference", "scene.toml", "-o", "o.png", "--paths", "0"], &["--paths"]),
         (&["bench", "scene.toml", "--repeats", "0"], &["--repeats"]),
         (&["bench", "scene.toml", "--stride", "0"], &["--stride"]),
+        (&["bench", "scene.toml", "--fluid-sizes", "8"], &["--fluid-sizes", "scene.toml"]),
+        (&["bench", "--fluid-sizes", "1"], &["--fluid-sizes", "2 to 512"]),
         (&["compare", "a.png", "b.png", "--diff", "a.png"], &["a.png", "input"]),
         (&["terrain", "scene.toml", "-o", "scene.toml"], &["scene.toml"]),
     ];

@@ -618,8 +618,16 @@ fn bench_command(args: BenchArgs) -> Result<()> {
     if let Some(n) = fluid_sizes.iter().find(|n| !(2..=512).contains(*n)) {
         return Err(anyhow!("command line: --fluid-sizes: expected 2 to 512 cells a side, got {n}"));
     }
+    if !fluid_sizes.is_empty() && !scenes.is_empty() {
+        // The step sweep runs a plume of its own: a scene given with it
+        // would be loaded (a smoke scene runs its fluid at load) and ignored.
+        return Err(anyhow!(
+            "command line: --fluid-sizes times the fluid's step on a plume of its own and takes no scene file, got {}",
+            scenes[0].display()
+        ));
+    }
     let family = match family {
-        None if !fluid_sizes.is_empty() && scenes.is_empty() => Some("smoke".to_string()),
+        None if !fluid_sizes.is_empty() => Some("smoke".to_string()),
         Some(f) if !fluid_sizes.is_empty() && f != "smoke" => {
             return Err(anyhow!("command line: --fluid-sizes: only the smoke family has a fluid, not {f}"));
         }

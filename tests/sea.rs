@@ -237,7 +237,7 @@ fn stress_image_sizes() {
                 seen,
                 &big.sea.bottom,
                 &[],
-                &big.geometry(),
+                &sunlit,
                 &big.materials,
                 &clouds,
             ),
@@ -637,6 +637,53 @@ fn the_rough_reflection_matches_the_f64_reference() {
 /// quad's own light in air, which the straight view ray would see through
 /// the water, is taken out (`sea.water` is 0 there). Order 2 is left out:
 /// its maps hold the deep bottom's light (see docs/sea.md).
+/// Issue 26: an object under waves seen from above takes the waves'
+/// caustic at its depth, as the bottom does there. A quad 2 m down in water
+/// 30 m deep against a flat bottom 2 m down, under the same waves: the
+/// quad's caustic comes from the shaft planes (built for an eye above the
+/// water because an object reaches under it; here one plane lies at 2 m
+/// and the planes' maps have the wave map's resolution), the bottom's from
+/// its own map; both are the same triangles cut at the same depth, so they
+/// agree but for the f32 depth of the quad's points. The caustic's own
+/// contrast on the quad (against `shafts = false`, the flat beam) is what
+/// the comparison would miss by if the quad took no caustic.
+#[test]
+fn an_object_under_waves_takes_the_caustic_at_its_depth() {
+    let waves = "waves = { kind = \"spectrum\", wind_m_s = 6.0, size_m = 16.0, resolution = 64, seed = 5 }";
+    let scene = |depth: &str, object: &str, extra: &str| {
+        format!("bottom_albedo = [0.6, 0.5, 0.3]\n{waves}\nshaft_planes = 3\nshaft_depth_m = 4.0\n{extra}\n{depth}\n{object}")
+    };
+    let quad = "[[object]]\ntype = \"quad\"\ncenter = [0.0, -2.0, -10.0]\nu = [60.0, 0.0, 0.0]\nv = [0.0, 0.0, 40.0]\nalbedo = [0.6, 0.5, 0.3]";
+    let with_object = sea(40.0, &scene("depth_m = 30.0", quad, ""));
+    let with_bottom = sea(40.0, &scene("depth_m = 2.0", "", ""));
+    let flat_beam = sea(40.0, &scene("depth_m = 30.0", quad, "shafts = false"));
+    assert_eq!(with_object.sea.params.shaft_planes, 3, "no shaft planes for an object under the water");
+    assert_eq!(with_bottom.sea.params.shaft_planes, 0, "shaft planes without an object or a varying bottom");
+    let (a, b, c) = (
+        render_checked(&with_object, "object"),
+        render_checked(&with_bottom, "bottom"),
+        render_checked(&flat_beam, "flat beam"),
+    );
+    let (x, y, z) = (layer(&a, "sea.bottom"), layer(&b, "sea.bottom"), layer(&c, "sea.bottom"));
+    let (w, h) = (with_object.width(), with_object.height());
+    let peak = y.iter().fold(0.0f32, |m, v| m.max(v.truncate().max_element()));
+    let (mut worst, mut contrast, mut covered) = (0.0f32, 0.0f32, 0);
+    for i in 0..(w * h) as usize {
+        // The lower half of the image sees the water over the quad.
+        if (i as u32) / w < h / 2 + 2 {
+            continue;
+        }
+        covered += 1;
+        worst = worst.max((x[i] - y[i]).truncate().abs().max_element() / peak);
+        contrast = contrast.max((z[i] - y[i]).truncate().abs().max_element() / peak);
+    }
+    println!("{covered} pixels: the quad against the bottom {worst:.2e} of the peak; the flat beam against the bottom {contrast:.3}");
+    assert!(covered > 500 && contrast > 0.05, "the waves focus nothing here ({contrast:.3}): the test shows nothing");
+    // 1e-3: the quad's points lie within f32 rounding of 2 m, where the
+    // planes are read between their two neighbours along the sun.
+    assert!(worst <= 1e-3, "the quad's caustic is {worst:.3e} of the peak off the bottom's at its depth");
+}
+
 #[test]
 fn an_object_under_flat_water_is_the_bottom_at_its_depth() {
     // `sea`'s clear ocean water, sun 40 degrees from the zenith; the extra

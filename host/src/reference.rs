@@ -443,11 +443,15 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let (depth, cos_gamma) = slicelight_shaders::sea::bottom_hit(p, grid, hit.x as f32, hit.z as f32, view.as_vec3());
     let local = slicelight_shaders::sea::SeaParams { depth, ..*p };
     let sea = SeaReference::new(&local, SEA_TOLERANCE);
-    // The waves' caustic where the view ray meets the bottom (photon traced).
-    let focus = caustic_reference(data).map_or(DVec3::ONE, |c| {
-        let q = hit - view * (depth as f64 / view.y);
-        c.at(q.x, q.z)
-    });
+    // The waves' caustic where the view ray meets the bottom (photon
+    // traced): a flat bottom's own map, a varying bottom's from the maps at
+    // the shaft planes' depths (`ShaftReference`), as the renderer reads them.
+    let q = hit - view * (depth as f64 / view.y);
+    let focus = if p.bottom_nx >= 2 {
+        shaft_reference(data).map_or(DVec3::ONE, |s| s.at(q.x, depth as f64, q.z))
+    } else {
+        caustic_reference(data).map_or(DVec3::ONE, |c| c.at(q.x, q.z))
+    };
     let bottom = sea.bottom(view) * (cos_gamma as f64 / sea.mu_s) * focus;
     let second = if !data.sea.second_order {
         DVec3::ZERO

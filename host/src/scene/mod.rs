@@ -496,7 +496,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
             if common.projection == PROJECTION_FISHEYE {
                 bail!(invalid("camera.projection", "a pinhole camera over a sea", "fisheye"));
             }
-            crate::sea::configure(s, &sky, &common, base, time)?
+            crate::sea::configure(s, &sky, &common, base, time, bounds.map(|(lo, _)| lo.y))?
         }
         None => Default::default(),
     };

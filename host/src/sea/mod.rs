@@ -150,8 +150,10 @@ pub struct Settings {
     /// Whether the waves focus the sunlight on a flat bottom (`caustics`).
     #[serde(default = "yes")]
     pub caustics: bool,
-    /// For an eye under the water, whether the waves' focusing is traced
-    /// into the water as light shafts (and onto objects there).
+    /// Whether the waves' focusing is traced into the water on the shaft
+    /// planes: for an eye under the water, its light shafts and the caustic
+    /// on objects and a varying bottom; for an eye above it, the caustic on
+    /// objects under the surface and on a varying bottom.
     #[serde(default = "yes")]
     pub shafts: bool,
     /// Horizontal planes the shafts' caustic is built on, surface to
@@ -528,13 +530,16 @@ pub fn choose_directions(p: &SeaParams) -> (u32, Vec<(u32, f32)>) {
 
 /// Validates `[sea]` against the sky's sun and the camera's height, and
 /// returns the sea's setup at the scene's `time` (s: the waves' phases);
-/// the error names the field under `sea.`.
+/// the error names the field under `sea.`. `lowest`: the lowest height
+/// (m) the scene's objects reach, if it has any (objects under the water
+/// take the waves' caustic from the shaft planes).
 pub fn configure(
     s: &Settings,
     sky: &crate::sky::Setup,
     common: &CommonParams,
     base: &std::path::Path,
     time: f64,
+    lowest: Option<f32>,
 ) -> Result<Setup> {
     let camera_y = common.camera_position.y;
     if !sky.enabled {
@@ -623,7 +628,7 @@ pub fn configure(
     }
     // The waves' caustic: over a flat bottom that exists.
     params.caustics = (s.caustics && waves_kind == WAVES_NORMAL_MAP && grid.is_none() && depth < DEEP) as u32;
-    shafts_of(s, &mut params)?;
+    shafts_of(s, &mut params, lowest.is_some_and(|y| y < s.level_m))?;
     let sampling = if s.second_order { choose_sampling(&mut params, s.planes, polar) } else { Vec::new() };
     check_table_size(&params, s.depth_table)?;
     Ok(Setup {
@@ -637,11 +642,15 @@ pub fn configure(
     })
 }
 
-/// `[sea]`'s caustic light shafts: for an eye under waves, `shaft_planes`
-/// planes from the surface to `shaft_depth_m` (default: the bottom's
-/// depth, at most `SHAFT_DEPTH`), on the wave pyramid's level whose side is
-/// at most `MAX_SHAFT_RESOLUTION` texels.
-fn shafts_of(s: &Settings, params: &mut SeaParams) -> Result<()> {
+/// `[sea]`'s caustic light shafts: `shaft_planes` planes from the surface
+/// to `shaft_depth_m` (default: the bottom's depth, at most
+/// `SHAFT_DEPTH`), on the wave pyramid's level whose side is at most
+/// `MAX_SHAFT_RESOLUTION` texels, holding the waves' caustic at their
+/// depths. Built under waves for an eye under the water (its shafts, and
+/// the caustic on objects and a varying bottom there) and for an eye above
+/// it where objects reach under the surface (`objects_below`) or the
+/// bottom varies (the caustic on them; the flat bottom has its own map).
+fn shafts_of(s: &Settings, params: &mut SeaParams, objects_below: bool) -> Result<()> {
     if !(2..=64).contains(&s.shaft_planes) {
         bail!(invalid("sea.shaft_planes", "a count of planes in 2..=64", s.shaft_planes));
     }
@@ -655,7 +664,8 @@ fn shafts_of(s: &Settings, params: &mut SeaParams) -> Result<()> {
     }
     // The intervals also carry the objects' shadows without shafts.
     params.shaft_steps = s.shaft_steps;
-    if !(s.shafts && params.underwater != 0 && params.waves == WAVES_NORMAL_MAP) {
+    let needed = params.underwater != 0 || objects_below || params.bottom_nx >= 2;
+    if !(s.shafts && needed && params.waves == WAVES_NORMAL_MAP) {
         return Ok(());
     }
     let max = slicelight_shaders::sea::caustics::MAX_SHAFT_RESOLUTION;
@@ -1207,12 +1217,13 @@ impl Pass for SeaShafts {
         }
         let p = &scene.sea.params;
         if p.shaft_planes == 0 {
-            let why = if p.underwater == 0 {
-                "the eye is above the water"
-            } else if p.waves != WAVES_NORMAL_MAP {
+            let asked = scene.source.file.sea.as_ref().is_some_and(|s| s.shafts);
+            let why = if p.waves != WAVES_NORMAL_MAP {
                 "a flat sea (no waves to focus the light)"
-            } else {
+            } else if !asked {
                 "shafts = false"
+            } else {
+                "the eye is above the water, and no object or varying bottom lies under it"
             };
             return Plan::skip(why);
         }
@@ -1626,6 +1637,7 @@ impl Pass for SeaBottom {
             SEA_SURFACE,
             SEA_BOTTOM_GRID,
             SEA_CAUSTICS,
+            SEA_SHAFTS,
             crate::passes::SPHERES,
             crate::passes::TRIANGLES,
             crate::passes::BVH_NODES,
@@ -1679,7 +1691,7 @@ impl Pass for SeaBottom {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_BOTTOM, |i, t, x| {
-            bottom_pixel(i, common, p, t, bottom, x.caustic, &x.sunlit.geometry, &scene.materials, &x.clouds)
+            bottom_pixel(i, common, p, t, bottom, x.caustic, &x.sunlit, &scene.materials, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

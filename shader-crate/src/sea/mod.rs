@@ -1050,17 +1050,26 @@ pub fn object_under(v: &SeaView, depth: f32, geometry: &Geometry) -> Hit {
 /// refracted sun (`lambert_leaving`) at the point's depth, with the
 /// object's albedo and its normal turned toward the eye, shaded by what
 /// stands between it and the sun (`under::sun_visibility`), attenuated
-/// along the `hit.distance` m of water up to the surface. The waves'
-/// caustic is not on it (the caustic map lies on the bottom).
-pub fn object_radiance(p: &SeaParams, v: &SeaView, hit: &Hit, geometry: &Geometry, materials: &[GpuMaterial]) -> Vec3 {
+/// along the `hit.distance` m of water up to the surface, and focused by
+/// the waves as the water at its depth is (`caustics::shaft_at` on the
+/// shaft planes, which are built for an eye above the water when objects
+/// reach below the surface; 1 without them).
+pub fn object_radiance(
+    p: &SeaParams,
+    v: &SeaView,
+    hit: &Hit,
+    sunlit: &under::Sunlit,
+    materials: &[GpuMaterial],
+) -> Vec3 {
     let point = v.point - v.view * hit.distance;
     let depth = (p.level - point.y).max(0.0);
     let normal = if hit.normal.dot(v.view) < 0.0 { -hit.normal } else { hit.normal };
     let cos_gamma = normal.dot(-p.sun_in_water.xyz());
     let albedo = materials[hit.material as usize].albedo.xyz();
     let eps = 1e-4 * point.abs().max_element().max(1.0);
-    let shade = under::sun_visibility(p, geometry, point + normal * eps);
-    under::lambert_leaving(p, depth, cos_gamma, albedo) * shade * (-p.extinction.xyz() * hit.distance).exp()
+    let shade = under::sun_visibility(p, &sunlit.geometry, point + normal * eps);
+    let focus = caustics::shaft_at(p, sunlit.shafts, point, 0.0);
+    under::lambert_leaving(p, depth, cos_gamma, albedo) * focus * shade * (-p.extinction.xyz() * hit.distance).exp()
 }
 
 /// The weight of layer `j + 1` for a bottom at `depth` between layers `j`
@@ -1207,24 +1216,25 @@ pub fn bottom_pixel(
     surface: Vec4,
     bottom: &[f32],
     caustic: &[u32],
-    geometry: &Geometry,
+    sunlit: &under::Sunlit,
     materials: &[GpuMaterial],
     clouds: &CloudShadow,
 ) -> Vec4 {
+    let geometry = &sunlit.geometry;
     if p.underwater != 0 {
         let v = under::decode(index, common, p, surface);
         let light = if v.end == under::END_BOTTOM {
             let (depth, cos_gamma) = under::bottom_at(p, bottom, &v);
             let q = v.end_point();
             under::bottom_leaving(p, depth, cos_gamma)
-                * caustics::caustic_at(p, caustic, q.x, q.z)
+                * bottom_focus(p, caustic, sunlit.shafts, q)
                 * under::sun_visibility(p, geometry, q)
         } else if v.end == under::END_SURFACE {
             let (depth, cos_gamma) = under::reflected_bottom(p, bottom, &v);
             let q = v.end_point() - v.up * (depth / v.up.y);
             bottom_radiance(p, v.up, depth, cos_gamma)
                 * v.reflectance
-                * caustics::caustic_at(p, caustic, q.x, q.z)
+                * bottom_focus(p, caustic, sunlit.shafts, q)
                 * under::sun_visibility(p, geometry, q)
         } else {
             return Vec4::ZERO;
@@ -1240,16 +1250,29 @@ pub fn bottom_pixel(
     let (depth, cos_gamma) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
     let object = object_under(&v, depth, geometry);
     let light = if object.distance != NO_HIT {
-        object_radiance(p, &v, &object, geometry, materials)
+        object_radiance(p, &v, &object, sunlit, materials)
     } else if depth >= DEEP {
         Vec3::ZERO
     } else {
         // Where the view ray meets the bottom: the waves' caustic there.
         let q = v.point - v.view * (depth / v.view.y);
-        let focus = caustics::caustic_at(p, caustic, q.x, q.z) * under::sun_visibility(p, geometry, q);
+        let focus = bottom_focus(p, caustic, sunlit.shafts, q) * under::sun_visibility(p, geometry, q);
         bottom_radiance(p, v.view, depth, cos_gamma) * focus
     };
     (light * v.transmission * clouds.at(p, v.point)).extend(0.0)
+}
+
+/// The waves' focusing of the sun at the bottom point `q` (scene
+/// coordinates, m): the bottom's caustic map over a flat bottom
+/// (`caustics::caustic_at`; 1 with `caustics = false`), over a varying
+/// bottom the shaft planes' caustic at the point's depth
+/// (`caustics::shaft_at`; 1 without planes).
+pub fn bottom_focus(p: &SeaParams, caustic: &[u32], shafts: &[Vec4], q: Vec3) -> Vec3 {
+    if p.bottom_nx >= 2 {
+        caustics::shaft_at(p, shafts, q, 0.0)
+    } else {
+        caustics::caustic_at(p, caustic, q.x, q.z)
+    }
 }
 
 #[spirv(compute(threads(64)))]
@@ -1433,6 +1456,7 @@ pub fn bottom_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 28)] bottom: &[f32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 77)] caustic: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 78)] shafts: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
@@ -1447,7 +1471,7 @@ pub fn bottom_kernel(
     if index < common.band_pixels {
         let clouds = CloudShadow { lights, grids, depths };
         let (i, p) = (index as usize, &params[0]);
-        let geometry = crate::scene_geometry(common, spheres, triangles, nodes);
+        let sunlit = under::Sunlit { shafts, geometry: crate::scene_geometry(common, spheres, triangles, nodes) };
         radiance[i] = bottom_pixel(
             common.band_start + index,
             common,
@@ -1455,7 +1479,7 @@ pub fn bottom_kernel(
             surface[i],
             bottom,
             caustic,
-            &geometry,
+            &sunlit,
             materials,
             &clouds,
         );

@@ -118,6 +118,7 @@ impl FluidParams {
 }
 
 /// The extent of the array holding `kind` (faces: one more along its axis).
+#[inline]
 pub fn extent(p: &FluidParams, kind: u32) -> UVec3 {
     let n = p.dims();
     if kind == KIND_U {
@@ -132,6 +133,7 @@ pub fn extent(p: &FluidParams, kind: u32) -> UVec3 {
 }
 
 /// Element `(i, j, k)` of an array of extent `e`, x fastest.
+#[inline]
 pub fn index(e: UVec3, i: u32, j: u32, k: u32) -> usize {
     (i + e.x * (j + e.y * k)) as usize
 }
@@ -143,6 +145,7 @@ pub fn coords(e: UVec3, flat: u32) -> UVec3 {
 
 /// Where element `(i, j, k)` of `kind` sits, in cells: a face's centre
 /// (`(i, j + 1/2, k + 1/2)` for `u`) or a cell's.
+#[inline]
 pub fn position(kind: u32, c: UVec3) -> Vec3 {
     let x = c.as_vec3();
     if kind == KIND_U {
@@ -158,6 +161,7 @@ pub fn position(kind: u32, c: UVec3) -> Vec3 {
 
 /// What `kind` is outside an open face: the wind, the ambient
 /// temperature, no smoke.
+#[inline]
 fn outside_value(p: &FluidParams, kind: u32) -> f32 {
     if kind <= KIND_W {
         p.wind(kind)
@@ -169,6 +173,7 @@ fn outside_value(p: &FluidParams, kind: u32) -> f32 {
 }
 
 /// Whether `x` (cells) lies beyond an open face of the box.
+#[inline]
 fn beyond_open_face(p: &FluidParams, x: Vec3) -> bool {
     let n = p.dims().as_vec3();
     (x.x < 0.0 && p.walls & WALL_X_LO == 0)
@@ -183,6 +188,7 @@ fn beyond_open_face(p: &FluidParams, x: Vec3) -> bool {
 /// the outside air's value beyond an open face, else clamped to the box
 /// (walls). Also the least and greatest of the eight values it blends
 /// (MacCormack's limiter).
+#[inline(always)]
 pub fn sample_bounded(p: &FluidParams, kind: u32, q: &[f32], x: Vec3) -> (f32, f32, f32) {
     if beyond_open_face(p, x) {
         let o = outside_value(p, kind);
@@ -213,6 +219,7 @@ pub fn sample_bounded(p: &FluidParams, kind: u32, q: &[f32], x: Vec3) -> (f32, f
 }
 
 /// `sample_bounded`'s value alone.
+#[inline(always)]
 pub fn sample(p: &FluidParams, kind: u32, q: &[f32], x: Vec3) -> f32 {
     sample_bounded(p, kind, q, x).0
 }
@@ -226,6 +233,7 @@ pub struct Velocity<'a> {
 }
 
 /// The velocity (m/s) at `x` (cells).
+#[inline]
 pub fn velocity_at(p: &FluidParams, vel: Velocity, x: Vec3) -> Vec3 {
     Vec3::new(sample(p, KIND_U, vel.u, x), sample(p, KIND_V, vel.v, x), sample(p, KIND_W, vel.w, x))
 }

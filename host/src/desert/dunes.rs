@@ -8,7 +8,7 @@ use anyhow::{bail, Result};
 use glam::UVec2;
 use indicatif::ProgressBar;
 use serde::Deserialize;
-use slicelight_shaders::desert::sand::{avalanche, relax_cell, sand_cell, SandParams};
+use slicelight_shaders::desert::sand::{avalanche, relax_apply, relax_choose, sand_cell, SandParams};
 use slicelight_shaders::types::CommonParams;
 
 use crate::cpu::for_each_invocation;
@@ -246,7 +246,7 @@ pub fn configure(field: &str, s: &Settings, size: [f32; 2]) -> Result<Setup> {
     };
     let avalanche_rounds = rounds("avalanche_rounds", s.avalanche_rounds, 2)?;
     let creep_rounds = rounds("creep_rounds", s.creep_rounds, 1)?;
-    let phases = 2 + 2 * (avalanche_rounds + creep_rounds);
+    let phases = 2 + 4 * (avalanche_rounds + creep_rounds);
     if 1 + s.steps as u64 * phases as u64 > MAX_DISPATCHES {
         bail!(invalid(&f("steps"), "fewer steps times rounds (the dispatch counter is 32 bits)", s.steps));
     }
@@ -352,9 +352,10 @@ pub fn settle(p: &SandParams, slabs: &[u32], limit: u32) -> Result<(Vec<u32>, u3
         let mut moved = false;
         for colour in 0..2 {
             let rule = avalanche(p, colour);
-            for_each_invocation(&mut next, 0, &ProgressBar::hidden(), |i, out| {
-                *out = UVec2::new(relax_cell(i, 0, p, &state, rule), 0)
-            });
+            let quiet = ProgressBar::hidden();
+            for_each_invocation(&mut next, 0, &quiet, |i, out| *out = relax_choose(i, 0, p, &state, rule));
+            std::mem::swap(&mut state, &mut next);
+            for_each_invocation(&mut next, 0, &quiet, |i, out| *out = relax_apply(i, p, &state));
             moved |= next != state;
             std::mem::swap(&mut state, &mut next);
         }

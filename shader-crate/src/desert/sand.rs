@@ -31,7 +31,12 @@
 //!    slab and moves with probability `creep`. Senders and receivers are of
 //!    different colours, so a round is a gather without conflicts; with
 //!    `repose >= 2` every avalanche move lowers the sum of squared heights,
-//!    so rounds repeated until nothing moves (`settled`) end.
+//!    so rounds repeated until nothing moves (`settled`) end. A round is
+//!    two phases: the senders *choose* (each writes the direction it sends
+//!    to, or 0), then every cell *applies* (a sender loses its slab, a
+//!    receiver gains one per neighbour whose choice points at it). One
+//!    phase would do, but then each receiver recomputes its four
+//!    neighbours' choices (20 reads) where it now reads four numbers.
 //!
 //! Random numbers: the counter-based hash of (cell, step, seed, stream) the
 //! cloud automaton uses; probabilities are thresholds on its 32 bits.
@@ -51,7 +56,8 @@ pub struct SandParams {
     pub nz: u32,
     pub cells: u32,
     pub seed: u32,
-    /// Phases per step: 2 + 2 (avalanche_rounds + creep_rounds).
+    /// Phases per step: 2 + 4 (avalanche_rounds + creep_rounds) (a round
+    /// is two colours, each a choose and an apply phase).
     pub phases: u32,
     pub avalanche_rounds: u32,
     pub creep_rounds: u32,
@@ -141,13 +147,20 @@ pub fn start_height(index: u32, p: &SandParams) -> u32 {
 
 /// Whether cell `(x, z)` lies in the wind shadow of a crest upwind: some
 /// `h(x - d) - h(x) > d drop / 256` (slabs; for whole slabs that is `>
-/// floor(d drop / 256)`, so no product of a height overflows).
+/// floor(d drop / 256)`, so no product of a height overflows). The scan
+/// walks the row upwind by index (wrapping at its start): this is the
+/// automaton's hottest loop on the CPU.
 fn shadowed(p: &SandParams, state: &[UVec2], x: i32, z: i32) -> bool {
-    let h = state[at(p, x, z)].x;
+    let row = wrap(z, p.nz) * p.nx;
+    let mut xi = wrap(x, p.nx);
+    let h = state[(row + xi) as usize].x;
+    let mut fall = 0;
     let mut d = 1;
     while d <= p.shadow_reach {
-        let up = state[at(p, x - d as i32, z)].x;
-        if up > h && up - h > (d * p.shadow_drop) >> 8 {
+        xi = if xi == 0 { p.nx - 1 } else { xi - 1 };
+        fall += p.shadow_drop;
+        let up = state[(row + xi) as usize].x;
+        if up > h && up - h > fall >> 8 {
             return true;
         }
         d += 1;
@@ -204,14 +217,15 @@ fn saltation_offset(index: u32, step: u32, p: &SandParams, state: &[UVec2]) -> u
 
 /// Phase 2: the height after the saltation (`state`'s `y`: phase 1's offset).
 fn gathered(index: u32, p: &SandParams, state: &[UVec2]) -> u32 {
-    let (x, z) = ((index % p.nx) as i32, (index / p.nx) as i32);
+    let (mut xi, row) = (index % p.nx, index - index % p.nx);
     let mut h = state[index as usize].x;
     if state[index as usize].y != 0 {
         h -= 1;
     }
     let mut d = 1;
     while d <= p.window {
-        if state[at(p, x - d as i32, z)].y == d {
+        xi = if xi == 0 { p.nx - 1 } else { xi - 1 };
+        if state[(row + xi) as usize].y == d {
             h += 1;
         }
         d += 1;
@@ -257,31 +271,37 @@ fn relax_choice(p: &SandParams, state: &[UVec2], x: u32, z: u32, step: u32, rule
     best
 }
 
-/// Phase 3: cell `index`'s height after one relaxation round of one colour.
-pub fn relax_cell(index: u32, step: u32, p: &SandParams, state: &[UVec2], rule: Relax) -> u32 {
+/// Phase 3a, a round's choice: cell `index` with `y` the direction it
+/// sends a slab to this round (0: none, or not of the round's colour).
+pub fn relax_choose(index: u32, step: u32, p: &SandParams, state: &[UVec2], rule: Relax) -> UVec2 {
     let (x, z) = (index % p.nx, index / p.nx);
-    let mut h = state[index as usize].x;
-    if (x + z) & 1 == rule.colour {
+    UVec2::new(state[index as usize].x, relax_choice(p, state, x, z, step, rule))
+}
+
+/// Phase 3b, a round's moves: cell `index`'s height after the round whose
+/// choices `state`'s `y` holds (`relax_choose`), and `y` cleared.
+pub fn relax_apply(index: u32, p: &SandParams, state: &[UVec2]) -> UVec2 {
+    let own = state[index as usize];
+    if own.y != 0 {
         // A sender this round (its neighbours are of the other colour).
-        if relax_choice(p, state, x, z, step, rule) != 0 {
-            h -= 1;
-        }
-        return h;
+        return UVec2::new(own.x - 1, 0);
     }
+    let (x, z) = (index % p.nx, index / p.nx);
     let n = neighbours(p, x, z);
+    let mut h = own.x;
     let mut dir = 0;
     while dir < 4 {
-        let m = n[dir];
         // The neighbour sends toward us if it chose the opposite direction
         // (on a 2-cell axis, both sides are one cell: counted once, from
-        // the side its choice names).
+        // the side its choice names; on a 1-cell axis the neighbour is
+        // this cell, which chose nothing).
         let opposite = if dir % 2 == 0 { dir as u32 + 2 } else { dir as u32 };
-        if relax_choice(p, state, m % p.nx, m / p.nx, step, rule) == opposite {
+        if state[n[dir] as usize].y == opposite {
             h += 1;
         }
         dir += 1;
     }
-    h
+    UVec2::new(h, 0)
 }
 
 /// Cell `index` after the automaton's dispatch `counter`: dispatch 0 lays
@@ -297,15 +317,17 @@ pub fn sand_cell(index: u32, counter: u32, p: &SandParams, state: &[UVec2]) -> U
     match phase {
         0 => UVec2::new(own.x, saltation_offset(index, step, p, state)),
         1 => UVec2::new(gathered(index, p, state), 0),
+        _ if phase % 2 == 1 => relax_apply(index, p, state),
         _ => {
-            let r = phase - 2;
+            // Relaxation `r` (a round's colour): its choose phase.
+            let r = (phase - 2) / 2;
             let round = r / 2;
             let rule = if round < p.avalanche_rounds {
                 avalanche(p, r % 2)
             } else {
                 Relax { colour: r % 2, threshold: 1, probability: p.creep, stream: STREAM_RELAX + r }
             };
-            UVec2::new(relax_cell(index, step, p, state, rule), 0)
+            relax_choose(index, step, p, state, rule)
         }
     }
 }
@@ -346,7 +368,7 @@ mod tests {
             nz,
             cells: nx * nz,
             seed: 3,
-            phases: 2 + 2 * 3,
+            phases: 2 + 4 * 3,
             avalanche_rounds: 2,
             creep_rounds: 1,
             mean_sand: 4,

@@ -29,7 +29,7 @@ fn shrink(name: &str, w: u32, h: u32, spp: u32, extra: &str) -> SceneData {
     let text = std::fs::read_to_string(common::root().join("scenes").join(name)).unwrap();
     let text = regex_free_resolution(&text, w, h);
     let mut data = common::scene_from_str(&format!("{text}\n{extra}"));
-    data.set_samples_per_pixel(spp).unwrap();
+    data = data.reconfigure(move |f| f.camera.samples_per_pixel = spp).unwrap();
     data
 }
 
@@ -856,7 +856,7 @@ fn the_balls_shadow_holds_the_light_tracers_halo() {
     // shadow's pixels more than 16 pixels (a sixth of the width) from the
     // focus's peak, 5 x 5-blurred against the light tracer's noise.
     let mut data = common::scene_from_str(&shadow_view());
-    data.set_samples_per_pixel(16).unwrap();
+    data = data.reconfigure(move |f| f.camera.samples_per_pixel = 16).unwrap();
     let w = data.width() as usize;
     let r = render_checked(&data, "shadow view");
     let direct = slicelight::reference::render_surfaces(&data);

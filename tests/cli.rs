@@ -179,6 +179,16 @@ fn bad_spp_pass_and_output_folder() {
     );
     let bad = GOOD.replace("[camera]", "[camera]\nsamples_per_pixel = 0");
     assert_rejected(&run_in(scene_dir(&bad), &["render", "scene.toml", "-o", "o.png"]), &["camera.samples_per_pixel"]);
+    // The overrides are edits of the file's settings, validated with it:
+    // the error names the flag and the field it set.
+    assert_rejected(
+        &run_in(scene_dir(GOOD), &["render", "scene.toml", "-o", "o.png", "--planes", "0"]),
+        &["--planes", "shafts.planes", "1..=100000"],
+    );
+    assert_rejected(
+        &run_in(scene_dir(GOOD), &["render", "scene.toml", "-o", "o.png", "--exposure=-1"]),
+        &["--exposure", "camera.exposure", "positive"],
+    );
 }
 
 fn scene_dir(toml: &str) -> tempfile::TempDir {
@@ -555,6 +565,31 @@ fn keyframes_move_the_camera_and_objects_between_frames() {
     // A keyframe naming a field the file lacks: the error names it.
     let bad = render(&(still("[0.0, 1.0, 0.0]", "[1.0, 3.0, 8.0]") + "[[keyframe]]\nat = 0.0\n\"camera.fov\" = 3.0\n"));
     assert_rejected(&bad, &["scene.toml", "camera.fov"]);
+}
+
+#[test]
+fn an_edited_animated_scene_keeps_its_keyframes_and_its_edits() {
+    // `reconfigure` (the command line's overrides, the benches' sweeps, the
+    // viewer) on an animated scene: the result is still animated, and
+    // every instant `at_time` builds has the edit, in the order made.
+    let text =
+        "[camera]\nposition = [0.0, 2.0, 9.0]\nlook_at = [0.0, 1.0, 0.0]\nvfov_deg = 50.0\nresolution = [48, 32]\n\
+                [[directional_light]]\ndirection = [0.3, -1.0, -0.2]\nirradiance = [3.0, 3.0, 3.0]\n\
+                [[keyframe]]\nat = 0.0\n\"camera.position\" = [0.0, 2.0, 9.0]\n\
+                [[keyframe]]\nat = 1.0\n\"camera.position\" = [2.0, 4.0, 7.0]\n";
+    let data = slicelight::scene::from_text(text, Path::new("animated.toml")).unwrap();
+    let edited = data
+        .reconfigure(|f| f.camera.samples_per_pixel = 4)
+        .unwrap()
+        .reconfigure(|f| f.camera.resolution = [24, 16])
+        .unwrap();
+    assert!(edited.source.animated.is_some());
+    let half = edited.at_time(0.5).unwrap();
+    assert_eq!(half.source.file.camera.position, [1.0, 3.0, 8.0]);
+    assert_eq!((half.samples_per_pixel(), half.width(), half.height()), (4, 24, 16));
+    // An edit that fails validation names the field, at any instant.
+    let bad = edited.reconfigure(|f| f.camera.samples_per_pixel = 0).unwrap_err();
+    assert!(format!("{bad:#}").contains("camera.samples_per_pixel"), "{bad:#}");
 }
 
 #[test]

@@ -400,7 +400,7 @@ fn ripple_lod_against_full_resolution() {
     let image =
         |d: &slicelight::scene::SceneData| slicelight::metrics::to_f64(&render(d, &Backend::Cpu, false).unwrap().0);
     let mut averaged = full.clone();
-    averaged.set_samples_per_pixel(16).unwrap();
+    averaged = averaged.reconfigure(move |f| f.camera.samples_per_pixel = 16).unwrap();
     let truth = image(&averaged);
     let f = image(&full);
     let measure = |i: &[glam::DVec3]| slicelight::metrics::difference(i, &truth, full.exposure);

@@ -28,7 +28,9 @@ fn fog_spot() -> SceneData {
 /// A scene that reaches the code paths fog_spot does not: a directional light
 /// through a window with a light map, a triangle mesh from OBJ, no light map
 /// on a spotlight with a hard edge, a coloured medium.
-fn window_scene() -> SceneData {
+/// The window scene with `edit` made to its settings (while its mesh and
+/// light map exist: they are read again).
+fn window_scene_with(edit: impl Fn(&mut slicelight::scene::SceneFile) + Send + Sync + 'static) -> SceneData {
     let dir = tempfile::tempdir().unwrap();
     let obj = "v -0.5 0 -0.5\nv 0.5 0 -0.5\nv 0 1 0\nv 0 0 0.5\nf 1 2 3\nf 2 4 3\nf 4 1 3\n";
     std::fs::write(dir.path().join("tetra.obj"), obj).unwrap();
@@ -69,32 +71,35 @@ fn window_scene() -> SceneData {
     "#;
     let path = dir.path().join("scene.toml");
     std::fs::write(&path, toml).unwrap();
-    slicelight::scene::load(&path).unwrap()
+    slicelight::scene::load(&path).unwrap().reconfigure(edit).unwrap()
+}
+
+fn window_scene() -> SceneData {
+    window_scene_with(|_| ())
 }
 
 /// The scenes every pass is checked on: between them they reach every
 /// kernel path (spot and directional lights, light maps, a mesh, exact and
 /// table shafts, the self-check).
 fn scenes() -> Vec<(&'static str, SceneData)> {
-    let mut tables = fog_spot();
-    let mut s = tables.shafts.settings;
-    s.mode = slicelight::scene::ShaftMode::Tables;
-    s.jitter = false;
-    tables.configure_shafts(s).unwrap();
-    let mut aa = window_scene();
-    aa.set_samples_per_pixel(4).unwrap();
-    aa.common.sample_index = 3;
+    let tables = fog_spot()
+        .reconfigure(|f| {
+            f.shafts.mode = slicelight::scene::ShaftMode::Tables;
+            f.shafts.jitter = false;
+        })
+        .unwrap();
+    let aa = window_scene_with(|f| f.camera.samples_per_pixel = 4).at_sample(3).unwrap();
     let mut fog = fog_spot();
     fog.requested_passes.push("scatter_check".into());
-    let mut mapped = window_scene();
-    mapped.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
+    let mapped = window_scene_with(|f| f.surface.shadows = slicelight::common::surface::SurfaceShadows::ShadowMap);
     let direct =
-        sky("sky_sunset", 180, 120).reconfigure(|f| f.sky.as_mut().expect("a [sky]").sky_view = false).unwrap();
+        sky("sky_sunset", 180, 120).reconfigure(move |f| f.sky.as_mut().expect("a [sky]").sky_view = false).unwrap();
     vec![
         ("fog_spot", fog),
         ("fog_spot, tables", tables),
         ("window", window_scene()),
         ("window, sample 3 of 4", aa),
+        ("window, shadow-mapped surfaces", mapped),
         ("sky_noon", sky("sky_noon", 128, 128)),
         ("sky_twilight", sky("sky_twilight", 128, 128)),
         ("sky_sunset, per-pixel sky", direct),
@@ -177,7 +182,7 @@ fn traced(name: &str, width: u32, height: u32) -> SceneData {
 /// A shipped scene at a smaller resolution of the same aspect.
 fn sky(name: &str, width: u32, height: u32) -> SceneData {
     let data = slicelight::scene::load(&common::root().join(format!("scenes/{name}.toml"))).unwrap();
-    data.reconfigure(|f| f.camera.resolution = [width, height]).unwrap()
+    data.reconfigure(move |f| f.camera.resolution = [width, height]).unwrap()
 }
 
 /// Every registered pass, on every scene that runs it: the CPU runs all
@@ -252,8 +257,7 @@ fn whole_render_matches_cpu() {
     // End to end through the pass plan on both backends, as the CLI runs it,
     // with 4 sub-pixel samples (the sample loop and the box filter).
     let ctx = device();
-    let mut data = fog_spot();
-    data.set_samples_per_pixel(4).unwrap();
+    let data = fog_spot().reconfigure(|f| f.camera.samples_per_pixel = 4).unwrap();
     let (cpu_img, _) = render::render(&data, &render::Backend::Cpu, false).unwrap();
     let gpu = render::Backend::Gpu(Box::new(ctx));
     let (gpu_img, stats) = render::render(&data, &gpu, false).unwrap();

@@ -12,12 +12,11 @@ use slicelight::{reference, scene::SceneData};
 /// (`sigma_s = 0` makes the plan skip the shafts pass; `sigma_t` still
 /// attenuates), so these tests see eq. 1's first term only.
 fn render_cpu(data: &SceneData) -> Vec<DVec3> {
-    // (Rebuilt from its file only where it scatters: a rebuild would drop
-    // what a test set on the scene itself, such as `set_surface_shadows`.)
+    // (Rebuilt only where it scatters: a rebuild costs a BVH.)
     let data = if data.common.sigma_s.truncate() == glam::Vec3::ZERO {
         data.clone()
     } else {
-        data.reconfigure(|f| f.medium.sigma_s = [0.0; 3]).unwrap()
+        data.reconfigure(move |f| f.medium.sigma_s = [0.0; 3]).unwrap()
     };
     to_f64(&render::render(&data, &Backend::Cpu, false).unwrap().0)
 }
@@ -216,7 +215,7 @@ fn every_shipped_scene_renders() {
         let data = slicelight::scene::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
         // A coarser pixel grid over the same view.
         let (w, h) = (data.width() / 4, data.height() / 4);
-        let data = data.reconfigure(|f| f.camera.resolution = [w, h]).unwrap_or_else(|e| panic!("{e:#}"));
+        let data = data.reconfigure(move |f| f.camera.resolution = [w, h]).unwrap_or_else(|e| panic!("{e:#}"));
         let (img, stats) = render::render(&data, &Backend::Cpu, false).unwrap();
         let lit = img.iter().filter(|p| p.truncate().max_element() > 0.0).count();
         assert!(img.iter().all(|p| p.truncate().is_finite()), "{}: not finite", path.display());
@@ -236,7 +235,7 @@ fn off_by_more_than_two_levels(data: &SceneData) -> (usize, usize) {
     let image = render_cpu(data);
     let centre = reference::render_surfaces(data);
     let mut four = data.clone();
-    four.set_samples_per_pixel(4).unwrap();
+    four = four.reconfigure(move |f| f.camera.samples_per_pixel = 4).unwrap();
     let mean = reference::render_surfaces(&four);
     let level = |v: f64| slicelight::output::to_8bit(v as f32, data.exposure) as i32;
     let (mut changing, mut other) = (0, 0);
@@ -263,14 +262,14 @@ fn surfaces_with_shadow_rays_agree_with_the_reference_to_two_levels() {
     // misjudges many more on the shadow's outline (kept as a check that this
     // test can fail).
     let data = slicelight::scene::load(&common::root().join("scenes/fig6_sphere.toml")).unwrap();
-    let mut data = data.reconfigure(|f| f.medium.sigma_s = [0.0; 3]).unwrap();
+    let mut data = data.reconfigure(move |f| f.medium.sigma_s = [0.0; 3]).unwrap();
     let (edge, other) = off_by_more_than_two_levels(&data);
     println!("shadow rays: {other} pixels off by more than 2 levels, {edge} more where the reference changes within the pixel");
     // Measured: 0, and 2 on the cone's hard edge (where f32's tangent test
     // and the reference's f64 angle test part at the pixel centre).
     assert_eq!(other, 0);
     assert!(edge <= 5, "{edge} edge pixels");
-    data.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
+    data = data.reconfigure(|f| f.surface.shadows = slicelight::common::surface::SurfaceShadows::ShadowMap).unwrap();
     let (edge, other) = off_by_more_than_two_levels(&data);
     println!("shadow map: {other} pixels off by more than 2 levels, {edge} more where the reference changes within the pixel");
     // Measured: 30, all on the shadow's outline.

@@ -282,7 +282,7 @@ fn antialiasing_averages_the_sub_pixel_samples() {
     // grid positions: render the four on their own (a 1-sample render at a
     // set sample index) and compare.
     let mut data = common::scene_from_str(&torus_scene([48, 24]));
-    data.set_samples_per_pixel(4).unwrap();
+    data = data.reconfigure(move |f| f.camera.samples_per_pixel = 4).unwrap();
     let (aa, stats) = render::render(&data, &Backend::Cpu, false).unwrap();
     assert_eq!(stats.samples_per_pixel, 4);
     let mut mean = vec![Vec4::ZERO; aa.len()];
@@ -310,7 +310,7 @@ fn antialiasing_averages_the_sub_pixel_samples() {
     // neither sample (the antialiasing does something).
     let (one, _) = {
         let mut d1 = data.clone();
-        d1.set_samples_per_pixel(1).unwrap();
+        d1 = d1.reconfigure(move |f| f.camera.samples_per_pixel = 1).unwrap();
         render::render(&d1, &Backend::Cpu, false).unwrap()
     };
     let changed = one.iter().zip(&aa).filter(|(a, b)| (**a - **b).abs().max_element() > 1e-3 * peak).count();

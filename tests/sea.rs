@@ -396,7 +396,7 @@ fn shore_against_a_path_tracer_over_the_height_field() {
     // 2 to 5 %) is checked the same way; the deterministic height-field
     // quadrature below is the sharper judge of order 2.
     let data = slicelight::scene::load(&common::root().join("scenes/sea_shore.toml")).unwrap();
-    let data = data.reconfigure(|f| f.camera.resolution = [72, 48]).unwrap();
+    let data = data.reconfigure(move |f| f.camera.resolution = [72, 48]).unwrap();
     let r = slicelight::render::render_layers(&data, &slicelight::render::Backend::Cpu, false).unwrap();
     let (o1, o2) = (layer(&r, "sea.order1"), layer(&r, "sea.order2"));
     let p = &data.sea.params;
@@ -467,7 +467,7 @@ fn shore_order2_against_the_height_field_quadrature() {
     // flat water alone (the flat quadrature at the view ray's depth) is
     // 2.5 %. Bounds: 2 % with the table, and it must beat no table.
     let data = slicelight::scene::load(&common::root().join("scenes/sea_shore.toml")).unwrap();
-    let data = data.reconfigure(|f| f.camera.resolution = [72, 48]).unwrap();
+    let data = data.reconfigure(move |f| f.camera.resolution = [72, 48]).unwrap();
     let r = slicelight::render::render_layers(&data, &slicelight::render::Backend::Cpu, false).unwrap();
     let o2 = layer(&r, "sea.order2");
     let mut no_table = data.clone();
@@ -535,7 +535,7 @@ fn horizon_window(filter: bool, spp: u32) -> (Vec<glam::Vec4>, Vec<glam::Vec4>, 
         12.0 - 60.0 * 4.0f32.to_radians().tan(),
         50.0 / 480.0 * height as f32,
     ));
-    data.set_samples_per_pixel(spp).unwrap();
+    data = data.reconfigure(move |f| f.camera.samples_per_pixel = spp).unwrap();
     let r = render_checked(&data, &format!("filter {filter}, {spp} spp"));
     (r.image.clone(), layer(&r, "sea.order1").to_vec(), width, height, data.exposure)
 }

@@ -6,6 +6,7 @@
 mod common;
 
 use glam::{DVec3, Vec4};
+use slicelight::common::surface::SurfaceShadows;
 use slicelight::metrics::{difference, to_f64, Difference};
 use slicelight::reference;
 use slicelight::render::{self, Backend};
@@ -16,14 +17,14 @@ fn render_cpu(data: &SceneData) -> Vec<Vec4> {
 }
 
 fn with_shafts(data: &SceneData, planes: u32, subplanes: u32, mode: ShaftMode, jitter: bool) -> SceneData {
-    let mut d = data.clone();
-    let mut s = d.shafts.settings;
-    s.planes = planes;
-    s.subplanes = subplanes;
-    s.mode = mode;
-    s.jitter = jitter;
-    d.configure_shafts(s).unwrap();
-    d
+    data.reconfigure(move |f| {
+        let s = &mut f.shafts;
+        s.planes = planes;
+        s.subplanes = subplanes;
+        s.mode = mode;
+        s.jitter = jitter;
+    })
+    .unwrap()
 }
 
 /// The Fig. 6 scene at 180x120: a coarser grid of pixel centres than the
@@ -284,7 +285,7 @@ fn one_by_one_image() {
 #[test]
 fn clear_air_skips_the_shafts_pass() {
     let toml = stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 30.0, [0.0, 1.5, 6.0], ISO);
-    let mut data = common::scene_from_str(&toml).reconfigure(|f| f.medium.sigma_s = [0.0; 3]).unwrap();
+    let data = common::scene_from_str(&toml).reconfigure(move |f| f.medium.sigma_s = [0.0; 3]).unwrap();
     let plan = render::plan(&data);
     let shafts = plan.iter().find(|p| p.name == "shafts").unwrap();
     assert!(!shafts.ran && shafts.reason.contains("does not scatter"), "{shafts:?}");
@@ -292,7 +293,7 @@ fn clear_air_skips_the_shafts_pass() {
     // with shadow-mapped surfaces they run again.
     let maps = plan.iter().find(|p| p.name == "shadow_maps").unwrap();
     assert!(!maps.ran, "{maps:?}");
-    data.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
+    let data = data.reconfigure(|f| f.surface.shadows = SurfaceShadows::ShadowMap).unwrap();
     assert!(render::plan(&data).iter().any(|p| p.name == "shadow_maps" && p.ran));
 }
 
@@ -318,14 +319,16 @@ fn eight_bit_mode_reproduces_the_papers_plane_count_trade_off() {
     let data = fig6_small();
     let (refimg, _) = reference::render_converged(&data, 2e-4);
     let err = |n: u32| {
-        let mut d = data.clone();
-        let mut s = d.shafts.settings;
-        s.planes = n;
-        s.subplanes = 1;
-        s.mode = ShaftMode::Tables;
-        s.jitter = false;
-        s.quantize_8bit = true;
-        d.configure_shafts(s).unwrap();
+        let d = data
+            .reconfigure(move |f| {
+                let s = &mut f.shafts;
+                s.planes = n;
+                s.subplanes = 1;
+                s.mode = ShaftMode::Tables;
+                s.jitter = false;
+                s.quantize_8bit = true;
+            })
+            .unwrap();
         error(&d, &refimg).rms_8bit_percent
     };
     let (few, paper, many) = (err(5), err(30), err(120));
@@ -431,7 +434,7 @@ fn shadow_maps_default_to_what_they_serve() {
     let toml = stress_scene(0.1, [0.0, 4.0, 0.0], [0.0, -1.0, 0.0], 30.0, [0.0, 1.5, 6.0], ISO)
         .replace("shadow_map_resolution = 128", "")
         + &spot(100);
-    let mut data = common::scene_from_str(&toml);
+    let data = common::scene_from_str(&toml);
     let layout = |d: &slicelight::scene::SceneData| {
         let maps: Vec<_> = d.lights.iter().map(|l| (l.shadow_resolution, l.shadow_offset)).collect();
         (maps, d.common.shadow_texel_count)
@@ -439,10 +442,10 @@ fn shadow_maps_default_to_what_they_serve() {
     // 49x33 pixels: a pixel spans 8 cm at the sphere, far more than a
     // 128-texel map's texel there; the least resolution is the default.
     assert_eq!(layout(&data), (vec![(MIN, 0), (100, MIN * MIN)], MIN * MIN + 100 * 100));
-    data.set_surface_shadows(slicelight::shaders::types::SHADOWS_MAP).unwrap();
-    assert_eq!(layout(&data), (vec![(MAX, 0), (100, MAX * MAX)], MAX * MAX + 100 * 100));
-    data.set_surface_shadows(slicelight::shaders::types::SHADOWS_RAYS).unwrap();
-    assert_eq!(layout(&data).1, MIN * MIN + 100 * 100);
+    let mapped = data.reconfigure(|f| f.surface.shadows = SurfaceShadows::ShadowMap).unwrap();
+    assert_eq!(layout(&mapped), (vec![(MAX, 0), (100, MAX * MAX)], MAX * MAX + 100 * 100));
+    let rays = mapped.reconfigure(|f| f.surface.shadows = SurfaceShadows::Rays).unwrap();
+    assert_eq!(layout(&rays).1, MIN * MIN + 100 * 100);
 
     // The rule itself: texels no wider than a pixel where the cone is seen.
     // Twice the image height halves the pixels' footprint and doubles the
@@ -453,7 +456,7 @@ fn shadow_maps_default_to_what_they_serve() {
     let light = fig6.lights[0];
     let at_height = |h: u32, eye: glam::Vec3, look: glam::Vec3| {
         let d = fig6
-            .reconfigure(|f| {
+            .reconfigure(move |f| {
                 f.camera.resolution = [h * 3 / 2, h];
                 f.camera.position = eye.to_array();
                 f.camera.look_at = look.to_array();

@@ -116,7 +116,7 @@ fn sky_matches_reference_for_every_sun_angle() {
         let (refvals, _) = reference::render_converged_at(&data, &pixels, 2e-4);
         for (mode, per_pixel) in [("sky-view table", false), ("per pixel", true)] {
             let data = if per_pixel {
-                data.reconfigure(|f| f.sky.as_mut().expect("a [sky]").sky_view = false).unwrap()
+                data.reconfigure(move |f| f.sky.as_mut().expect("a [sky]").sky_view = false).unwrap()
             } else {
                 data.clone()
             };
@@ -146,7 +146,7 @@ fn sunlit_scene_matches_reference() {
     // 96x64 the error was 0.32 % with 8 rays, 0.09 % with 64); the same
     // objects, shadows and sky are seen.
     let small = |rays: u32, light: bool| {
-        data.reconfigure(|f| {
+        data.reconfigure(move |f| {
             f.camera.resolution = [72, 48];
             let sky = f.sky.as_mut().unwrap();
             sky.sky_light_rays = rays;
@@ -226,7 +226,7 @@ fn sky_is_finite_at_the_edges() {
 #[test]
 fn sky_at_tiny_and_huge_image_sizes() {
     for (w, h) in [(1u32, 1u32), (8192, 4096)] {
-        let data = fisheye(8, 45.0, "").reconfigure(|f| f.camera.resolution = [w, h]).unwrap();
+        let data = fisheye(8, 45.0, "").reconfigure(move |f| f.camera.resolution = [w, h]).unwrap();
         let (image, _) = render::render(&data, &Backend::Cpu, false).unwrap();
         assert_eq!(image.len(), (w * h) as usize);
         assert!(image.iter().all(|p| p.is_finite() && p.min_element() >= 0.0), "{w}x{h}");

@@ -528,7 +528,7 @@ fn a_view_rendered_with_the_memo_is_the_fresh_render() {
     use slicelight::render::{self, Backend, Memo};
     let base = slicelight::scene::load(Path::new("../scenes/sea_open.toml")).expect("the scene");
     let at = |x: f32| {
-        base.reconfigure(|f| {
+        base.reconfigure(move |f| {
             f.camera.resolution = [64, 36];
             f.camera.position[0] += x;
         })
@@ -551,7 +551,7 @@ fn a_view_rendered_with_the_memo_is_the_fresh_render() {
         assert!(with.image == fresh.image, "{}: the memo changed the image", backend.name());
         // A changed sun changes every table's inputs (the sky's and the
         // sea's parameter blocks hold the sun): nothing is taken.
-        let sun = b.reconfigure(|f| f.sky.as_mut().expect("a sky").sun_zenith_deg += 10.0).expect("valid");
+        let sun = b.reconfigure(move |f| f.sky.as_mut().expect("a sky").sun_zenith_deg += 10.0).expect("valid");
         let hits = memo.hits;
         let moved = render::render_samples(&sun, &backend, 0..1, false, Some(&mut memo)).expect("renders");
         assert_eq!(memo.hits, hits, "{}: no table is reused after the sun moved", backend.name());

@@ -11,7 +11,7 @@ use slicelight::scene::SceneData;
 /// A shipped scene at a smaller resolution, through the validating path.
 fn shipped(name: &str, width: u32, height: u32) -> SceneData {
     let data = slicelight::scene::load(&common::root().join(format!("scenes/{name}.toml"))).unwrap();
-    data.reconfigure(|f| f.camera.resolution = [width, height]).unwrap()
+    data.reconfigure(move |f| f.camera.resolution = [width, height]).unwrap()
 }
 
 fn cpu_image(data: &SceneData) -> Vec<glam::Vec4> {
@@ -28,7 +28,7 @@ fn single_against_reference(
     tolerance: f64,
 ) -> (SceneData, Vec<glam::DVec3>, slicelight::metrics::Difference, Vec<glam::DVec3>) {
     let data = shipped(name, width, height)
-        .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
+        .reconfigure(move |f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
         .unwrap();
     assert!(data.volumes.enabled && data.volumes.params.octaves == 1);
     let image = to_f64(&cpu_image(&data));
@@ -44,7 +44,7 @@ fn single_against_reference(
 /// Pixels of `image` that differ (by more than 1e-3 relative) from the
 /// same scene rendered without its volumes: how much of the picture they cover.
 fn covered_pixels(data: &SceneData, image: &[glam::DVec3]) -> usize {
-    let clear = to_f64(&cpu_image(&data.reconfigure(|f| f.volume.clear()).unwrap()));
+    let clear = to_f64(&cpu_image(&data.reconfigure(move |f| f.volume.clear()).unwrap()));
     image.iter().zip(&clear).filter(|(a, b)| (**a - **b).length() > 1e-3 * b.length()).count()
 }
 
@@ -95,7 +95,7 @@ fn cumulus_matches_the_reference() {
 /// The scene with every volume drawn by splatting.
 fn splatted(data: &SceneData) -> SceneData {
     let s = data
-        .reconfigure(|f| f.volume.iter_mut().for_each(|v| v.method = slicelight::volumes::Method::Splatting))
+        .reconfigure(move |f| f.volume.iter_mut().for_each(|v| v.method = slicelight::volumes::Method::Splatting))
         .unwrap();
     assert_eq!(s.volumes.params.method, slicelight::shaders::volumes::METHOD_SPLATTING);
     s
@@ -180,7 +180,7 @@ fn thin_metaball_against_reference(lights: &str, worst_bound: f64) {
     use slicelight::shaders::camera::camera_ray;
     let data = splatted(
         &puff("[0.0, 1.0, 0.0, 0.8, 1.0]", "", &format!("{lights}\n[volumes]\nscattering = \"single\""))
-            .reconfigure(|f| {
+            .reconfigure(move |f| {
                 f.volume[0].sigma_t = [0.02; 3];
                 f.volume[0].sigma_s = [0.018; 3];
             })
@@ -234,8 +234,8 @@ fn multiple_scattering_against_monte_carlo() {
     let (reference, _) = slicelight::reference::render_converged(&data, 3e-3);
     let against = |d: &SceneData| difference(&to_f64(&cpu_image(d)), &reference, data.exposure);
     let columns = against(&data);
-    let octaves = against(&data.reconfigure(|f| f.volumes.scattering = Scattering::Octaves).unwrap());
-    let single = against(&data.reconfigure(|f| f.volumes.scattering = Scattering::Single).unwrap());
+    let octaves = against(&data.reconfigure(move |f| f.volumes.scattering = Scattering::Octaves).unwrap());
+    let single = against(&data.reconfigure(move |f| f.volumes.scattering = Scattering::Single).unwrap());
     println!(
         "cumulus 24x18 against Monte Carlo: columns {:.3} energy, {:.2} % RMS; octaves {:.3}, {:.2} %; single {:.3}, {:.2} %",
         columns.energy_ratio,
@@ -319,7 +319,7 @@ fn stress_cases_stay_finite() {
         (
             "optical depth 1e4",
             puff(BALLS, "", "")
-                .reconfigure(|f| {
+                .reconfigure(move |f| {
                     f.volume[0].sigma_t = [6000.0; 3];
                     f.volume[0].sigma_s = [5000.0; 3];
                 })
@@ -327,8 +327,8 @@ fn stress_cases_stay_finite() {
         ),
         ("no metaballs", puff("", "", "")),
         ("radius 1 mm", puff("[0.0, 1.0, 0.0, 0.001, 1.0]", "", "")),
-        ("box through the floor", puff(BALLS, "", "").reconfigure(|f| f.volume[0].min[1] = -1.0).unwrap()),
-        ("camera inside", puff(BALLS, "", "").reconfigure(|f| f.camera.position = [0.0, 1.0, 0.3]).unwrap()),
+        ("box through the floor", puff(BALLS, "", "").reconfigure(move |f| f.volume[0].min[1] = -1.0).unwrap()),
+        ("camera inside", puff(BALLS, "", "").reconfigure(move |f| f.camera.position = [0.0, 1.0, 0.3]).unwrap()),
     ]);
     let many: Vec<String> = (0..10_000)
         .map(|i| {
@@ -375,7 +375,7 @@ fn sane_cases(cases: &[(&str, SceneData)]) {
 fn low_and_set_sun() {
     for zenith in [89.5f32, 90.0, 100.0] {
         let data = shipped("cloud_cumulus", 32, 24);
-        let data = data.reconfigure(|f| f.sky.as_mut().unwrap().sun_zenith_deg = zenith).unwrap();
+        let data = data.reconfigure(move |f| f.sky.as_mut().unwrap().sun_zenith_deg = zenith).unwrap();
         assert_sane(&format!("sun at {zenith} degrees"), &data);
     }
 }
@@ -631,7 +631,7 @@ fn volumes_shadow_the_surfaces() {
     // Seen from above on the side the shadow falls (the light travels
     // along +x, -z), so the shadow is not behind the puff.
     let data = puff(BALLS, "", "[volumes]\nscattering = \"single\"")
-        .reconfigure(|f| {
+        .reconfigure(move |f| {
             f.camera.position = [3.0, 4.0, -4.0];
             f.camera.look_at = [0.3, 0.0, -0.4];
         })
@@ -645,7 +645,7 @@ fn volumes_shadow_the_surfaces() {
         d.rms_8bit_percent, d.max_8bit_percent
     );
     assert!(d.rms_8bit_percent < 1.0, "{d:?}");
-    let clear = data.reconfigure(|f| f.volume[0].metaballs.clear()).unwrap();
+    let clear = data.reconfigure(move |f| f.volume[0].metaballs.clear()).unwrap();
     let lit = slicelight::render::render_layers(&clear, &Backend::Cpu, false).unwrap();
     let surface = |r: &slicelight::render::Rendered| -> Vec<glam::Vec4> {
         r.layers.iter().find(|(n, _)| *n == "surface").unwrap().1.as_slice::<glam::Vec4>().to_vec()
@@ -723,7 +723,7 @@ fn bad_grids_name_the_file_and_field() {
 #[test]
 fn clouds_shade_the_sea() {
     let data = shipped("cloud_sea", 64, 48)
-        .reconfigure(|f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
+        .reconfigure(move |f| f.volumes.scattering = slicelight::volumes::Scattering::Single)
         .unwrap();
     assert!(data.sea.params.sun_light > 0);
     let order1 = |d: &SceneData| -> Vec<glam::Vec4> {
@@ -733,7 +733,7 @@ fn clouds_shade_the_sea() {
     let shaded = order1(&data);
     // The same scene with the cloud's box moved far behind the camera.
     let clear = data
-        .reconfigure(|f| {
+        .reconfigure(move |f| {
             f.volume[0].min = [-900.0, 700.0, 90000.0];
             f.volume[0].max = [900.0, 1600.0, 91800.0];
         })
@@ -871,7 +871,7 @@ fn volumes_shadow_the_fog() {
     let outside = pixels_by_box(&data, false);
     let image = to_f64(&cpu_image(&data));
     let (reference, _) = slicelight::reference::render_converged_at(&data, &outside, 1e-3);
-    let clear = data.reconfigure(|f| f.volume[0].metaballs.clear()).unwrap();
+    let clear = data.reconfigure(move |f| f.volume[0].metaballs.clear()).unwrap();
     let (unshadowed, _) = slicelight::reference::render_converged_at(&clear, &outside, 1e-3);
     let method: Vec<_> = outside.iter().map(|&i| image[i as usize]).collect();
     let (rms, _) = slicelight::metrics::relative_error(&method, &reference);

@@ -296,14 +296,63 @@ struct ShaftOverrides {
     no_jitter: bool,
 }
 
-impl ShaftOverrides {
-    fn apply(&self, data: &mut scene::SceneData) -> Result<()> {
-        let mut s = data.shafts.settings;
-        s.planes = self.planes.unwrap_or(s.planes);
-        s.subplanes = self.subplanes.unwrap_or(s.subplanes);
-        s.mode = self.mode.unwrap_or(s.mode);
-        s.jitter &= !self.no_jitter;
-        data.configure_shafts(s).map_err(|e| anyhow!("command line: --{}", e.to_string().replace('_', "-")))
+/// A command's overrides of the scene file's settings. They are an edit of
+/// the file (`scene::load_edited`), built and validated with it once, and
+/// kept by an animated scene for every frame.
+#[derive(Default, Clone)]
+struct Overrides {
+    shafts: ShaftOverrides,
+    spp: Option<u32>,
+    exposure: Option<f32>,
+    surface_shadows: Option<slicelight::common::surface::SurfaceShadows>,
+}
+
+impl Overrides {
+    /// The flags given and the file's fields they set.
+    fn given(&self) -> Vec<(&'static str, &'static str)> {
+        let s = &self.shafts;
+        [
+            (s.planes.is_some(), "--planes", "shafts.planes"),
+            (s.subplanes.is_some(), "--subplanes", "shafts.subplanes"),
+            (s.mode.is_some(), "--mode", "shafts.mode"),
+            (s.no_jitter, "--no-jitter", "shafts.jitter"),
+            (self.spp.is_some(), "--spp", "camera.samples_per_pixel"),
+            (self.exposure.is_some(), "--exposure", "camera.exposure"),
+            (self.surface_shadows.is_some(), "--surface-shadows", "surface.shadows"),
+        ]
+        .into_iter()
+        .filter_map(|(given, flag, field)| given.then_some((flag, field)))
+        .collect()
+    }
+
+    /// The edit of the file's settings, if any flag is given.
+    fn edit(&self) -> Option<scene::Edit> {
+        if self.given().is_empty() {
+            return None;
+        }
+        let o = self.clone();
+        Some(std::sync::Arc::new(move |f: &mut scene::SceneFile| {
+            let s = &mut f.shafts;
+            s.planes = o.shafts.planes.unwrap_or(s.planes);
+            s.subplanes = o.shafts.subplanes.unwrap_or(s.subplanes);
+            s.mode = o.shafts.mode.unwrap_or(s.mode);
+            s.jitter &= !o.shafts.no_jitter;
+            f.camera.samples_per_pixel = o.spp.unwrap_or(f.camera.samples_per_pixel);
+            f.camera.exposure = o.exposure.unwrap_or(f.camera.exposure);
+            f.surface.shadows = o.surface_shadows.unwrap_or(f.surface.shadows);
+        }))
+    }
+
+    /// The scene at `path` with the overrides applied; an error about a
+    /// field a flag set names the flag.
+    fn load(&self, path: &Path) -> Result<scene::SceneData> {
+        scene::load_edited(path, self.edit()).map_err(|e| {
+            let text = format!("{e:#}");
+            match self.given().into_iter().find(|(_, field)| text.contains(&format!("{field}:"))) {
+                Some((flag, _)) => anyhow!("command line: {flag}: {text}"),
+                None => e,
+            }
+        })
     }
 }
 
@@ -407,13 +456,6 @@ fn print_summary(st: &render::RenderStats, all: bool) {
     }
 }
 
-fn set_spp(data: &mut scene::SceneData, spp: Option<u32>) -> Result<()> {
-    match spp {
-        Some(n) => data.set_samples_per_pixel(n).map_err(|e| anyhow!("command line: --spp: {e}")),
-        None => Ok(()),
-    }
-}
-
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Render(args) => render_command(args),
@@ -478,7 +520,8 @@ fn render_command(args: RenderArgs) -> Result<()> {
     };
     // Simulations step where the frame renders (their kernels, or their CPU twins).
     render::simulate_on(backend);
-    let base = scene::load(&scene)?;
+    let overrides = Overrides { shafts, spp, exposure, surface_shadows };
+    let base = overrides.load(&scene)?;
     for (_, outs, st) in &jobs {
         check_outputs(outs)?;
         if let Some(path) = st {
@@ -522,17 +565,6 @@ fn render_command(args: RenderArgs) -> Result<()> {
                 base.at_time(t).map_err(|e| anyhow!("{}: {e}", scene.display()))?
             }
         };
-        shafts.apply(&mut data)?;
-        set_spp(&mut data, spp)?;
-        if let Some(e) = exposure {
-            if !(e.is_finite() && e > 0.0) {
-                return Err(anyhow!("command line: --exposure: expected a positive number, got {e}"));
-            }
-            data.exposure = e;
-        }
-        if let Some(s) = surface_shadows {
-            data.set_surface_shadows(s.code())?;
-        }
         data.requested_passes = passes.clone();
         let rendered = render::render_layers(&data, &backend, show && frame.is_none())?;
         let stats_of = &rendered.stats;
@@ -571,8 +603,7 @@ fn reference_command(args: ReferenceArgs) -> Result<()> {
     if paths == 0 {
         return Err(anyhow!("command line: --paths: expected at least 1 light path, got 0"));
     }
-    let mut data = scene::load(&scene)?;
-    set_spp(&mut data, spp)?;
+    let data = Overrides { spp, ..Default::default() }.load(&scene)?;
     reference::supports(&data).map_err(|e| anyhow!("{}: {e}", scene.display()))?;
     let t = Instant::now();
     let (mut image, samples) = reference::render_converged(&data, tolerance);

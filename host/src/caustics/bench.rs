@@ -126,7 +126,8 @@ fn glass_sphere(file: &scene::SceneFile) -> bool {
 /// glass spheres tessellated so, validated as a file's are (the table's
 /// memory limit included). The table is traced afresh (no disk cache).
 fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
-    data.reconfigure(|f| {
+    let c = *c;
+    data.reconfigure(move |f| {
         f.caustics.directions = c.directions;
         f.caustics.compression = c.compression;
         f.caustics.planes = c.planes;
@@ -148,13 +149,12 @@ fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
 }
 
 /// The image at reduced size with 16 samples per pixel.
-fn small(mut data: SceneData, stride: u32) -> Result<SceneData> {
+fn small(data: SceneData, stride: u32) -> Result<SceneData> {
     let (w, h) = ((data.width() / stride).max(8), (data.height() / stride).max(6));
-    data.common.width = w;
-    data.common.height = h;
-    data.common.band_pixels = w * h;
-    data.set_samples_per_pixel(16)?;
-    Ok(data)
+    data.reconfigure(move |f| {
+        f.camera.resolution = [w, h];
+        f.camera.samples_per_pixel = 16;
+    })
 }
 
 /// Pixels none of whose sub-pixel samples sees glass first (the pixels the

@@ -63,7 +63,7 @@ impl crate::bench::Sweep for DesertSweep {
 
 /// The scene with every terrain meshed by `n x n` quadrilaterals.
 fn meshed(data: &SceneData, n: u32) -> Result<SceneData> {
-    data.reconfigure(|f| f.terrain.iter_mut().for_each(|t| t.mesh = Some([n, n])))
+    data.reconfigure(move |f| f.terrain.iter_mut().for_each(|t| t.mesh = Some([n, n])))
         .with_context(|| format!("desert bench: mesh {n} x {n}"))
 }
 
@@ -75,7 +75,7 @@ fn dunes_on(data: &SceneData, n: u32, steps: u32) -> Result<Option<SceneData>> {
         return Ok(None);
     }
     let mut d = data
-        .reconfigure(|f| {
+        .reconfigure(move |f| {
             if let Some(t) = f.terrain.iter_mut().find(|t| t.dunes.is_some()) {
                 let dunes = t.dunes.as_mut().expect("found");
                 let cell = t.size[0] / dunes.cells[0] as f32;
@@ -122,7 +122,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
                 let d = if series == "mesh" {
                     meshed(data, n)?
                 } else {
-                    finest.reconfigure(|f| {
+                    finest.reconfigure(move |f| {
                         f.terrain.iter_mut().filter_map(|t| t.ripples.as_mut()).for_each(|r| r.lod = false)
                     })?
                 };

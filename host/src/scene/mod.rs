@@ -80,13 +80,31 @@ pub struct SceneData {
 }
 
 /// A scene as its file gave it (see `SceneData::reconfigure`).
-#[derive(Debug)]
 pub struct Source {
+    /// The file's settings at this instant, every edit applied.
     pub file: SceneFile,
     pub base: std::path::PathBuf,
     /// With `[[keyframe]]`s: the file's TOML without them, and the
     /// keyframes (`keyframes::take`), from which `at_time` builds an instant.
     pub animated: Option<(toml::Table, Keyframes)>,
+    /// The edits made since the file was read (command-line overrides,
+    /// `reconfigure`), in order: an animated scene applies them again to
+    /// every instant `at_time` builds from its keyframes.
+    pub edits: Vec<Edit>,
+}
+
+/// A change to a scene file's settings (`SceneData::reconfigure`).
+pub type Edit = std::sync::Arc<dyn Fn(&mut SceneFile) + Send + Sync>;
+
+impl std::fmt::Debug for Source {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Source")
+            .field("file", &self.file)
+            .field("base", &self.base)
+            .field("animated", &self.animated)
+            .field("edits", &self.edits.len())
+            .finish()
+    }
 }
 
 pub use keyframes::Keyframes;
@@ -94,21 +112,33 @@ pub use keyframes::Keyframes;
 impl SceneData {
     /// The scene with its file's settings edited by `edit`, built and
     /// validated again from the start, exactly as `load` does: the one way
-    /// the benches' sweeps change a family's settings (a table size, a
-    /// tessellation, a plane count), so that every setting they try passes
-    /// the checks and limits a scene file's does. Errors name the field.
-    pub fn reconfigure(&self, edit: impl FnOnce(&mut SceneFile)) -> Result<SceneData> {
-        let mut file = self.source.file.clone();
-        edit(&mut file);
-        build(&file, &self.source.base)
+    /// settings change after a scene is read (the command line's overrides,
+    /// the benches' sweeps, the viewer, tests), so that every setting tried
+    /// passes the checks and limits a scene file's does. Errors name the
+    /// field. An animated scene stays animated: `at_time` applies the edit
+    /// again at every instant.
+    pub fn reconfigure(&self, edit: impl Fn(&mut SceneFile) + Send + Sync + 'static) -> Result<SceneData> {
+        let edit: Edit = std::sync::Arc::new(edit);
+        let mut edits = self.source.edits.clone();
+        edits.push(edit.clone());
+        match &self.source.animated {
+            Some((raw, keys)) => from_table(raw, keys, &self.source.base, Some(self.time), &edits),
+            None => {
+                let mut file = self.source.file.clone();
+                edit(&mut file);
+                let mut data = build(&file, &self.source.base)?;
+                std::sync::Arc::get_mut(&mut data.source).expect("just built").edits = edits;
+                Ok(data)
+            }
+        }
     }
 
     /// The scene at time `t` (s): its `[time] seconds` set to `t` and, with
     /// `[[keyframe]]`s, every animated field at its value then.
     pub fn at_time(&self, t: f64) -> Result<SceneData> {
         match &self.source.animated {
-            None => self.reconfigure(|f| f.time.seconds = t),
-            Some((raw, keys)) => from_table(raw, keys, &self.source.base, Some(t)),
+            None => self.reconfigure(move |f| f.time.seconds = t),
+            Some((raw, keys)) => from_table(raw, keys, &self.source.base, Some(t), &self.source.edits),
         }
     }
 
@@ -232,25 +262,22 @@ impl SceneData {
     }
 
     /// Applies shaft settings (see `shafts::configure`).
-    pub fn configure_shafts(&mut self, s: Shafts) -> Result<()> {
+    fn configure_shafts(&mut self, s: Shafts) -> Result<()> {
         crate::shafts::configure(self, s)
     }
 
-    /// Sets the sub-pixel samples per pixel (`[camera] samples_per_pixel`, `--spp`).
-    pub fn set_samples_per_pixel(&mut self, spp: u32) -> Result<()> {
-        if !(1..=MAX_SAMPLES_PER_PIXEL).contains(&spp) {
-            bail!(invalid("samples_per_pixel", &format!("a sample count in 1..={MAX_SAMPLES_PER_PIXEL}"), spp));
+    /// The scene as sub-pixel sample `k` of its `samples_per_pixel` is
+    /// dispatched (`sample_index`: which sub-pixel position the camera's
+    /// rays go through; the renderer sets it per sample): for checks of
+    /// one sample's passes.
+    pub fn at_sample(&self, k: u32) -> Result<SceneData> {
+        let n = self.common.samples_per_pixel;
+        if k >= n {
+            bail!(invalid("sample", &format!("a sample index below samples_per_pixel = {n}"), k));
         }
-        self.common.samples_per_pixel = spp;
-        Ok(())
-    }
-
-    /// Sets how directly seen surfaces are shadowed (`SHADOWS_RAYS` or
-    /// `SHADOWS_MAP`) and lays the shadow maps out again, since their default
-    /// resolution depends on it.
-    pub fn set_surface_shadows(&mut self, code: u32) -> Result<()> {
-        self.common.surface_shadows = code;
-        self.lay_out_shadow_maps()
+        let mut d = self.clone();
+        d.common.sample_index = k;
+        Ok(d)
     }
 
     /// Gives each spot and directional light its shadow map, one after the
@@ -312,30 +339,52 @@ impl SceneData {
 /// Reads, validates and converts a scene file. Relative paths inside it are
 /// taken relative to the file's folder.
 pub fn load(path: &Path) -> Result<SceneData> {
+    load_edited(path, None)
+}
+
+/// `load` with `edit` applied to the file's settings before the scene is
+/// built (the command line's overrides): one build, validated as the file
+/// is, and kept by an animated scene for every instant.
+pub fn load_edited(path: &Path, edit: Option<Edit>) -> Result<SceneData> {
     crate::output::regular_file("the scene file", path, crate::output::MAX_SCENE_BYTES)
         .map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let text =
         std::fs::read_to_string(path).with_context(|| format!("{}: cannot read the scene file", path.display()))?;
-    from_text(&text, path)
+    from_text_edited(&text, path, edit)
 }
 
 /// A scene from a scene file's text; `path` names it in errors and its
 /// folder is where the file's paths start.
 pub fn from_text(text: &str, path: &Path) -> Result<SceneData> {
+    from_text_edited(text, path, None)
+}
+
+fn from_text_edited(text: &str, path: &Path, edit: Option<Edit>) -> Result<SceneData> {
     let base = path.parent().unwrap_or(Path::new("."));
     let mut raw: toml::Table = text.parse().map_err(|e| anyhow!("{}: {}", path.display(), e))?;
     let keys = keyframes::take(&mut raw).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    let edits: Vec<Edit> = edit.into_iter().collect();
     if !keys.is_empty() {
-        return from_table(&raw, &keys, base, None).map_err(|e| anyhow!("{}: {}", path.display(), e));
+        return from_table(&raw, &keys, base, None, &edits).map_err(|e| anyhow!("{}: {}", path.display(), e));
     }
     // Without keyframes, read from the text: serde's errors then give lines.
-    let file: SceneFile = toml::from_str(text).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
-    build(&file, base).map_err(|e| anyhow!("{}: {}", path.display(), e))
+    let mut file: SceneFile = toml::from_str(text).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    edits.iter().for_each(|e| e(&mut file));
+    let mut data = build(&file, base).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    std::sync::Arc::get_mut(&mut data.source).expect("just built").edits = edits;
+    Ok(data)
 }
 
 /// The scene of an animated file (`raw` without its keyframes `keys`) at
-/// `time` (s; default the file's `[time] seconds`).
-fn from_table(raw: &toml::Table, keys: &Keyframes, base: &Path, time: Option<f64>) -> Result<SceneData> {
+/// `time` (s; default the file's `[time] seconds`), `edits` applied to the
+/// settings of that instant.
+fn from_table(
+    raw: &toml::Table,
+    keys: &Keyframes,
+    base: &Path,
+    time: Option<f64>,
+    edits: &[Edit],
+) -> Result<SceneData> {
     let mut table = raw.clone();
     if let Some(t) = time {
         let clock = table.entry("time").or_insert_with(|| toml::Value::Table(toml::Table::new()));
@@ -349,10 +398,15 @@ fn from_table(raw: &toml::Table, keys: &Keyframes, base: &Path, time: Option<f64
         None => 0.0,
     };
     keyframes::apply(&mut table, keys, t)?;
-    let file: SceneFile = toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| anyhow!("{e}"))?;
+    let mut file: SceneFile = toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| anyhow!("{e}"))?;
+    edits.iter().for_each(|e| e(&mut file));
     let mut data = build(&file, base)?;
-    data.source =
-        std::sync::Arc::new(Source { file, base: base.to_path_buf(), animated: Some((raw.clone(), keys.clone())) });
+    data.source = std::sync::Arc::new(Source {
+        file,
+        base: base.to_path_buf(),
+        animated: Some((raw.clone(), keys.clone())),
+        edits: edits.to_vec(),
+    });
     Ok(data)
 }
 
@@ -568,7 +622,12 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         requested_passes: Vec::new(),
         disabled_passes: Vec::new(),
         time,
-        source: std::sync::Arc::new(Source { file: file.clone(), base: base.to_path_buf(), animated: None }),
+        source: std::sync::Arc::new(Source {
+            file: file.clone(),
+            base: base.to_path_buf(),
+            animated: None,
+            edits: Vec::new(),
+        }),
     };
     data.lay_out_shadow_maps()?;
     data.configure_shafts(file.shafts).map_err(|e| anyhow!("shafts.{e}"))?;

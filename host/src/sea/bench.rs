@@ -69,7 +69,8 @@ pub fn sweep(auto: &SeaParams, quick: bool) -> Vec<Config> {
 /// The scene with `c`'s settings in its `[sea]`, validated (and held to
 /// the tables' memory limit) as a file's are.
 fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
-    data.reconfigure(|f| {
+    let c = *c;
+    data.reconfigure(move |f| {
         if let Some(s) = f.sea.as_mut() {
             s.planes = Some(c.planes);
             s.directions = Some(c.directions());

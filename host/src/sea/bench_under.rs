@@ -72,7 +72,8 @@ fn sweep(data: &SceneData, quick: bool) -> Vec<Config> {
 
 /// The scene with `c`'s counts and the wave filter off, validated as a file's are.
 fn configure(data: &SceneData, c: Option<&Config>) -> Result<SceneData> {
-    data.reconfigure(|f| {
+    let c = c.copied();
+    data.reconfigure(move |f| {
         if let Some(s) = f.sea.as_mut() {
             if let Some(c) = c {
                 s.planes = Some(c.planes);

@@ -42,14 +42,13 @@ pub struct Row {
 /// The scene at a third of its resolution, `spp` samples per pixel and the
 /// wave filter on or off, validated as a file's settings are.
 fn configure(data: &SceneData, filter: bool, spp: u32) -> Result<SceneData> {
-    let mut d = data.reconfigure(|f| {
+    data.reconfigure(move |f| {
         f.camera.resolution = f.camera.resolution.map(|n| (n / 3).max(8));
+        f.camera.samples_per_pixel = spp;
         if let Some(Waves::Spectrum(s)) = f.sea.as_mut().map(|s| &mut s.waves) {
             s.filter = filter;
         }
-    })?;
-    d.set_samples_per_pixel(spp)?;
-    Ok(d)
+    })
 }
 
 /// The first image row whose every pixel sees the sea (`seen`: a sea

@@ -99,7 +99,6 @@ pub fn sweep(quick: bool) -> Vec<Config> {
 }
 
 fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
-    let mut d = data.clone();
     let s = Shafts {
         planes: c.planes,
         subplanes: c.subplanes,
@@ -110,8 +109,7 @@ fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
         h_table_size: [c.table_size, c.table_size],
         quantize_8bit: c.quantize_8bit,
     };
-    d.configure_shafts(s)?;
-    Ok(d)
+    data.reconfigure(move |f| f.shafts = s)
 }
 
 /// The shafts family's sweep (`passes::FAMILIES` registers it): scenes in

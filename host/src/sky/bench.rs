@@ -61,7 +61,8 @@ pub fn sweep(quick: bool) -> Vec<Config> {
 
 /// The scene with `c`'s settings in its `[sky]`, validated as a file's are.
 fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
-    data.reconfigure(|f| {
+    let c = *c;
+    data.reconfigure(move |f| {
         if let Some(s) = f.sky.as_mut() {
             s.sky_view = c.sky_view;
             s.view_samples = c.view_samples;

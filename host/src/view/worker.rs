@@ -210,8 +210,9 @@ fn guarded<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
 pub fn build(base: &SceneData, view: &ViewState) -> Result<SceneData> {
     let t = base.source.file.time.seconds + view.time;
     let at = if base.source.animated.is_some() && view.time != 0.0 { base.at_time(t)? } else { base.clone() };
-    let mut data = at.reconfigure(|f| {
-        view.apply(f);
+    let view_edit = view.clone();
+    let mut data = at.reconfigure(move |f| {
+        view_edit.apply(f);
         f.time.seconds = t;
     })?;
     data.disabled_passes = view.disabled.iter().cloned().collect();

@@ -72,7 +72,8 @@ pub fn sweep(quick: bool, splattable: bool) -> Vec<Config> {
 
 /// The scene with `c`'s settings in its `[volumes]`, validated as a file's are.
 fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
-    data.reconfigure(|f| {
+    let c = *c;
+    data.reconfigure(move |f| {
         let s = &mut f.volumes;
         s.planes = c.planes;
         s.light_grid = c.light_grid.map(|n| [n; 3]);

@@ -104,6 +104,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("sky_twilight", sky("sky_twilight", 128, 128)),
         ("sky_sunset, per-pixel sky", direct),
         ("sun_garden", sky("sun_garden", 180, 120)),
+        ("glass_garden", traced("glass_garden", 180, 120)),
         ("sea_open", sky("sea_open", 180, 120)),
         ("sea_calm_noon", sky("sea_calm_noon", 180, 120)),
         ("sea_shore", sky("sea_shore", 180, 120)),

@@ -302,15 +302,24 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         }
     };
     if data.materials[hit.material as usize].kind == MATERIAL_GLASS {
-        // Through glass: the opaque surface behind, lit directly, per channel.
+        // Through glass: the opaque surface behind, lit directly, per
+        // channel; or, under a sky, the sky where the ray leaves the glass
+        // for good, and the sky reflected at the first interface.
         let mut radiance = DVec3::ZERO;
+        let mut sky = DVec3::ZERO;
         for c in 0..3 {
-            if let Some((q, dir, weight, behind)) = crate::caustics::reference::through_glass(data, o, d, &hit, c) {
-                let l = direct(data, q, dir, &behind) * (-sigma_t * behind.t).exp();
-                radiance[c] += l[c] * weight;
+            match crate::caustics::reference::through_glass(data, o, d, &hit, c) {
+                Some((q, dir, weight, Some(behind))) => {
+                    let l = direct(data, q, dir, &behind) * (-sigma_t * behind.t).exp();
+                    radiance[c] += l[c] * weight;
+                }
+                Some((q, dir, weight, None)) => sky[c] += open_sky(data, q, dir)[c] * weight,
+                None => {}
             }
+            let (q, r, mirrored) = crate::caustics::reference::glass_reflection(data, o, d, &hit, c);
+            sky[c] += open_sky(data, q, mirrored)[c] * r;
         }
-        return (air(radiance * (-sigma_t * hit.t).exp()), hit.t);
+        return (air(radiance * (-sigma_t * hit.t).exp() + sky), hit.t);
     }
     // A terrain's ripples at their full resolution (the LOD's truth).
     let hit = crate::desert::reference::rippled(data, o, d, hit.clone());
@@ -319,6 +328,21 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
     let sky = crate::sky::reference::sky_light(data, o + d * hit.t, normal, hit.albedo);
     (air((direct(data, o, d, &hit) + sky) * (-sigma_t * hit.t).exp()), hit.t)
+}
+
+/// The sky (and the sun's disk) along `dir` from `from`, if nothing is in
+/// the way and it is the sky that lies that way (not a sea below the eye);
+/// else 0. Not attenuated by a `[medium]` on the way out, as the sky seen
+/// directly is not.
+fn open_sky(data: &SceneData, from: DVec3, dir: DVec3) -> DVec3 {
+    if !data.sky.enabled || (data.sea.enabled && dir.y < 0.0) {
+        return DVec3::ZERO;
+    }
+    let eps = 1e-9 * from.abs().max_element().max(1.0);
+    if nearest(data, from, dir, eps, f64::INFINITY).is_some() {
+        return DVec3::ZERO;
+    }
+    SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(dir)
 }
 
 /// Points per line light of the reference's direct light: the midpoint

@@ -56,6 +56,18 @@ fn shading_normal(data: &SceneData, triangle: usize, p: DVec3) -> DVec3 {
     (n[0] * (1.0 - w1 - w2) + n[1] * w1 + n[2] * w2).normalize_or(n[0])
 }
 
+/// Channel `c`'s Fresnel reflectance at the first interface of a view ray
+/// in direction `d` whose first hit `first` is glass, and the reflected
+/// direction from the point hit.
+pub(crate) fn glass_reflection(data: &SceneData, o: DVec3, d: DVec3, first: &Surface, c: usize) -> (DVec3, f64, DVec3) {
+    let p = o + d * first.t;
+    let n = shading_normal(data, first.triangle, p);
+    let facing = if n.dot(d) > 0.0 { -n } else { n };
+    let ior = data.materials[first.material as usize].ior[c] as f64;
+    let (r, _) = interface(d, facing, 1.0 / ior);
+    (p, r, d - facing * (2.0 * facing.dot(d)))
+}
+
 /// Fresnel reflectance for unpolarised light and the refracted direction
 /// (None past the critical angle), `n` facing against `d`, `eta` = n_i / n_t.
 fn interface(d: DVec3, n: DVec3, eta: f64) -> (f64, Option<DVec3>) {
@@ -75,16 +87,17 @@ fn epsilon(p: DVec3) -> f64 {
 
 /// A view ray `o + t d` whose first hit `first` is glass, followed in
 /// channel `c` through the glass (refraction with the Fresnel transmittance
-/// as weight, total internal reflection followed) to the first opaque
-/// surface: (the point it leaves the glass from, its direction, the weight,
-/// the surface hit from there). The method's `glass::trace_through` in f64.
+/// as weight, total internal reflection followed) until it leaves it for
+/// good: (the point it leaves the glass from, its direction, the weight,
+/// the opaque surface hit from there, or None if it meets nothing more);
+/// None if it is lost inside. The method's `glass::trace_through` in f64.
 pub(crate) fn through_glass(
     data: &SceneData,
     o: DVec3,
     d: DVec3,
     first: &Surface,
     c: usize,
-) -> Option<(DVec3, DVec3, f64, Surface)> {
+) -> Option<(DVec3, DVec3, f64, Option<Surface>)> {
     let mut p = o + d * first.t;
     let mut dir = d;
     let mut hit = first.clone();
@@ -105,14 +118,16 @@ pub(crate) fn through_glass(
             }
             None => dir = dir - facing * (2.0 * facing.dot(dir)),
         }
-        let next = nearest(data, p, dir, epsilon(p), f64::INFINITY)?;
+        let Some(next) = nearest(data, p, dir, epsilon(p), f64::INFINITY) else {
+            return (!inside).then_some((p, dir, weight, None));
+        };
         if inside {
             if !is_glass(data, &next) {
                 return None;
             }
             weight *= (-(m.absorption[c] as f64) * next.t).exp();
         } else if !is_glass(data, &next) {
-            return Some((p, dir, weight, next));
+            return Some((p, dir, weight, Some(next)));
         }
         p += dir * next.t;
         hit = next;

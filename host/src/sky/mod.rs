@@ -3,6 +3,7 @@
 //! (the scene's `[sky]` table) and the sun as a light on the scene.
 
 pub mod bench;
+pub mod glass;
 pub mod reference;
 
 use anyhow::{bail, Result};
@@ -19,7 +20,8 @@ use slicelight_shaders::types::{CommonParams, GBufferTexel};
 use crate::passes::*;
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
-pub static PASSES: &[&dyn Pass] = &[&SkyTransmittance, &SkyView, &SkyIrradiance, &Sky, &SkyLight, &Aerial];
+pub static PASSES: &[&dyn Pass] =
+    &[&SkyTransmittance, &SkyView, &SkyIrradiance, &Sky, &glass::SkyGlass, &SkyLight, &Aerial];
 
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family = Family { name: "sky", passes: PASSES, kernels: &[], bench: Some(&bench::SkySweep) };

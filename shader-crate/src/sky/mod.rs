@@ -44,6 +44,7 @@ use core::f32::consts::{FRAC_1_PI, FRAC_PI_2, PI};
 use spirv_std::spirv;
 
 pub mod aerial;
+pub mod glass;
 pub mod light;
 
 /// The sky passes' parameter block.

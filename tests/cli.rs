@@ -96,6 +96,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sky_view",
         "sky_irradiance",
         "sky",
+        "sky.glass",
         "sky_light",
         "sky_aerial",
         "sea.radiance_map",

@@ -12,8 +12,6 @@ use crate::cpu::{for_each_invocation, for_each_invocation2};
 
 /// Red-black Gauss-Seidel sweeps before and after the coarse correction.
 pub(crate) const SMOOTHING_SWEEPS: u32 = 2;
-/// Symmetric sweep pairs on the coarsest level (a few cells a side).
-pub(crate) const COARSE_SWEEPS: u32 = 16;
 
 /// The sums of `partial`s, in order, in f64: `(sum a b, max |a|, sum a, count)`.
 pub fn sum_partials(partials: &[glam::Vec4]) -> [f64; 4] {
@@ -138,14 +136,8 @@ impl Poisson {
     fn v_cycle(&mut self, l: usize) {
         self.levels[l].x.fill(0.0);
         if l + 1 == self.levels.len() {
-            for _ in 0..COARSE_SWEEPS {
-                gs_sweep(&mut self.levels[l], 0);
-                gs_sweep(&mut self.levels[l], 1);
-            }
-            for _ in 0..COARSE_SWEEPS {
-                gs_sweep(&mut self.levels[l], 1);
-                gs_sweep(&mut self.levels[l], 0);
-            }
+            let Level { n, stencils, x, b, .. } = &mut self.levels[l];
+            coarse_solve(*n, stencils, b, x);
             return;
         }
         for _ in 0..SMOOTHING_SWEEPS {
@@ -659,4 +651,42 @@ impl Fluid {
 /// A uniform number in [0, 1) for puff `e` and axis `axis`.
 fn uniform(e: u32, seed: u32, axis: u32) -> f32 {
     (random(e, 0, seed, 0x9f0 + axis) >> 8) as f32 / 16_777_216.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The coarse solve in place (`coarse_solve`, as the CPU runs it; and
+    /// split among lanes visited in reverse, as a workgroup may interleave
+    /// them) gives the same bits as the half-sweeps into a second array.
+    #[test]
+    fn the_in_place_coarse_solve_equals_the_ping_pong_sweeps() {
+        for (n, walls) in [(UVec3::new(4, 4, 4), 63), (UVec3::new(3, 2, 4), 5), (UVec3::new(4, 1, 3), 0)] {
+            let cells = (n.x * n.y * n.z) as usize;
+            // Some solid cells, a right-hand side of mixed signs.
+            let fluid: Vec<u32> = (0..cells as u32).map(|i| (i % 7 != 3) as u32).collect();
+            let mut level = Level::new(n, walls, fluid);
+            level.b = (0..cells).map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3).collect();
+            for _ in 0..COARSE_SWEEPS {
+                gs_sweep(&mut level, 0);
+                gs_sweep(&mut level, 1);
+            }
+            for _ in 0..COARSE_SWEEPS {
+                gs_sweep(&mut level, 1);
+                gs_sweep(&mut level, 0);
+            }
+            let mut x = vec![0.0; cells];
+            coarse_solve(n, &level.stencils, &level.b, &mut x);
+            assert_eq!(x, level.x, "{n}");
+            let mut split = vec![0.0; cells];
+            for k in 0..COARSE_HALF_SWEEPS {
+                for lane in (0..7).rev() {
+                    gauss_seidel_in_place(n, &level.stencils, &level.b, &mut split, lane, 7, coarse_colour(k));
+                }
+            }
+            assert_eq!(split, level.x, "{n}, 7 lanes");
+            assert!(level.x.iter().any(|v| *v != 0.0));
+        }
+    }
 }

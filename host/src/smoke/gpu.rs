@@ -10,7 +10,7 @@ use glam::{UVec3, Vec3, Vec4};
 use slicelight_shaders::smoke::*;
 use std::time::Instant;
 
-use super::fluid::{elements, sum_partials, Advection, Fluid, Solve, StepStats, COARSE_SWEEPS, SMOOTHING_SWEEPS};
+use super::fluid::{elements, sum_partials, Advection, Fluid, Solve, StepStats, SMOOTHING_SWEEPS};
 use crate::gpu::{Batch, GpuContext, Kernel};
 
 // The kernels' bindings (`shader-crate/src/smoke/kernels.rs`).
@@ -59,6 +59,7 @@ kernels! {
     APPLY = "smoke::kernels::fluid_apply" reads [P, A, FLAGS] writes [OUT];
     RESIDUAL = "smoke::kernels::fluid_residual" reads [P, A, B, FLAGS] writes [OUT];
     GAUSS_SEIDEL = "smoke::kernels::fluid_gauss_seidel" reads [P, A, B, FLAGS] writes [OUT];
+    COARSE_SOLVE = "smoke::kernels::fluid_coarse_solve" reads [P, A, FLAGS] writes [OUT];
     RESTRICT = "smoke::kernels::fluid_restrict" reads [P, A] writes [OUT];
     PROLONG = "smoke::kernels::fluid_prolong" reads [P, A, B, FLAGS] writes [OUT];
     PROJECT = "smoke::kernels::fluid_project" reads [P, A, FLAGS] writes [OUT];
@@ -517,6 +518,8 @@ impl<'a> GpuFluid<'a> {
     /// Two Gauss-Seidel sweeps on level `l`, colour `first` then the
     /// other: `x` into `scratch` and back (each sweep writes every cell,
     /// the other colour's unchanged, so no copy is needed between them).
+    /// (Sweeping in place, as the coarse solve does, was slower on
+    /// lavapipe at 64^3: see docs/smoke.md.)
     fn sweep_pair(&self, batch: &mut Batch, p: &FluidParams, l: usize, first: u32) {
         let lv = &self.levels[l];
         let d = self.on_level(p, l);
@@ -536,12 +539,10 @@ impl<'a> GpuFluid<'a> {
         let lv = &self.levels[l];
         batch.clear(&lv.x);
         if l + 1 == self.levels.len() {
-            for _ in 0..COARSE_SWEEPS {
-                self.sweep_pair(batch, p, l, 0);
-            }
-            for _ in 0..COARSE_SWEEPS {
-                self.sweep_pair(batch, p, l, 1);
-            }
+            // The whole coarse solve in one workgroup (`fluid_coarse_solve`).
+            let d = self.on_level(p, l);
+            let lanes = slicelight_shaders::smoke::COARSE_LANES;
+            batch.dispatch(&COARSE_SOLVE, P, &d, &[(A, &lv.b), (FLAGS, &lv.stencils), (OUT, &lv.x)], lanes);
             return;
         }
         for _ in 0..SMOOTHING_SWEEPS {

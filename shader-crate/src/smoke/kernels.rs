@@ -301,6 +301,46 @@ pub fn fluid_residual(
     }
 }
 
+/// The multigrid's coarsest level solved in one workgroup (`coarse_solve`'s
+/// half-sweeps, each split among the lanes, a barrier after each): one
+/// dispatch where the sweeps into a second array take 64. Dispatch exactly
+/// `COARSE_LANES` invocations, `out` (the level's `x`) cleared.
+#[spirv(compute(threads(64)))]
+pub fn fluid_coarse_solve(
+    #[spirv(local_invocation_index)] lane: u32,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 100)] params: &[FluidDispatch],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 101)] a: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 110)] flags: &[u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 112)] out: &mut [f32],
+) {
+    let n = params[0].level();
+    let mut k = 0;
+    while k < COARSE_HALF_SWEEPS {
+        gauss_seidel_in_place(n, flags, a, out, lane, COARSE_LANES, coarse_colour(k));
+        barrier();
+        k += 1;
+    }
+}
+
+/// Every lane's writes to the storage buffers visible to the workgroup
+/// before any lane goes on (the CPU runs one lane: nothing to wait for).
+/// Workgroup scope for both the execution and the memory (the Vulkan
+/// memory model the module uses refuses device scope without a
+/// capability), on storage-buffer memory: GLSL's
+/// `controlBarrier(gl_ScopeWorkgroup, gl_ScopeWorkgroup,
+/// gl_StorageSemanticsBuffer, gl_SemanticsAcquireRelease)`.
+#[cfg(target_arch = "spirv")]
+fn barrier() {
+    use spirv_std::memory::{Scope, Semantics};
+    spirv_std::arch::control_barrier::<
+        { Scope::Workgroup as u32 },
+        { Scope::Workgroup as u32 },
+        { Semantics::UNIFORM_MEMORY.bits() | Semantics::ACQUIRE_RELEASE.bits() },
+    >();
+}
+#[cfg(not(target_arch = "spirv"))]
+fn barrier() {}
+
 #[spirv(compute(threads(64)))]
 pub fn fluid_gauss_seidel(
     #[spirv(global_invocation_id)] id: UVec3,

@@ -584,6 +584,54 @@ pub fn gauss_seidel(n: UVec3, stencils: &[u32], b: &[f32], x: &[f32], flat: u32,
     (b[i] + stencil_sum(n, bits, x, flat)) / diagonal
 }
 
+/// Red-black Gauss-Seidel, one colour in place: each cell `lane, lane +
+/// lanes, ...` of colour `colour` takes its `gauss_seidel` update in `x`
+/// itself; the other colour's cells are not written. A colour's cells read
+/// only the other colour's, so every split of them among lanes, in any
+/// order, gives exactly the values the sweep into a second array gives.
+pub fn gauss_seidel_in_place(n: UVec3, stencils: &[u32], b: &[f32], x: &mut [f32], lane: u32, lanes: u32, colour: u32) {
+    let cells = n.x * n.y * n.z;
+    let mut i = lane;
+    while i < cells {
+        if ((stencils[i as usize] & STENCIL_COLOUR) != 0) as u32 == colour {
+            let v = gauss_seidel(n, stencils, b, x, i, colour);
+            x[i as usize] = v;
+        }
+        i += lanes;
+    }
+}
+
+/// The multigrid's coarsest level (at most 4 cells a side: 64) is solved
+/// by this many symmetric pairs of half-sweeps, colours 0 then 1, then as
+/// many pairs in the reverse order (the V-cycle stays symmetric, as
+/// conjugate gradients need).
+pub const COARSE_SWEEPS: u32 = 16;
+/// The coarse solve's half-sweeps in all.
+pub const COARSE_HALF_SWEEPS: u32 = 4 * COARSE_SWEEPS;
+/// Invocations of the coarse solve's one workgroup.
+pub const COARSE_LANES: u32 = 64;
+
+/// The colour of half-sweep `k` of the coarse solve.
+pub fn coarse_colour(k: u32) -> u32 {
+    if k < 2 * COARSE_SWEEPS {
+        k % 2
+    } else {
+        1 - k % 2
+    }
+}
+
+/// The coarse solve, `x` from 0 (the caller clears it): every half-sweep
+/// in order on one lane, as the CPU runs it (the GPU's workgroup splits
+/// each half-sweep among `COARSE_LANES` with a barrier between them, and
+/// gets the same values).
+pub fn coarse_solve(n: UVec3, stencils: &[u32], b: &[f32], x: &mut [f32]) {
+    let mut k = 0;
+    while k < COARSE_HALF_SWEEPS {
+        gauss_seidel_in_place(n, stencils, b, x, 0, 1, coarse_colour(k));
+        k += 1;
+    }
+}
+
 /// The cells of the next coarser multigrid level: `ceil(n / 2)` per axis.
 pub fn coarser(n: UVec3) -> UVec3 {
     (n + UVec3::ONE) / 2

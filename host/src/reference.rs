@@ -306,7 +306,8 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         // channel; or, under a sky, the sky where the ray leaves the glass
         // for good, and the sky reflected at the first interface.
         let mut radiance = DVec3::ZERO;
-        let mut sky = DVec3::ZERO;
+        let (q, r, mirrored) = crate::caustics::reference::glass_reflection(data, o, d, &hit);
+        let mut sky = open_sky(data, q, mirrored) * r;
         for c in 0..3 {
             match crate::caustics::reference::through_glass(data, o, d, &hit, c) {
                 Some((q, dir, weight, Some(behind))) => {
@@ -316,8 +317,6 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
                 Some((q, dir, weight, None)) => sky[c] += open_sky(data, q, dir)[c] * weight,
                 None => {}
             }
-            let (q, r, mirrored) = crate::caustics::reference::glass_reflection(data, o, d, &hit, c);
-            sky[c] += open_sky(data, q, mirrored)[c] * r;
         }
         return (air(radiance * (-sigma_t * hit.t).exp() + sky), hit.t);
     }
@@ -338,8 +337,7 @@ fn open_sky(data: &SceneData, from: DVec3, dir: DVec3) -> DVec3 {
     if !data.sky.enabled || (data.sea.enabled && dir.y < 0.0) {
         return DVec3::ZERO;
     }
-    let eps = 1e-9 * from.abs().max_element().max(1.0);
-    if nearest(data, from, dir, eps, f64::INFINITY).is_some() {
+    if nearest(data, from, dir, crate::caustics::reference::epsilon(from), f64::INFINITY).is_some() {
         return DVec3::ZERO;
     }
     SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(dir)

@@ -56,15 +56,15 @@ fn shading_normal(data: &SceneData, triangle: usize, p: DVec3) -> DVec3 {
     (n[0] * (1.0 - w1 - w2) + n[1] * w1 + n[2] * w2).normalize_or(n[0])
 }
 
-/// Channel `c`'s Fresnel reflectance at the first interface of a view ray
-/// in direction `d` whose first hit `first` is glass, and the reflected
-/// direction from the point hit.
-pub(crate) fn glass_reflection(data: &SceneData, o: DVec3, d: DVec3, first: &Surface, c: usize) -> (DVec3, f64, DVec3) {
+/// The first interface of a view ray in direction `d` whose first hit
+/// `first` is glass: the point hit, the Fresnel reflectance there per
+/// channel, and the reflected direction (the same in every channel).
+pub(crate) fn glass_reflection(data: &SceneData, o: DVec3, d: DVec3, first: &Surface) -> (DVec3, DVec3, DVec3) {
     let p = o + d * first.t;
     let n = shading_normal(data, first.triangle, p);
     let facing = if n.dot(d) > 0.0 { -n } else { n };
-    let ior = data.materials[first.material as usize].ior[c] as f64;
-    let (r, _) = interface(d, facing, 1.0 / ior);
+    let ior = data.materials[first.material as usize].ior;
+    let r = DVec3::from_array([0, 1, 2].map(|c| interface(d, facing, 1.0 / ior[c] as f64).0));
     (p, r, d - facing * (2.0 * facing.dot(d)))
 }
 
@@ -81,7 +81,7 @@ fn is_glass(data: &SceneData, s: &Surface) -> bool {
     s.triangle != usize::MAX && data.materials[s.material as usize].kind == MATERIAL_GLASS
 }
 
-fn epsilon(p: DVec3) -> f64 {
+pub(crate) fn epsilon(p: DVec3) -> f64 {
     1e-9 * p.abs().max_element().max(1.0)
 }
 

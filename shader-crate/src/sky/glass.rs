@@ -84,13 +84,14 @@ pub fn sky_in_glass_pixel(
     let facing = if n.dot(dir) > 0.0 { -n } else { n };
     let cos_i = (-facing.dot(dir)).clamp(0.0, 1.0);
     let material = materials[hit.material as usize];
-    let mirrored = reflect(dir, facing);
+    // The reflected ray is the same in every channel: traced once.
+    let mirrored = open_sky(p, transmittance, sky_view, geometry, point, reflect(dir, facing));
     let channels = view_channels(materials, &hit);
     let mut out = Vec4::ZERO;
     let mut c = 0;
     while c < channels {
         let eta = 1.0 / pick(material.ior, c);
-        let reflected = open_sky(p, transmittance, sky_view, geometry, point, mirrored) * reflectance(cos_i, eta);
+        let reflected = mirrored * reflectance(cos_i, eta);
         let path = trace_through(geometry, glass, materials, point, n, hit.material, dir, c, NO_OBJECT, true);
         let mut through = Vec4::ZERO;
         if path.status == PATH_OUT && path.next.distance == NO_HIT {

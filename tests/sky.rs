@@ -181,9 +181,11 @@ fn sunlit_scene_matches_reference() {
 fn glass_shows_the_sky_through_it_and_in_it() {
     // `glass_garden`: a glass ball and a tinted glass knot under the sky.
     // Where a view through the glass leaves it for the sky, and where the
-    // glass reflects the sky, `sky.glass` adds it; the reference follows
-    // the same rays in f64 with its own sky quadrature. Caustics off on
-    // both sides (the reference's light tracer is measured with them).
+    // glass reflects the sky, `sky.glass` adds it, and the sky's light on
+    // the lawn and the box seen through the glass; the reference follows
+    // the same rays in f64 with its own sky quadrature and hemisphere
+    // integral. Caustics off on both sides (the reference's light tracer is
+    // measured with them).
     let data = slicelight::scene::load(&common::root().join("scenes/glass_garden.toml")).unwrap();
     let data = data
         .reconfigure(|f| {
@@ -193,10 +195,26 @@ fn glass_shows_the_sky_through_it_and_in_it() {
         .unwrap();
     let all: Vec<u32> = (0..data.pixel_count()).collect();
     let (refvals, _) = reference::render_converged_at(&data, &all, 2e-4);
-    let r = render::render_layers(&data, &Backend::Cpu, false).unwrap();
-    let glass = &r.layers.iter().find(|(n, _)| *n == "sky.glass").expect("the sky.glass layer").1;
-    let without: Vec<Vec4> = r.image.iter().zip(glass.as_slice::<Vec4>()).map(|(a, b)| *a - *b).collect();
-    let d = slicelight::metrics::difference(&rgb(&r.image, &all), &refvals, data.exposure);
+    let layer = |data: &SceneData| {
+        let r = render::render_layers(data, &Backend::Cpu, false).unwrap();
+        let glass = r
+            .layers
+            .iter()
+            .find(|(n, _)| *n == "sky.glass")
+            .expect("the sky.glass layer")
+            .1
+            .as_slice::<Vec4>()
+            .to_vec();
+        (r.image, glass)
+    };
+    let (image, glass) = layer(&data);
+    // The same layer without the skylight (`sky_light = false`): the sky
+    // through and in the glass alone, so the difference is the skylight on
+    // what is seen through the glass.
+    let (_, glass_unlit) = layer(&data.reconfigure(|f| f.sky.as_mut().unwrap().sky_light = false).unwrap());
+    let without: Vec<Vec4> = image.iter().zip(&glass).map(|(a, b)| *a - *b).collect();
+    let unlit: Vec<Vec4> = image.iter().zip(&glass).zip(&glass_unlit).map(|((a, b), c)| *a - *b + *c).collect();
+    let d = slicelight::metrics::difference(&rgb(&image, &all), &refvals, data.exposure);
     let before = slicelight::metrics::difference(&rgb(&without, &all), &refvals, data.exposure);
     println!("glass_garden 72x48 vs reference: {d:?}\n  without the sky in the glass: {before:?}");
     // Measured: see docs/sky.md ("The sky in glass"). The rest is the
@@ -206,6 +224,18 @@ fn glass_shows_the_sky_through_it_and_in_it() {
     assert!((d.energy_ratio - 1.0).abs() < 0.02, "{d:?}");
     // Without it the glass is black where it shows the sky.
     assert!(before.rms_8bit_percent > 3.0 * d.rms_8bit_percent, "{before:?}");
+    // Over the pixels that see glass, with and without the skylight on
+    // what lies behind it.
+    let seen: Vec<u32> = all.iter().copied().filter(|&i| glass[i as usize].max_element() > 0.0).collect();
+    let pick = |v: &[DVec3]| seen.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
+    let on_glass = slicelight::metrics::difference(&rgb(&image, &seen), &pick(&refvals), data.exposure);
+    let on_glass_unlit = slicelight::metrics::difference(&rgb(&unlit, &seen), &pick(&refvals), data.exposure);
+    println!(
+        "  over the {} glass pixels: {on_glass:?}\n  without the skylight behind the glass: {on_glass_unlit:?}",
+        seen.len()
+    );
+    assert!(on_glass.rms_8bit_percent < 2.0 && (on_glass.energy_ratio - 1.0).abs() < 0.03, "{on_glass:?}");
+    assert!(on_glass_unlit.rms_8bit_percent > 2.0 * on_glass.rms_8bit_percent, "{on_glass_unlit:?}");
 }
 
 /// Stress: observer at 0 m, 10 km and 100 km (looking at the limb), the sun

@@ -302,16 +302,21 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         }
     };
     if data.materials[hit.material as usize].kind == MATERIAL_GLASS {
-        // Through glass: the opaque surface behind, lit directly, per
-        // channel; or, under a sky, the sky where the ray leaves the glass
-        // for good, and the sky reflected at the first interface.
+        // Through glass: the opaque surface behind, lit directly (and by
+        // the sky's light under a sky), per channel; or, under a sky, the
+        // sky where the ray leaves the glass for good, and the sky
+        // reflected at the first interface.
         let mut radiance = DVec3::ZERO;
         let (q, r, mirrored) = crate::caustics::reference::glass_reflection(data, o, d, &hit);
         let mut sky = open_sky(data, q, mirrored) * r;
         for c in 0..3 {
             match crate::caustics::reference::through_glass(data, o, d, &hit, c) {
                 Some((q, dir, weight, Some(behind))) => {
-                    let l = direct(data, q, dir, &behind) * (-sigma_t * behind.t).exp();
+                    // Lit by the lights and, under a sky, by the sky.
+                    let at = q + dir * behind.t;
+                    let normal = if behind.normal.dot(dir) > 0.0 { -behind.normal } else { behind.normal };
+                    let sky_light = crate::sky::reference::sky_light(data, at, normal, behind.albedo);
+                    let l = (direct(data, q, dir, &behind) + sky_light) * (-sigma_t * behind.t).exp();
                     radiance[c] += l[c] * weight;
                 }
                 Some((q, dir, weight, None)) => sky[c] += open_sky(data, q, dir)[c] * weight,
@@ -322,8 +327,7 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
     }
     // A terrain's ripples at their full resolution (the LOD's truth).
     let hit = crate::desert::reference::rippled(data, o, d, hit.clone());
-    // The sky's own light on a surface seen directly (not through glass,
-    // as the skylight pass takes it).
+    // The sky's own light on a surface seen directly.
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
     let sky = crate::sky::reference::sky_light(data, o + d * hit.t, normal, hit.albedo);
     (air((direct(data, o, d, &hit) + sky) * (-sigma_t * hit.t).exp()), hit.t)

@@ -1,5 +1,6 @@
-//! `sky.glass`: the sky through and reflected in glass under a `[sky]`
-//! (kernel: `shader-crate/src/sky/glass.rs`). Without it a glass object
+//! `sky.glass`: the sky through and reflected in glass under a `[sky]`,
+//! and the sky's light on the surfaces seen through glass (kernel:
+//! `shader-crate/src/sky/glass.rs`). Without it a glass object
 //! under the sky is black wherever its view leads to the sky: the sky pass
 //! draws only pixels that see no surface, and the surface pass follows the
 //! view through glass only to an opaque surface.
@@ -9,7 +10,7 @@ use indicatif::ProgressBar;
 use slicelight_shaders::sky::glass::sky_in_glass_pixel;
 use slicelight_shaders::types::{CommonParams, GBufferTexel};
 
-use super::{skip_without_sky, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW};
+use super::{skip_without_sky, SKY_IRRADIANCE, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW};
 use crate::cpu::for_each_invocation;
 use crate::passes::*;
 use crate::scene::SceneData;
@@ -38,6 +39,7 @@ impl Pass for SkyGlass {
             SKY_PARAMS,
             SKY_TRANSMITTANCE,
             SKY_VIEW,
+            SKY_IRRADIANCE,
             GLASS_VERTICES,
             GLASS_TRIANGLES
         ]
@@ -58,7 +60,11 @@ impl Pass for SkyGlass {
         if !scene.has_glass() {
             return Plan::skip("no glass");
         }
-        Plan::run("the sky and the sun through and reflected in glass (Fresnel, Beer's law per channel)", 0)
+        let behind = if scene.sky.light { ", the skylight on surfaces seen through it" } else { "" };
+        Plan::run(
+            format!("the sky and the sun through and reflected in glass (Fresnel, Beer's law per channel){behind}"),
+            0,
+        )
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let n = common.band_pixels as usize;
@@ -70,6 +76,9 @@ impl Pass for SkyGlass {
         frame.write_all::<Vec4>(&SKY_GLASS_RADIANCE, n, |frame, out| {
             let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
             let sky_view = frame.get::<Vec4>(&SKY_VIEW);
+            // Read only when the sky lights the scene (`lights_surfaces`),
+            // when `sky_irradiance` has filled it.
+            let irradiance = frame.get::<Vec4>(&SKY_IRRADIANCE);
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
             for_each_invocation(out, common.band_start, progress, |i, v| {
                 let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
@@ -79,6 +88,7 @@ impl Pass for SkyGlass {
                     p,
                     transmittance,
                     sky_view,
+                    irradiance,
                     texel,
                     &geometry,
                     &glass,

@@ -402,6 +402,8 @@ pub fn configure(s: &Settings) -> Result<Setup> {
         horizon: 0.0,
         sea: 0,
         light_rays: s.sky_light_rays,
+        lights_surfaces: (s.sky_light && s.light_scene) as u32,
+        pad: [0; 3],
     };
     let params = SkyParams { horizon: slicelight_shaders::sky::horizon_elevation(&params), ..params };
     Ok(Setup {

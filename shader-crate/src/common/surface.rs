@@ -8,7 +8,7 @@ use crate::caustics::{caustic_light, pack_rgb, CausticsParams};
 use crate::desert::ripples::{rippled, RippleRecord, Ripples};
 use crate::geometry::{occluded, trace_nearest, Geometry, Hit, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
-use crate::glass::{dispersive, is_glass, shading_normal, trace_through, Glass, PATH_OUT};
+use crate::glass::{dispersive, is_glass, shading_normal, trace_through, Glass, GlassPath, PATH_OUT};
 use crate::light::{emitted, emitted_visible, light_local, transmittance};
 use crate::types::{
     CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
@@ -153,9 +153,8 @@ pub fn receiver(
     hit: &Hit,
     channel: u32,
 ) -> Receiver {
-    let mut r = Receiver { found: false, point: origin, normal: Vec3::Y, material: NO_OBJECT, weight: Vec4::ZERO };
     if hit.distance == NO_HIT {
-        return r;
+        return Receiver { found: false, point: origin, normal: Vec3::Y, material: NO_OBJECT, weight: Vec4::ZERO };
     }
     if !is_glass(materials, hit) {
         return opaque_receiver(params, origin, dir, hit);
@@ -163,16 +162,30 @@ pub fn receiver(
     let p = origin + dir * hit.distance;
     let n = shading_normal(geometry, glass, hit, p);
     let path = trace_through(geometry, glass, materials, p, n, hit.material, dir, channel, NO_OBJECT, true);
-    if path.status != PATH_OUT || path.next.distance == NO_HIT {
-        return r;
-    }
+    receiver_after(params, hit.distance, &path)
+}
+
+/// The opaque surface at the end of `path`, the way through glass of a
+/// view ray whose first hit (the glass) is `hit_distance` m from the eye:
+/// not found if the path is lost or leaves for the sky.
+pub fn receiver_after(params: &CommonParams, hit_distance: f32, path: &GlassPath) -> Receiver {
     let next = path.next;
-    r.found = true;
-    r.point = path.position + path.direction * next.distance;
-    r.normal = if next.normal.dot(path.direction) > 0.0 { -next.normal } else { next.normal };
-    r.material = next.material;
-    r.weight = path.transmittance() * transmittance(params.sigma_t, hit.distance + next.distance);
-    r
+    if path.status != PATH_OUT || next.distance == NO_HIT {
+        return Receiver {
+            found: false,
+            point: path.position,
+            normal: Vec3::Y,
+            material: NO_OBJECT,
+            weight: Vec4::ZERO,
+        };
+    }
+    Receiver {
+        found: true,
+        point: path.position + path.direction * next.distance,
+        normal: if next.normal.dot(path.direction) > 0.0 { -next.normal } else { next.normal },
+        material: next.material,
+        weight: path.transmittance() * transmittance(params.sigma_t, hit_distance + next.distance),
+    }
 }
 
 /// `receiver` of a view ray whose first hit `hit` (a hit) is opaque: the

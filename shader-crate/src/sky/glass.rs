@@ -13,21 +13,30 @@
 //!   the Fresnel reflectance for unpolarised light (`optics::reflectance`,
 //!   the same law as the transmittance, `R = 1 - T`).
 //!
-//! A ray that meets an opaque surface, is lost in the glass, or (with a sea
-//! below the eye) goes down toward the water adds nothing here: surfaces
-//! seen in glass by reflection are not drawn, and the sea is not seen
-//! through glass. Like the sky seen directly, the sky through glass is not
-//! attenuated by a `[medium]`.
+//! - **skylight behind**: where the path through the glass ends on a
+//!   diffuse surface and the sky lights the scene (`lights_surfaces`), the
+//!   sky's light on that surface (`light::sky_light_at`, its normal's
+//!   irradiance and visibility rays from the point), times the path's
+//!   transmittance and the medium's along its legs in the open, as the
+//!   surface pass weights the sun's light there (`receiver_after`). The
+//!   skylight pass reads one G-buffer texel, the glass's, and cannot.
+//!
+//! A ray that is lost in the glass, or (with a sea below the eye) goes
+//! down toward the water adds nothing here: surfaces seen in glass by
+//! reflection are not drawn, and the sea is not seen through glass. Like
+//! the sky seen directly, the sky through glass is not attenuated by a
+//! `[medium]`.
 
 use crate::camera::{camera_ray, in_image};
-use crate::common::surface::{channel_part, view_channels};
+use crate::common::surface::{channel_part, receiver_after, view_channels};
 use crate::geometry::{trace_nearest, Geometry, NO_HIT};
-use crate::glam::{UVec3, Vec3, Vec4};
+use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::glass::{is_glass, pick, shading_normal, surface_epsilon, trace_through, Glass, PATH_OUT};
 use crate::optics::{reflect, reflectance};
+use crate::sky::light::sky_light_at;
 use crate::sky::{sky_radiance, sun_disk, SkyParams, SEA_AROUND, SEA_BELOW};
 use crate::types::{CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuMaterial, GpuSphere};
-use crate::types::{GpuTriangle, NO_OBJECT};
+use crate::types::{GpuTriangle, MATERIAL_DIFFUSE, NO_OBJECT};
 use spirv_std::spirv;
 
 /// The sky and the sun's disk along unit `dir` from a point `from` of the
@@ -61,6 +70,7 @@ pub fn sky_in_glass_pixel(
     p: &SkyParams,
     transmittance: &[Vec4],
     sky_view: &[Vec4],
+    irradiance: &[Vec4],
     texel: &GBufferTexel,
     geometry: &Geometry,
     glass: &Glass,
@@ -97,6 +107,13 @@ pub fn sky_in_glass_pixel(
         if path.status == PATH_OUT && path.next.distance == NO_HIT {
             let sky = open_sky(p, transmittance, sky_view, geometry, path.position, path.direction);
             through = sky.extend(0.0) * path.transmittance();
+        } else if p.lights_surfaces != 0 {
+            let r = receiver_after(common, hit.distance, &path);
+            if r.found && materials[r.material as usize].kind == MATERIAL_DIFFUSE {
+                let albedo = materials[r.material as usize].albedo.xyz();
+                let light = sky_light_at(p, transmittance, sky_view, irradiance, geometry, r.point, r.normal, albedo);
+                through = light.extend(0.0) * r.weight;
+            }
         }
         out += channel_part(reflected.extend(0.0) + through, c, channels);
         c += 1;
@@ -118,6 +135,7 @@ pub fn sky_glass_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] params: &[SkyParams],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] transmittance: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] sky_view: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 62)] irradiance: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 29)] glass_vertices: &[GlassVertex],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 30)] glass_triangles: &[GlassTriangle],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 83)] radiance: &mut [Vec4],
@@ -133,6 +151,7 @@ pub fn sky_glass_kernel(
             &params[0],
             transmittance,
             sky_view,
+            irradiance,
             &gbuffer[index as usize],
             &geometry,
             &glass,

@@ -107,35 +107,21 @@ pub fn visibility_direction(n: Vec3, k: u32, count: u32) -> Vec3 {
     local.normalize()
 }
 
-/// Per-pixel skylight kernel: the sky's light reflected toward the eye by
-/// the diffuse surface pixel `index` sees (rgb, W/(m^2 sr); w = 0),
-/// `rho / pi E(n) V exp(-sigma_t t)` (the medium between eye and surface
-/// as the surface pass takes it), 0 where the pixel sees no surface or
-/// glass. With `light_rays` 0, `V` is 1 (unshadowed).
+/// The sky's light reflected by a diffuse surface of `albedo` at `point`
+/// (unit `normal`, turned toward the viewer), rgb W/(m^2 sr):
+/// `rho / pi E(n) V`, `V` the radiance-weighted share of `light_rays`
+/// visibility rays that escape the scene's geometry (1 with none).
 #[allow(clippy::too_many_arguments)]
-pub fn sky_light_pixel(
-    index: u32,
-    common: &CommonParams,
+pub fn sky_light_at(
     p: &SkyParams,
     transmittance: &[Vec4],
     sky_view: &[Vec4],
     irradiance: &[Vec4],
     geometry: &Geometry,
-    materials: &[GpuMaterial],
-    texel: &GBufferTexel,
-) -> Vec4 {
-    let (x, y) = (index % common.width, index / common.width);
-    if texel.object == NO_OBJECT || !in_image(common, x, y) {
-        return Vec4::ZERO;
-    }
-    let material = &materials[texel.material as usize];
-    if material.kind != MATERIAL_DIFFUSE {
-        return Vec4::ZERO;
-    }
-    let (origin, dir) = camera_ray(common, x, y);
-    let t = texel.normal_distance.w;
-    let point = origin + dir * t;
-    let n = texel.normal_distance.xyz();
+    point: Vec3,
+    n: Vec3,
+    albedo: Vec3,
+) -> Vec3 {
     let e = irradiance_lookup(p, irradiance, n);
     let mut seen = Vec3::ONE;
     if p.light_rays > 0 {
@@ -162,6 +148,40 @@ pub fn sky_light_pixel(
             if all.z > 0.0 { free.z / all.z } else { 1.0 },
         );
     }
+    albedo * FRAC_1_PI * e * seen
+}
+
+/// Per-pixel skylight kernel: the sky's light reflected toward the eye by
+/// the diffuse surface pixel `index` sees (rgb, W/(m^2 sr); w = 0),
+/// `sky_light_at` times `exp(-sigma_t t)` (the medium between eye and
+/// surface as the surface pass takes it), 0 where the pixel sees no surface
+/// or glass (`sky.glass` lights what is seen through glass). With
+/// `light_rays` 0, `V` is 1 (unshadowed).
+#[allow(clippy::too_many_arguments)]
+pub fn sky_light_pixel(
+    index: u32,
+    common: &CommonParams,
+    p: &SkyParams,
+    transmittance: &[Vec4],
+    sky_view: &[Vec4],
+    irradiance: &[Vec4],
+    geometry: &Geometry,
+    materials: &[GpuMaterial],
+    texel: &GBufferTexel,
+) -> Vec4 {
+    let (x, y) = (index % common.width, index / common.width);
+    if texel.object == NO_OBJECT || !in_image(common, x, y) {
+        return Vec4::ZERO;
+    }
+    let material = &materials[texel.material as usize];
+    if material.kind != MATERIAL_DIFFUSE {
+        return Vec4::ZERO;
+    }
+    let (origin, dir) = camera_ray(common, x, y);
+    let t = texel.normal_distance.w;
+    let point = origin + dir * t;
+    let n = texel.normal_distance.xyz();
+    let light = sky_light_at(p, transmittance, sky_view, irradiance, geometry, point, n, material.albedo.xyz());
     let medium = (-common.sigma_t.xyz() * t).exp();
-    (material.albedo.xyz() * FRAC_1_PI * e * seen * medium).extend(0.0)
+    (light * medium).extend(0.0)
 }

@@ -102,10 +102,17 @@ pub struct SkyParams {
     /// Rays per pixel that find how much of the sky a surface sees (the
     /// skylight's shadow, `light::sky_light_pixel`; 0: unshadowed).
     pub light_rays: u32,
+    /// 1 when the sky lights the scene's surfaces (the irradiance table is
+    /// built): `sky.glass` then adds the skylight on the surfaces seen
+    /// through glass, which the skylight pass (one G-buffer texel, the
+    /// glass's) does not reach.
+    pub lights_surfaces: u32,
+    /// Padding to a whole number of `Vec4`s.
+    pub pad: [u32; 3],
 }
 
 #[cfg(not(target_arch = "spirv"))]
-// SAFETY: `repr(C)`, six `Vec4`s and sixteen 4-byte scalars, no padding; any bits are valid.
+// SAFETY: `repr(C)`, six `Vec4`s and twenty 4-byte scalars, no padding; any bits are valid.
 unsafe impl bytemuck::Zeroable for SkyParams {}
 #[cfg(not(target_arch = "spirv"))]
 unsafe impl bytemuck::Pod for SkyParams {}

@@ -591,6 +591,21 @@ fn an_edited_animated_scene_keeps_its_keyframes_and_its_edits() {
     // An edit that fails validation names the field, at any instant.
     let bad = edited.reconfigure(|f| f.camera.samples_per_pixel = 0).unwrap_err();
     assert!(format!("{bad:#}").contains("camera.samples_per_pixel"), "{bad:#}");
+    // The viewer's one build of an instant with its own edit is the two
+    // steps' scene, animated or not.
+    let still_text = text.split("[[keyframe]]").next().unwrap();
+    let still = slicelight::scene::from_text(still_text, Path::new("still.toml")).unwrap();
+    let still = still.reconfigure(|f| f.camera.samples_per_pixel = 2).unwrap();
+    for scene in [&edited, &still] {
+        let one = scene.at_time_edited(0.25, |f| f.camera.vfov_deg = Some(30.0)).unwrap();
+        let two = scene.at_time(0.25).unwrap().reconfigure(|f| f.camera.vfov_deg = Some(30.0)).unwrap();
+        assert_eq!(format!("{:?}", one.source.file), format!("{:?}", two.source.file));
+        assert_eq!(format!("{:?}", one.common), format!("{:?}", two.common));
+        assert_eq!(one.source.animated.is_some(), scene.source.animated.is_some());
+        assert_eq!((one.source.file.time.seconds, one.source.file.camera.vfov_deg), (0.25, Some(30.0)));
+    }
+    let later = edited.at_time_edited(0.5, |f| f.camera.vfov_deg = Some(30.0)).unwrap();
+    assert_eq!(later.source.file.camera.position, [1.0, 3.0, 8.0]);
 }
 
 #[test]

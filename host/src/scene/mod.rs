@@ -142,6 +142,23 @@ impl SceneData {
         }
     }
 
+    /// `at_time(t)` and then `reconfigure(edit)` in one build (the viewer's
+    /// view of an instant): the keyframes at `t`, the scene's edits, then
+    /// `edit`, which the result keeps as `reconfigure` does.
+    pub fn at_time_edited(&self, t: f64, edit: impl Fn(&mut SceneFile) + Send + Sync + 'static) -> Result<SceneData> {
+        match &self.source.animated {
+            None => self.reconfigure(move |f| {
+                f.time.seconds = t;
+                edit(f);
+            }),
+            Some((raw, keys)) => {
+                let mut edits = self.source.edits.clone();
+                edits.push(std::sync::Arc::new(edit));
+                from_table(raw, keys, &self.source.base, Some(t), &edits)
+            }
+        }
+    }
+
     /// The spotlights whose light reaches nothing (`spotlight[k]`): no
     /// scattering medium for their shafts, and none of 1 024 rays spread
     /// over the cone (Fibonacci directions, uniform in solid angle) meets

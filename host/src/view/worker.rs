@@ -209,12 +209,9 @@ fn guarded<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
 /// edited by the view, built and validated as a file is.
 pub fn build(base: &SceneData, view: &ViewState) -> Result<SceneData> {
     let t = base.source.file.time.seconds + view.time;
-    let at = if base.source.animated.is_some() && view.time != 0.0 { base.at_time(t)? } else { base.clone() };
     let view_edit = view.clone();
-    let mut data = at.reconfigure(move |f| {
-        view_edit.apply(f);
-        f.time.seconds = t;
-    })?;
+    // One build: the keyframes at `t` (if any), the scene's edits, the view's.
+    let mut data = base.at_time_edited(t, move |f| view_edit.apply(f))?;
     data.disabled_passes = view.disabled.iter().cloned().collect();
     Ok(data)
 }

@@ -118,6 +118,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "volume_density",
         "volume_light",
         "volume_splat_sort",
+        "volume_splat_textures",
         "volume_splat_tiles",
         "volumes",
         "volume_splats",

@@ -166,6 +166,7 @@ pub fn run(
                     &super::Density,
                     &super::OpticalDepth,
                     &super::splat::SplatSort,
+                    &super::splat::SplatTextures,
                     &super::splat::SplatTiles,
                 ];
                 let timed =

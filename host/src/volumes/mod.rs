@@ -38,6 +38,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &Density,
     &OpticalDepth,
     &splat::SplatSort,
+    &splat::SplatTextures,
     &splat::SplatTiles,
     &Volumes,
     &splat::Splats,

@@ -1,7 +1,8 @@
 //! Splatting (`method = "splatting"` on metaball volumes; kernels:
 //! `shader-crate/src/volumes/splat.rs`): Dobashi et al. 2000's billboard
-//! renderer as three passes: each metaball's light and rank
-//! (`volume_splat_sort`, step 1 and the sort), the screen tiles' lists
+//! renderer as four passes: each metaball's light and rank
+//! (`volume_splat_sort`, step 1 and the sort), its billboard's texture of
+//! the light where the eye sees it (`volume_splat_textures`), the screen tiles' lists
 //! (`volume_splat_tiles`), and the per-pixel blend (`volume_splats`,
 //! step 2), which draws the layer the slice renderer's `volumes` pass
 //! draws otherwise.
@@ -14,7 +15,9 @@ use rayon::prelude::*;
 use slicelight_shaders::light::light_local;
 use slicelight_shaders::types::CommonParams;
 use slicelight_shaders::types::{GpuLight, LIGHT_DIRECTIONAL};
-use slicelight_shaders::volumes::splat::{splat_ball, splat_pixel, splat_tile, LightBins, SplatBall};
+use slicelight_shaders::volumes::splat::BILLBOARD_TEXELS;
+use slicelight_shaders::volumes::splat::{billboard_texel, splat_key, splat_light, splat_pixel, splat_tile};
+use slicelight_shaders::volumes::splat::{LightBins, SplatBall, Step1};
 use slicelight_shaders::volumes::GpuMetaball;
 use slicelight_shaders::volumes::METHOD_SPLATTING;
 
@@ -26,7 +29,13 @@ use crate::scene::SceneData;
 
 /// Per metaball, its billboard (`SplatBall`).
 pub static SPLATS: Resource =
-    Resource { binding: 69, name: "splats", kind: ResourceKind::Frame(|s| s.volumes.params.ball_count as u64 * 32) };
+    Resource { binding: 69, name: "splats", kind: ResourceKind::Frame(|s| s.volumes.params.ball_count as u64 * 160) };
+/// Per metaball, its billboard's texture: `BILLBOARD_TEXELS` colours (rgb).
+pub static SPLAT_TEXTURES: Resource = Resource {
+    binding: 84,
+    name: "splat textures",
+    kind: ResourceKind::Frame(|s| s.volumes.params.ball_count as u64 * BILLBOARD_TEXELS as u64 * 16),
+};
 /// The metaballs' indices front to back.
 pub static SPLAT_ORDER: Resource = Resource {
     binding: 70,
@@ -165,7 +174,7 @@ impl Pass for SplatSort {
         let binned = v.light_bins.iter().filter(|b| b.nx > 0).count();
         Plan::run(
             format!(
-                "{n} metaballs: the light at each centre through the billboards toward {} light(s) ({binned} binned, {} entries), and the order from the eye",
+                "{n} metaballs: the light at each centre and half a radius either side along its key light, through the billboards toward {} light(s) ({binned} binned, {} entries), and the order from the eye",
                 scene.lights.len(),
                 v.light_lists.len()
             ),
@@ -176,30 +185,35 @@ impl Pass for SplatSort {
         let v = &scene.volumes;
         let n = v.params.ball_count as usize;
         let shadow = frame.get::<f32>(&SHADOW_MAPS);
-        let splats: Vec<SplatBall> = (0..n as u32)
+        let inp = Step1 {
+            common,
+            params: &v.params,
+            volumes: &v.volumes,
+            balls: &v.balls,
+            lights: &scene.lights,
+            light_map: &scene.light_map,
+            shadow,
+            bins: &v.light_bins,
+            lists: &v.light_lists,
+        };
+        let mut splats: Vec<SplatBall> = (0..n as u32)
             .into_par_iter()
             .map(|j| {
-                let s = splat_ball(
-                    j,
-                    common,
-                    &v.params,
-                    &v.volumes,
-                    &v.balls,
-                    &scene.lights,
-                    &scene.light_map,
-                    shadow,
-                    &v.light_bins,
-                    &v.light_lists,
-                );
+                let s = splat_light(j, &inp);
                 progress.inc(1);
                 s
             })
             .collect();
-        frame.write::<u32>(&SPLAT_ORDER, n, |_, order| {
-            for (j, s) in splats.iter().enumerate() {
-                order[s.rank as usize] = j as u32;
-            }
-        });
+        // The ranks `splat_rank` counts, by a sort of the same keys: the
+        // order by key, equal keys by index (keys are finite and not
+        // negative, so `total_cmp` orders them as `<` does).
+        let keys: Vec<f32> = (0..n as u32).map(|j| splat_key(common, &v.balls, j)).collect();
+        let mut sorted: Vec<u32> = (0..n as u32).collect();
+        sorted.par_sort_unstable_by(|&a, &b| keys[a as usize].total_cmp(&keys[b as usize]).then(a.cmp(&b)));
+        for (rank, &j) in sorted.iter().enumerate() {
+            splats[j as usize].rank = rank as u32;
+        }
+        frame.write::<u32>(&SPLAT_ORDER, n, |_, order| order.copy_from_slice(&sorted));
         frame.insert(&SPLATS, Buffer::from_bytes(bytemuck::cast_slice(&splats)));
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
@@ -209,12 +223,81 @@ impl Pass for SplatSort {
         // fused multiply-add): 1 % of the places.
         let g = gpu.get::<SplatBall>(&SPLATS);
         let c = cpu.get::<SplatBall>(&SPLATS);
-        let colors = |s: &[SplatBall]| s.iter().map(|b| b.color).collect::<Vec<Vec4>>();
+        // Every ball's colours (centre, toward and away from the key light,
+        // all light and its direct part) in one list, and the key light's
+        // axis (a unit vector: 1e-4).
+        let colors = |s: &[SplatBall]| {
+            s.iter()
+                .flat_map(|b| [b.color, b.toward, b.away, b.direct, b.direct_toward, b.direct_away])
+                .collect::<Vec<Vec4>>()
+        };
         let a = compare_rgb("splat colours", &colors(g), &colors(c), 1e-4, 0)?;
+        let axes = |s: &[SplatBall]| s.iter().flat_map(|b| b.axis.truncate().to_array()).collect::<Vec<f32>>();
+        let b = compare_values("splat axes", &axes(g), &axes(c), 1e-4, 0)?;
         let (moved, places) =
             differing_records("splat order", gpu.get::<u32>(&SPLAT_ORDER), cpu.get::<u32>(&SPLAT_ORDER), 1)?;
         anyhow::ensure!(moved <= places / 100, "splat order: {moved} of {places} places differ");
-        Ok(format!("{a}; order: {moved} of {places} places differ"))
+        Ok(format!("{a}; {b}; order: {moved} of {places} places differ"))
+    }
+}
+
+/// Each billboard's texture (`billboard_texel`): the light where the eye
+/// sees the ball, per texel, from step 1's samples.
+pub struct SplatTextures;
+
+impl Pass for SplatTextures {
+    fn name(&self) -> &'static str {
+        "volume_splat_textures"
+    }
+    fn kernel(&self) -> &'static str {
+        "volumes::splat::splat_texture_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, VOLUMES_PARAMS, VOLUMES, METABALLS, SPLATS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SPLAT_TEXTURES]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip(scene) {
+            return skip;
+        }
+        let n = scene.volumes.params.ball_count as u64;
+        let side = slicelight_shaders::volumes::splat::BILLBOARD_SIDE;
+        Plan::run(
+            format!(
+                "{n} billboard textures of {side}x{side}: the light where the eye sees each ball ({:.1} MiB)",
+                (n * BILLBOARD_TEXELS as u64 * 16) as f64 / (1u64 << 20) as f64
+            ),
+            n * BILLBOARD_TEXELS as u64,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let v = &scene.volumes;
+        let n = (v.params.ball_count * BILLBOARD_TEXELS) as usize;
+        let splats = frame.get::<SplatBall>(&SPLATS);
+        let texels: Vec<Vec4> = (0..n as u32)
+            .into_par_iter()
+            .map(|k| {
+                let w = billboard_texel(k, common, &v.volumes, &v.balls, splats);
+                if k % BILLBOARD_TEXELS == 0 {
+                    progress.inc(BILLBOARD_TEXELS as u64);
+                }
+                w
+            })
+            .collect();
+        frame.insert(&SPLAT_TEXTURES, Buffer::from_bytes(bytemuck::cast_slice(&texels)));
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Colours from step 1's (1e-4 of the peak, `SplatSort::compare`)
+        // read at points found by Newton's method in f32: 1e-3 of the
+        // peak, and a texel in a thousand further (a step that lands on
+        // the other side of a bisection).
+        let c = cpu.get::<Vec4>(&SPLAT_TEXTURES);
+        compare_rgb("splat textures", gpu.get::<Vec4>(&SPLAT_TEXTURES), c, 1e-3, c.len() * 3 / 1000 + 1)
     }
 }
 
@@ -298,7 +381,17 @@ impl Pass for Splats {
         "volumes::splat::splat_pixel_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![COMMON, GBUFFER, VOLUMES_PARAMS, VOLUMES, METABALLS, SPLATS, SPLAT_ORDER, SPLAT_TILES]
+        resources![
+            COMMON,
+            GBUFFER,
+            VOLUMES_PARAMS,
+            VOLUMES,
+            METABALLS,
+            SPLATS,
+            SPLAT_TEXTURES,
+            SPLAT_ORDER,
+            SPLAT_TILES
+        ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SPLAT_RADIANCE, SPLAT_TRANSMITTANCE]
@@ -322,10 +415,11 @@ impl Pass for Splats {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let v = &scene.volumes;
         let splats = frame.get::<SplatBall>(&SPLATS);
+        let textures = frame.get::<Vec4>(&SPLAT_TEXTURES);
         let order = frame.get::<u32>(&SPLAT_ORDER);
         let tiles = frame.get::<u32>(&SPLAT_TILES);
         let layers = per_pixel_layers(common, frame, progress, |i, d| {
-            splat_pixel(i, common, &v.params, &v.volumes, &v.balls, splats, order, tiles, d)
+            splat_pixel(i, common, &v.params, &v.volumes, &v.balls, splats, textures, order, tiles, d)
         });
         frame.insert(&SPLAT_RADIANCE, layers.0);
         frame.insert(&SPLAT_TRANSMITTANCE, layers.1);

@@ -113,6 +113,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.order1",
         "sea.order2",
         "sea.bottom",
+        "sea.glass",
         "cloud_automaton",
         "cloud_automaton.smooth",
         "volume_density",

@@ -105,6 +105,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("sky_sunset, per-pixel sky", direct),
         ("sun_garden", sky("sun_garden", 180, 120)),
         ("glass_garden", traced("glass_garden", 180, 120)),
+        ("sea_glass", traced("sea_glass", 180, 120)),
         ("sea_open", sky("sea_open", 180, 120)),
         ("sea_calm_noon", sky("sea_calm_noon", 180, 120)),
         ("sea_shore", sky("sea_shore", 180, 120)),

@@ -730,3 +730,40 @@ fn an_object_under_flat_water_is_the_bottom_at_its_depth() {
         assert!(covered > 500 && worst <= 1e-4, "{name}: {worst:.3e} of the peak");
     }
 }
+
+/// `sea_glass` with a flat sea (order 2 and the caustic off, so that the
+/// reference costs seconds, not minutes): over the pixels that see glass,
+/// against `slicelight reference`, which follows the same rays in f64 to
+/// its own sea (`sea_radiance`) and sky. `sea.glass` draws the sea along
+/// the rays that leave the glass downward (and the sea the glass
+/// reflects); without it those pixels were dark. Measured: see
+/// docs/sea.md ("The sea in glass").
+#[test]
+fn glass_over_the_sea_shows_the_sea() {
+    use glam::Vec4;
+    use slicelight::render::{self, Backend};
+    let data = slicelight::scene::load(&common::root().join("scenes/sea_glass.toml"))
+        .unwrap()
+        .reconfigure(|f| {
+            f.camera.resolution = [36, 24];
+            let sea = f.sea.as_mut().unwrap();
+            sea.waves = slicelight::sea::Waves::Flat;
+            sea.second_order = false;
+            sea.caustics = false;
+        })
+        .unwrap();
+    let r = render::render_layers(&data, &Backend::Cpu, false).unwrap();
+    let layer = |name: &str| r.layers.iter().find(|(n, _)| *n == name).expect(name).1.as_slice::<Vec4>().to_vec();
+    let (sea, sky) = (layer("sea.glass"), layer("sky.glass"));
+    let seen: Vec<u32> =
+        (0..data.pixel_count()).filter(|&i| (sea[i as usize] + sky[i as usize]).max_element() > 0.0).collect();
+    assert!(seen.len() > 40, "{} glass pixels", seen.len());
+    let (refvals, _) = slicelight::reference::render_converged_at(&data, &seen, 1e-3);
+    let pick = |image: &[Vec4]| seen.iter().map(|&i| image[i as usize].truncate().as_dvec3()).collect::<Vec<DVec3>>();
+    let without: Vec<Vec4> = r.image.iter().zip(&sea).map(|(a, b)| *a - *b).collect();
+    let d = slicelight::metrics::difference(&pick(&r.image), &refvals, data.exposure);
+    let before = slicelight::metrics::difference(&pick(&without), &refvals, data.exposure);
+    println!("sea_glass (flat) over {} glass pixels: {d:?}\n  without sea.glass: {before:?}", seen.len());
+    assert!(d.rms_8bit_percent < 0.5 && (d.energy_ratio - 1.0).abs() < 0.01, "{d:?}");
+    assert!(before.rms_8bit_percent > 3.0 * d.rms_8bit_percent, "{before:?}");
+}

@@ -333,16 +333,24 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
     (air((direct(data, o, d, &hit) + sky) * (-sigma_t * hit.t).exp()), hit.t)
 }
 
-/// The sky (and the sun's disk) along `dir` from `from`, if nothing is in
-/// the way and it is the sky that lies that way (not a sea below the eye);
-/// else 0. Not attenuated by a `[medium]` on the way out, as the sky seen
-/// directly is not.
+/// What lies along `dir` from `from` if nothing is in the way: the sky
+/// (and the sun's disk), or with a `[sea]` under an eye above it the sea
+/// (`sea_radiance`, as a view ray that meets the water directly) where the
+/// ray goes down; else 0. Not attenuated by a `[medium]` on the way out,
+/// as the sky seen directly is not.
 fn open_sky(data: &SceneData, from: DVec3, dir: DVec3) -> DVec3 {
-    if !data.sky.enabled || (data.sea.enabled && dir.y < 0.0) {
+    if !data.sky.enabled {
+        return DVec3::ZERO;
+    }
+    let sea = data.sea.enabled && dir.y < 0.0;
+    if sea && (data.sea.params.underwater != 0 || from.y <= data.sea.params.level as f64) {
         return DVec3::ZERO;
     }
     if nearest(data, from, dir, crate::caustics::reference::epsilon(from), f64::INFINITY).is_some() {
         return DVec3::ZERO;
+    }
+    if sea {
+        return sea_radiance(data, from, dir);
     }
     SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(dir)
 }

@@ -8,6 +8,7 @@
 pub mod bench;
 pub mod bench_under;
 pub mod bench_waves;
+pub mod glass;
 pub mod reference;
 pub mod table;
 pub mod waves;
@@ -50,6 +51,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &SeaOrder1,
     &SeaOrder2,
     &SeaBottom,
+    &glass::SeaGlass,
 ];
 
 /// The family, as `passes::FAMILIES` registers it.
@@ -619,7 +621,7 @@ pub fn configure(
         shaft_depth: 0.0,
         shaft_level: 0,
         shaft_steps: 0,
-        pad1: 0,
+        second_order: (s.second_order) as u32,
         pad2: 0,
         pad3: 0,
     };

@@ -52,6 +52,7 @@
 //! direction, so one map serves every camera.
 
 pub mod caustics;
+pub mod glass;
 pub mod surface;
 pub mod table;
 pub mod under;
@@ -153,7 +154,9 @@ pub struct SeaParams {
     pub shaft_level: u32,
     /// Intervals of `under::order1_shafts` along each view ray.
     pub shaft_steps: u32,
-    pub pad1: u32,
+    /// 1 when second-order scattering is on (the accumulated map is
+    /// built): `glass::sea_along` reads order 2 only then.
+    pub second_order: u32,
     pub pad2: u32,
     pub pad3: u32,
 }
@@ -767,30 +770,43 @@ pub fn surface_normal(p: &SeaParams, waves: &[Vec4], x: f32, z: f32) -> Vec3 {
 pub fn sea_hit(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> SeaView {
     let x = index % common.width;
     let y = index / common.width;
-    let mut out = SeaView::default();
     if !in_image(common, x, y) {
-        return out;
+        return SeaView::default();
     }
     let (origin, dir) = camera_ray(common, x, y);
     if dir.y >= 0.0 || origin.y <= p.level {
-        return out;
+        return SeaView::default();
     }
     let t = (p.level - origin.y) / dir.y;
     // An object the straight view ray meets before the water hides it; one
     // it meets under the water is seen through the surface (`sea.water`
     // takes its light in air out, `object_under` finds it).
     if texel.object != NO_OBJECT && texel.normal_distance.w <= t {
+        return SeaView::default();
+    }
+    let (a, b) = if p.waves == WAVES_NORMAL_MAP && p.wave_filter != 0 {
+        surface::footprint(common, x, y, dir, t, 2.0 * p.wave_size)
+    } else {
+        (Vec2::ZERO, Vec2::ZERO)
+    };
+    sea_hit_along(p, waves, origin, dir, a, b)
+}
+
+/// Where the ray `origin + t dir` (from above the water, `dir` unit and
+/// downward) meets the sea, and over waves the slope rule there for a
+/// footprint with axes `a`, `b` (m; zero: the map's slope at the point, with
+/// the unresolved waves' roughness); `hit` false if it does not go down
+/// from above the water.
+pub fn sea_hit_along(p: &SeaParams, waves: &[Vec4], origin: Vec3, dir: Vec3, a: Vec2, b: Vec2) -> SeaView {
+    let mut out = SeaView::default();
+    if dir.y >= 0.0 || origin.y <= p.level {
         return out;
     }
+    let t = (p.level - origin.y) / dir.y;
     out.hit = true;
     out.point = origin + dir * t;
     out.dir = dir;
     if p.waves == WAVES_NORMAL_MAP {
-        let (a, b) = if p.wave_filter != 0 {
-            surface::footprint(common, x, y, dir, t, 2.0 * p.wave_size)
-        } else {
-            (Vec2::ZERO, Vec2::ZERO)
-        };
         out.slopes = surface::footprint_slopes(p, waves, out.point.x, out.point.z, a, b);
         out.rule = surface::SlopeRule::new(&out.slopes, dir);
     }
@@ -805,7 +821,13 @@ pub fn sea_hit(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4],
 /// and the light below is taken along the view refracted at their mean
 /// normal, each weighted by what it transmits (`1 - R`).
 pub fn sea_view(index: u32, common: &CommonParams, p: &SeaParams, waves: &[Vec4], texel: &GBufferTexel) -> SeaView {
-    let mut out = sea_hit(index, common, p, waves, texel);
+    refracted(p, sea_hit(index, common, p, waves, texel))
+}
+
+/// `sea_view` of a hit (`sea_hit`, `sea_hit_along`): its reflectance,
+/// reflected ray, the view refracted into the water and the transmission.
+pub fn refracted(p: &SeaParams, hit: SeaView) -> SeaView {
+    let mut out = hit;
     if !out.hit {
         return out;
     }
@@ -931,18 +953,34 @@ pub fn reflection_pixel(
             sky_radiance(sky, transmittance, sky_view, out) + sun_disk(sky, transmittance, out) * clouds.at(p, point);
         return (light * factor * under::attenuation(p, &v)).extend(0.0);
     }
-    if p.waves != WAVES_NORMAL_MAP {
-        let v = sea_view(index, common, p, waves, texel);
-        if !v.hit {
-            return Vec4::ZERO;
-        }
-        let sun = sun_disk(sky, transmittance, v.reflected) * clouds.at(p, v.point);
-        let sky_light = sky_radiance(sky, transmittance, sky_view, v.reflected) + sun;
-        return (sky_light * v.reflectance).extend(0.0);
-    }
-    let v = sea_hit(index, common, p, waves, texel);
+    // Waves read the slope rule alone (`sea_hit`); a flat sea, the
+    // reflectance and reflected ray (`sea_view`).
+    let v = if p.waves != WAVES_NORMAL_MAP {
+        sea_view(index, common, p, waves, texel)
+    } else {
+        sea_hit(index, common, p, waves, texel)
+    };
     if !v.hit {
         return Vec4::ZERO;
+    }
+    reflection_seen(p, sky, transmittance, sky_view, &v, clouds).extend(0.0)
+}
+
+/// The sky and the sun reflected at the surface where `v` meets it (rgb):
+/// a flat sea's mirror (`v` from `refracted`), or over waves every facet
+/// of `v`'s slope rule and the sun's glint.
+pub fn reflection_seen(
+    p: &SeaParams,
+    sky: &SkyParams,
+    transmittance: &[Vec4],
+    sky_view: &[Vec4],
+    v: &SeaView,
+    clouds: &CloudShadow,
+) -> Vec3 {
+    if p.waves != WAVES_NORMAL_MAP {
+        let sun = sun_disk(sky, transmittance, v.reflected) * clouds.at(p, v.point);
+        let sky_light = sky_radiance(sky, transmittance, sky_view, v.reflected) + sun;
+        return sky_light * v.reflectance;
     }
     // Waves: the sky (and, by the turned-away share, the sun's disk)
     // reflected by each facet of the slope rule (`surface::SlopeRule`), and
@@ -963,7 +1001,7 @@ pub fn reflection_pixel(
         k += 1;
     }
     light += surface::sun_glint(sky, transmittance, &v.rule, &v.slopes, n) * shade;
-    light.extend(0.0)
+    light
 }
 
 /// The volumes' shadow on the water: the sun's transmittance through them
@@ -1025,14 +1063,21 @@ pub fn order1_pixel(
     if !v.hit {
         return Vec4::ZERO;
     }
+    order1_seen(p, &v, bottom, sunlit, clouds).extend(0.0)
+}
+
+/// Order 1 (eq. 5 to the bottom, or to an object under the surface) seen
+/// through the surface where `v` (from `refracted`) meets it, rgb.
+pub fn order1_seen(p: &SeaParams, v: &SeaView, bottom: &[f32], sunlit: &under::Sunlit, clouds: &CloudShadow) -> Vec3 {
+    let c1 = p.order1_extinction.xyz();
     let (mut depth, _) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
     // The water in front of an object under the surface, not behind it.
-    let object = object_under(&v, depth, &sunlit.geometry);
+    let object = object_under(v, depth, &sunlit.geometry);
     if object.distance != NO_HIT {
         depth = object.distance * v.view.y.max(1e-4);
     }
     let shade = clouds.at(p, v.point);
-    (order1_radiance(p, v.view, depth, c1) * v.transmission * shade).extend(0.0)
+    order1_radiance(p, v.view, depth, c1) * v.transmission * shade
 }
 
 /// What the refracted view ray of an eye above the water meets under the
@@ -1247,10 +1292,26 @@ pub fn bottom_pixel(
     if !v.hit {
         return Vec4::ZERO;
     }
+    bottom_seen(p, &v, bottom, caustic, sunlit, materials, clouds).extend(0.0)
+}
+
+/// The bottom (eq. 9 with the waves' caustic) or an object under the
+/// surface, seen through the surface where `v` (from `refracted`) meets
+/// it, rgb.
+pub fn bottom_seen(
+    p: &SeaParams,
+    v: &SeaView,
+    bottom: &[f32],
+    caustic: &[u32],
+    sunlit: &under::Sunlit,
+    materials: &[GpuMaterial],
+    clouds: &CloudShadow,
+) -> Vec3 {
+    let geometry = &sunlit.geometry;
     let (depth, cos_gamma) = bottom_hit(p, bottom, v.point.x, v.point.z, v.view);
-    let object = object_under(&v, depth, geometry);
+    let object = object_under(v, depth, geometry);
     let light = if object.distance != NO_HIT {
-        object_radiance(p, &v, &object, sunlit, materials)
+        object_radiance(p, v, &object, sunlit, materials)
     } else if depth >= DEEP {
         Vec3::ZERO
     } else {
@@ -1259,7 +1320,7 @@ pub fn bottom_pixel(
         let focus = bottom_focus(p, caustic, sunlit.shafts, q) * under::sun_visibility(p, geometry, q);
         bottom_radiance(p, v.view, depth, cos_gamma) * focus
     };
-    (light * v.transmission * clouds.at(p, v.point)).extend(0.0)
+    light * v.transmission * clouds.at(p, v.point)
 }
 
 /// The waves' focusing of the sun at the bottom point `q` (scene

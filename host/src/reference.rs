@@ -304,11 +304,21 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
     if data.materials[hit.material as usize].kind == MATERIAL_GLASS {
         // Through glass: the opaque surface behind, lit directly (and by
         // the sky's light under a sky), per channel; or, under a sky, the
-        // sky where the ray leaves the glass for good, and the sky
-        // reflected at the first interface.
+        // sky where the ray leaves the glass for good. Reflected at the
+        // first interface: the opaque surface the mirrored ray meets, lit
+        // the same way, or the sky (a second glass is not followed).
         let mut radiance = DVec3::ZERO;
         let (q, r, mirrored) = crate::caustics::reference::glass_reflection(data, o, d, &hit);
         let mut sky = open_sky(data, q, mirrored) * r;
+        let eps = crate::caustics::reference::epsilon(q);
+        if let Some(seen) = nearest(data, q, mirrored, eps, f64::INFINITY) {
+            if data.materials[seen.material as usize].kind != MATERIAL_GLASS {
+                let at = q + mirrored * seen.t;
+                let normal = if seen.normal.dot(mirrored) > 0.0 { -seen.normal } else { seen.normal };
+                let sky_light = crate::sky::reference::sky_light(data, at, normal, seen.albedo);
+                radiance += (direct(data, q, mirrored, &seen) + sky_light) * (-sigma_t * seen.t).exp() * r;
+            }
+        }
         for c in 0..3 {
             match crate::caustics::reference::through_glass(data, o, d, &hit, c) {
                 Some((q, dir, weight, Some(behind))) => {

@@ -8,8 +8,9 @@ use crate::caustics::{caustic_light, pack_rgb, CausticsParams};
 use crate::desert::ripples::{rippled, RippleRecord, Ripples};
 use crate::geometry::{occluded, trace_nearest, Geometry, Hit, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
-use crate::glass::{dispersive, is_glass, shading_normal, trace_through, Glass, GlassPath, PATH_OUT};
+use crate::glass::{dispersive, is_glass, shading_normal, surface_epsilon, trace_through, Glass, GlassPath, PATH_OUT};
 use crate::light::{emitted, emitted_visible, light_local, transmittance};
+use crate::optics::{reflect, reflectance};
 use crate::types::{
     CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial, GpuSphere, GpuTriangle,
     LIGHT_DIRECTIONAL, NO_OBJECT, SHADOWS_MAP,
@@ -141,7 +142,7 @@ pub struct Receiver {
 /// paper, traced exactly here rather than looked up in the table), the
 /// first opaque surface after the glass, in channel `channel` (a dispersive
 /// glass sends each channel its own way). Total internal reflection inside
-/// glass is followed; light reflected off the glass is not.
+/// glass is followed; the surface mirrored in the glass is `reflected_receiver`'s.
 #[allow(clippy::too_many_arguments)]
 pub fn receiver(
     params: &CommonParams,
@@ -188,6 +189,66 @@ pub fn receiver_after(params: &CommonParams, hit_distance: f32, path: &GlassPath
     }
 }
 
+/// Where a view ray `origin + t dir` meets glass first (`hit`): the point,
+/// the shading normal there (`glass::shading_normal`), the normal turned
+/// against the ray, the cosine of incidence and the mirror direction.
+pub struct GlassEntry {
+    pub point: Vec3,
+    pub normal: Vec3,
+    pub facing: Vec3,
+    pub cos_i: f32,
+    pub mirror: Vec3,
+}
+
+/// The interface a view ray meets at its first hit `hit` (glass).
+pub fn glass_entry(geometry: &Geometry, glass: &Glass, origin: Vec3, dir: Vec3, hit: &Hit) -> GlassEntry {
+    let point = origin + dir * hit.distance;
+    let normal = shading_normal(geometry, glass, hit, point);
+    let facing = if normal.dot(dir) > 0.0 { -normal } else { normal };
+    let cos_i = (-facing.dot(dir)).clamp(0.0, 1.0);
+    GlassEntry { point, normal, facing, cos_i, mirror: reflect(dir, facing) }
+}
+
+/// The Fresnel reflectance for unpolarised light (`optics::reflectance`,
+/// from air into index `ior` per channel) at cosine `cos_i`, rgb (w = 0).
+pub fn reflectances(ior: Vec4, cos_i: f32) -> Vec4 {
+    let r = |n: f32| reflectance(cos_i, 1.0 / n);
+    Vec4::new(r(ior.x), r(ior.y), r(ior.z), 0.0)
+}
+
+/// The opaque surface seen in glass by reflection: the view ray
+/// `origin + t dir` whose first hit `hit` is glass, mirrored at that
+/// interface (`glass_entry`) and traced to the next surface. Its weight is
+/// the Fresnel reflectance per channel (`reflectances`) times the medium's
+/// transmittance over both legs, as `receiver_after` weights a path through
+/// the glass. Not found where the first hit is not glass or the mirrored
+/// ray meets nothing or glass again (one reflection, not followed into a
+/// second glass); `material` is then the second hit's, or `NO_OBJECT`.
+#[allow(clippy::too_many_arguments)]
+pub fn reflected_receiver(
+    params: &CommonParams,
+    geometry: &Geometry,
+    materials: &[GpuMaterial],
+    entry: &GlassEntry,
+    hit: &Hit,
+) -> Receiver {
+    let next = trace_nearest(entry.point, entry.mirror, surface_epsilon(entry.point), NO_HIT, geometry);
+    let mut r = Receiver { found: false, point: entry.point, normal: Vec3::Y, material: NO_OBJECT, weight: Vec4::ZERO };
+    if next.distance == NO_HIT {
+        return r;
+    }
+    r.material = next.material;
+    if is_glass(materials, &next) {
+        return r;
+    }
+    r.found = true;
+    r.point = entry.point + entry.mirror * next.distance;
+    r.normal = if next.normal.dot(entry.mirror) > 0.0 { -next.normal } else { next.normal };
+    let fresnel = reflectances(materials[hit.material as usize].ior, entry.cos_i);
+    r.weight = fresnel * transmittance(params.sigma_t, hit.distance + next.distance);
+    r
+}
+
 /// `receiver` of a view ray whose first hit `hit` (a hit) is opaque: the
 /// hit itself.
 pub fn opaque_receiver(params: &CommonParams, origin: Vec3, dir: Vec3, hit: &Hit) -> Receiver {
@@ -227,8 +288,9 @@ pub fn channel_part(v: Vec4, c: u32, channels: u32) -> Vec4 {
 /// sample. Returns the attenuated surface radiance `I_o exp(-sigma_t T)`
 /// (eq. 1, first term) in rgb, W/(m^2 sr) (w = 0), and the pixel's G-buffer
 /// texel: normal toward the viewer, distance `T` (metres), object, material.
-/// A pixel that sees glass gets the opaque surface behind it (`receiver`);
-/// its G-buffer texel is the glass's.
+/// A pixel that sees glass gets the opaque surface behind it (`receiver`)
+/// and the one mirrored in it (`reflected_receiver`); its G-buffer texel is
+/// the glass's.
 ///
 /// `GLASS` false compiles the function for a scene without glass (every
 /// surface opaque, no caustics maps): the same result without the glass
@@ -294,6 +356,16 @@ pub fn surface_pixel<const GLASS: bool>(
                 caustic += channel_part(caustic_light(caustic_maps, caustics, materials, &r), c, channels);
             }
             c += 1;
+        }
+        // The opaque surface mirrored in the glass, lit the same way.
+        if is_glass(materials, &hit) {
+            let entry = glass_entry(geometry, glass, origin, dir, &hit);
+            let r = reflected_receiver(params, geometry, materials, &entry, &hit);
+            if r.found {
+                let albedo = materials[r.material as usize].albedo;
+                radiance += direct_radiance(params, lights, geometry, inputs, r.point, r.normal, albedo) * r.weight;
+                caustic += caustic_light(caustic_maps, caustics, materials, &r);
+            }
         }
     } else {
         let mut r = opaque_receiver(params, origin, dir, &hit);

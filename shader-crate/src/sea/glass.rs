@@ -22,11 +22,10 @@
 use super::{accumulated_toward, bottom_hit, reflection_seen, refracted, sea_hit_along, CloudShadow, SeaParams};
 use super::{bottom_seen, order1_seen, under};
 use crate::camera::{camera_ray, in_image};
-use crate::common::surface::{channel_part, view_channels};
+use crate::common::surface::{channel_part, glass_entry, reflectances, view_channels};
 use crate::geometry::{trace_nearest, NO_HIT};
 use crate::glam::{UVec3, Vec2, Vec3, Vec4};
-use crate::glass::{is_glass, pick, shading_normal, surface_epsilon, trace_through, Glass, PATH_OUT};
-use crate::optics::{reflect, reflectance};
+use crate::glass::{is_glass, surface_epsilon, trace_through, Glass, PATH_OUT};
 use crate::sky::SkyParams;
 use crate::types::{CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial};
 use crate::types::{GpuSphere, GpuTriangle, MATERIAL_GLASS, NO_OBJECT};
@@ -104,25 +103,19 @@ pub fn sea_in_glass_pixel(
     if !is_glass(materials, &hit) {
         return Vec4::ZERO;
     }
-    let point = origin + dir * hit.distance;
-    let n = shading_normal(geometry, glass, &hit, point);
-    let facing = if n.dot(dir) > 0.0 { -n } else { n };
-    let cos_i = (-facing.dot(dir)).clamp(0.0, 1.0);
-    let material = materials[hit.material as usize];
+    let entry = glass_entry(geometry, glass, origin, dir, &hit);
+    let (point, n) = (entry.point, entry.normal);
     // The reflected ray is the same in every channel: followed once.
-    let mirrored = sea_along(s, point, reflect(dir, facing));
+    let fresnel = reflectances(materials[hit.material as usize].ior, entry.cos_i);
+    let mut out = sea_along(s, point, entry.mirror).extend(0.0) * fresnel;
     let channels = view_channels(materials, &hit);
-    let mut out = Vec4::ZERO;
     let mut c = 0;
     while c < channels {
-        let eta = 1.0 / pick(material.ior, c);
-        let reflected = mirrored * reflectance(cos_i, eta);
         let path = trace_through(geometry, glass, materials, point, n, hit.material, dir, c, NO_OBJECT, true);
-        let mut through = Vec4::ZERO;
         if path.status == PATH_OUT && path.next.distance == NO_HIT {
-            through = sea_along(s, path.position, path.direction).extend(0.0) * path.transmittance();
+            let through = sea_along(s, path.position, path.direction).extend(0.0) * path.transmittance();
+            out += channel_part(through, c, channels);
         }
-        out += channel_part(reflected.extend(0.0) + through, c, channels);
         c += 1;
     }
     Vec4::new(out.x, out.y, out.z, 0.0)

@@ -21,18 +21,22 @@
 //!   surface pass weights the sun's light there (`receiver_after`). The
 //!   skylight pass reads one G-buffer texel, the glass's, and cannot.
 //!
+//! - **skylight mirrored**: where the reflected ray meets a diffuse surface
+//!   (`common::surface::reflected_receiver`; the surface pass lights it
+//!   with the lights), the sky's light on it times the reflectance.
+//!
 //! A ray that is lost in the glass, or (with a sea below the eye) goes
-//! down toward the water adds nothing here: surfaces seen in glass by
-//! reflection are not drawn, and the sea is not seen through glass. Like
+//! down toward the water adds nothing here (`sea.glass` draws the sea). Like
 //! the sky seen directly, the sky through glass is not attenuated by a
 //! `[medium]`.
 
 use crate::camera::{camera_ray, in_image};
-use crate::common::surface::{channel_part, receiver_after, view_channels};
+use crate::common::surface::{
+    channel_part, glass_entry, receiver_after, reflectances, reflected_receiver, view_channels,
+};
 use crate::geometry::{trace_nearest, Geometry, NO_HIT};
 use crate::glam::{UVec3, Vec3, Vec4, Vec4Swizzles};
-use crate::glass::{is_glass, pick, shading_normal, surface_epsilon, trace_through, Glass, PATH_OUT};
-use crate::optics::{reflect, reflectance};
+use crate::glass::{is_glass, surface_epsilon, trace_through, Glass, PATH_OUT};
 use crate::sky::light::sky_light_at;
 use crate::sky::{sky_radiance, sun_disk, SkyParams, SEA_AROUND, SEA_BELOW};
 use crate::types::{CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuMaterial, GpuSphere};
@@ -55,6 +59,14 @@ fn open_sky(
     }
     let eps = surface_epsilon(from);
     if trace_nearest(from, dir, eps, NO_HIT, geometry).distance != NO_HIT {
+        return Vec3::ZERO;
+    }
+    sky_along(p, transmittance, sky_view, dir)
+}
+
+/// `open_sky` along a ray already known to meet nothing.
+fn sky_along(p: &SkyParams, transmittance: &[Vec4], sky_view: &[Vec4], dir: Vec3) -> Vec3 {
+    if p.sea == SEA_AROUND || (p.sea == SEA_BELOW && dir.y < 0.0) {
         return Vec3::ZERO;
     }
     sky_radiance(p, transmittance, sky_view, dir) + sun_disk(p, transmittance, dir)
@@ -89,19 +101,23 @@ pub fn sky_in_glass_pixel(
     if !is_glass(materials, &hit) {
         return Vec4::ZERO;
     }
-    let point = origin + dir * hit.distance;
-    let n = shading_normal(geometry, glass, &hit, point);
-    let facing = if n.dot(dir) > 0.0 { -n } else { n };
-    let cos_i = (-facing.dot(dir)).clamp(0.0, 1.0);
-    let material = materials[hit.material as usize];
-    // The reflected ray is the same in every channel: traced once.
-    let mirrored = open_sky(p, transmittance, sky_view, geometry, point, reflect(dir, facing));
-    let channels = view_channels(materials, &hit);
+    let entry = glass_entry(geometry, glass, origin, dir, &hit);
+    let (point, n) = (entry.point, entry.normal);
+    // The reflected ray is the same in every channel: traced once, to the
+    // sky or to a surface the sky lights.
+    let mirror = reflected_receiver(common, geometry, materials, &entry, &hit);
+    let fresnel = reflectances(materials[hit.material as usize].ior, entry.cos_i);
     let mut out = Vec4::ZERO;
+    if mirror.material == NO_OBJECT {
+        out = sky_along(p, transmittance, sky_view, entry.mirror).extend(0.0) * fresnel;
+    } else if mirror.found && p.lights_surfaces != 0 && materials[mirror.material as usize].kind == MATERIAL_DIFFUSE {
+        let albedo = materials[mirror.material as usize].albedo.xyz();
+        let light = sky_light_at(p, transmittance, sky_view, irradiance, geometry, mirror.point, mirror.normal, albedo);
+        out = light.extend(0.0) * mirror.weight;
+    }
+    let channels = view_channels(materials, &hit);
     let mut c = 0;
     while c < channels {
-        let eta = 1.0 / pick(material.ior, c);
-        let reflected = mirrored * reflectance(cos_i, eta);
         let path = trace_through(geometry, glass, materials, point, n, hit.material, dir, c, NO_OBJECT, true);
         let mut through = Vec4::ZERO;
         if path.status == PATH_OUT && path.next.distance == NO_HIT {
@@ -115,7 +131,7 @@ pub fn sky_in_glass_pixel(
                 through = light.extend(0.0) * r.weight;
             }
         }
-        out += channel_part(reflected.extend(0.0) + through, c, channels);
+        out += channel_part(through, c, channels);
         c += 1;
     }
     Vec4::new(out.x, out.y, out.z, 0.0)

@@ -97,6 +97,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sky_irradiance",
         "sky",
         "sky.glass",
+        "sky_visibility",
         "sky_light",
         "sky_aerial",
         "sea.radiance_map",

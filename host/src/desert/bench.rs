@@ -10,6 +10,9 @@
 //!   in accuracy, and what the renderer's own error is at full resolution;
 //!   with ripples, the full mesh again with the ripples at full
 //!   resolution everywhere (no LOD), as the reference takes them;
+//! - `skylight-spacing` (under a `[sky]` that lights the scene): the full
+//!   mesh and ripples with the skylight's visibility rays traced at every pixel
+//!   (`size` 1), one in 2x2 (2, the default) and one in 4x4 (4);
 //! - `automaton`: the scene's dunes (first terrain with `dunes`) on
 //!   lattices of 64^2 up to 512^2 cells of its cell width (256^2 with
 //!   `--quick`), 20 steps
@@ -35,7 +38,9 @@ pub struct Row {
     pub scene: String,
     pub backend: &'static str,
     pub series: &'static str,
-    /// Quadrilaterals a side (`mesh`) or cells a side (`automaton`).
+    /// Quadrilaterals a side (`mesh`), pixels between the pixels that
+    /// trace the skylight's rays (`skylight-spacing`) or cells a side
+    /// (`automaton`).
     pub size: u32,
     pub median_seconds: f64,
     /// `automaton`: the median over repeats of the pass's time over its steps.
@@ -94,10 +99,13 @@ fn dunes_on(data: &SceneData, n: u32, steps: u32) -> Result<Option<SceneData>> {
 
 /// Runs the sweep over `scenes` and writes `desert_bench.csv` and
 /// `desert_time_vs_error.png` into the options' folder. Error is measured
-/// at every second pixel each way at least.
+/// at every `stride | 1`-th pixel each way (odd, at least 3).
 pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
     let Options { backends, repeats, quick, out_dir, .. } = opts;
-    let (repeats, quick, stride) = (*repeats, *quick, opts.stride.max(2));
+    // An odd stride (5 with the default 4): the lattice meets the pixels
+    // that trace the skylight's visibility (even coordinates at spacing 2)
+    // and those that take theirs alike.
+    let (repeats, quick, stride) = (*repeats, *quick, opts.stride.max(2) | 1);
     let mut rows = Vec::new();
     for BenchScene { path, name, data } in scenes {
         anyhow::ensure!(!data.desert.fields.is_empty(), "{}: no [[terrain]] to benchmark", path.display());
@@ -117,14 +125,29 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
             // ripples at full resolution everywhere: what the LOD costs
             // against the reference's full-resolution ripples.
             let rippled = data.source.file.terrain.iter().any(|t| t.ripples.is_some());
-            let configs = sizes.iter().map(|&n| ("mesh", n)).chain(rippled.then_some(("mesh-ripples-full", full)));
+            // Under a sky, the full mesh with the skylight's visibility rays
+            // traced at every pixel, one in 2x2 and one in 4x4.
+            let lit = data.sky.light && data.sky.params.light_rays > 0;
+            let spacings: &[u32] = if lit { &[1, 2, 4] } else { &[] };
+            let configs = sizes
+                .iter()
+                .map(|&n| ("mesh", n))
+                .chain(rippled.then_some(("mesh-ripples-full", full)))
+                .chain(spacings.iter().map(|&s| ("skylight-spacing", s)));
             for (series, n) in configs {
-                let d = if series == "mesh" {
-                    meshed(data, n)?
-                } else {
-                    finest.reconfigure(move |f| {
+                let d = match series {
+                    "mesh" => meshed(data, n)?,
+                    // The ripples at full resolution, as the reference
+                    // takes them: what is left is the skylight's.
+                    "skylight-spacing" => finest
+                        .reconfigure(move |f| {
+                            f.sky.iter_mut().for_each(|s| s.sky_light_spacing = n);
+                            f.terrain.iter_mut().filter_map(|t| t.ripples.as_mut()).for_each(|r| r.lod = false)
+                        })
+                        .with_context(|| format!("desert bench: sky_light_spacing {n}"))?,
+                    _ => finest.reconfigure(move |f| {
                         f.terrain.iter_mut().filter_map(|t| t.ripples.as_mut()).for_each(|r| r.lod = false)
-                    })?
+                    })?,
                 };
                 let timed = time_renders(&d, backend, repeats, &[])?;
                 let img = &timed.last.image;
@@ -180,17 +203,17 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     crate::bench::write_csv(path, rows)
 }
 
-/// The mesh series' error against the median render time, one line per
-/// scene and backend.
+/// The mesh and skylight series' error against the median render time,
+/// one line per scene, backend and series.
 fn plot(path: &Path, rows: &[Row]) -> Result<()> {
-    let mesh: Vec<&Row> = rows.iter().filter(|r| r.series.starts_with("mesh")).collect();
+    let mesh: Vec<&Row> = rows.iter().filter(|r| r.rms_8bit_percent.is_some()).collect();
     let series = crate::bench::series_of(
         &mesh,
         |r| format!("{} ({}, {})", r.scene, r.backend, r.series),
         |r| (r.median_seconds, r.rms_8bit_percent.unwrap_or(0.0)),
     );
     let labels = crate::bench::LogLogPlot {
-        caption: "Desert: run time against error of the terrain's mesh (RMS % of the 8-bit range)",
+        caption: "Desert: run time against error, the mesh and the skylight's spacing (RMS % of 255)",
         x_desc: "median render time, s",
         y_desc: "RMS error, % of 255",
     };

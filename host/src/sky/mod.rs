@@ -10,7 +10,9 @@ use anyhow::{bail, Result};
 use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use serde::Deserialize;
-use slicelight_shaders::sky::light::{irradiance_texel, sky_light_pixel, IRRADIANCE_HEIGHT, IRRADIANCE_WIDTH};
+use slicelight_shaders::sky::light::{
+    irradiance_texel, sky_light_pixel, visibility_pixel, SkyTables, IRRADIANCE_HEIGHT, IRRADIANCE_WIDTH,
+};
 use slicelight_shaders::sky::{
     hits_ground, optical_depth_to_top, sky_pixel, sky_view_texel, transmittance_texel, SkyParams, MIE_CORNETTE_SHANKS,
     MIE_HENYEY_GREENSTEIN,
@@ -21,7 +23,7 @@ use crate::passes::*;
 
 /// The family's passes, in the order they run (see `passes::FAMILIES`).
 pub static PASSES: &[&dyn Pass] =
-    &[&SkyTransmittance, &SkyView, &SkyIrradiance, &Sky, &glass::SkyGlass, &SkyLight, &Aerial];
+    &[&SkyTransmittance, &SkyView, &SkyIrradiance, &Sky, &glass::SkyGlass, &SkyVisibility, &SkyLight, &Aerial];
 
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family = Family { name: "sky", passes: PASSES, kernels: &[], bench: Some(&bench::SkySweep) };
@@ -51,6 +53,9 @@ pub static SKY_IRRADIANCE: Resource = Resource {
 };
 pub static SKY_LIGHT_RADIANCE: Resource =
     Resource { binding: 63, name: "skylight radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
+/// The skylight's visibility `V` (rgb; w 1) at the pixels that trace it.
+pub static SKY_VISIBILITY: Resource =
+    Resource { binding: 86, name: "skylight visibility", kind: ResourceKind::PerPixel { blank: no_radiance } };
 /// The air's light in front of the surfaces (aerial perspective).
 pub static AERIAL_RADIANCE: Resource =
     Resource { binding: 64, name: "aerial radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
@@ -95,6 +100,11 @@ pub struct Settings {
     /// unshadowed skylight).
     #[serde(default = "sky_light_rays")]
     pub sky_light_rays: u32,
+    /// Pixels between the pixels that trace those rays, across and down
+    /// (1: every pixel traces its own; 2: one in each 2x2 block, the others
+    /// take theirs where they see the same surface).
+    #[serde(default = "sky_light_spacing")]
+    pub sky_light_spacing: u32,
     /// Whether the air between the eye and the surfaces scatters the sun's
     /// light toward the eye and dims what lies behind it.
     #[serde(default = "yes")]
@@ -132,6 +142,9 @@ fn yes() -> bool {
 }
 fn sky_light_rays() -> u32 {
     8
+}
+fn sky_light_spacing() -> u32 {
+    2
 }
 fn view_samples() -> u32 {
     32
@@ -325,6 +338,9 @@ pub fn configure(s: &Settings) -> Result<Setup> {
     if s.sky_light_rays > 1024 {
         bail!(invalid("sky.sky_light_rays", "0 to 1024 rays per pixel", s.sky_light_rays));
     }
+    if !(1..=8).contains(&s.sky_light_spacing) {
+        bail!(invalid("sky.sky_light_spacing", "1 to 8 pixels", s.sky_light_spacing));
+    }
     table_size("sky.transmittance_table", s.transmittance_table, false)?;
     table_size("sky.sky_view_table", s.sky_view_table, true)?;
     let a = &s.atmosphere;
@@ -403,7 +419,8 @@ pub fn configure(s: &Settings) -> Result<Setup> {
         sea: 0,
         light_rays: s.sky_light_rays,
         lights_surfaces: (s.sky_light && s.light_scene) as u32,
-        pad: [0; 3],
+        light_spacing: s.sky_light_spacing,
+        pad: [0; 2],
     };
     let params = SkyParams { horizon: slicelight_shaders::sky::horizon_elevation(&params), ..params };
     Ok(Setup {
@@ -631,6 +648,63 @@ impl Pass for SkyIrradiance {
     }
 }
 
+/// The skylight's first pass: `V` at the pixels that trace the visibility
+/// rays (one in `light_spacing`^2), which `sky_light` spreads to the pixels
+/// around them that see the same surface.
+pub struct SkyVisibility;
+
+impl Pass for SkyVisibility {
+    fn name(&self) -> &'static str {
+        "sky_visibility"
+    }
+    fn kernel(&self) -> &'static str {
+        "sky::sky_visibility_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, SPHERES, TRIANGLES, BVH_NODES, MATERIALS, GBUFFER, SKY_PARAMS, SKY_TRANSMITTANCE, SKY_VIEW]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SKY_VISIBILITY]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sky_light(scene) {
+            return skip;
+        }
+        let (rays, spacing) = (scene.sky.params.light_rays, scene.sky.params.light_spacing);
+        if rays == 0 {
+            return Plan::skip("no visibility rays (sky_light_rays = 0): the skylight is unshadowed");
+        }
+        let which = if spacing == 1 { "every pixel".to_string() } else { format!("one pixel in {spacing}x{spacing}") };
+        Plan::run(format!("the sky a surface sees: {rays} rays at {which}"), 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let n = common.band_pixels as usize;
+        let p = &scene.sky.params;
+        let blank = slicelight_shaders::common::surface::no_surface();
+        let geometry = scene.geometry();
+        frame.write_all::<Vec4>(&SKY_VISIBILITY, n, |frame, out| {
+            let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
+            let sky_view = frame.get::<Vec4>(&SKY_VIEW);
+            let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            for_each_invocation(out, common.band_start, progress, |i, v| {
+                let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
+                *v = visibility_pixel(i, common, p, transmittance, sky_view, &geometry, &scene.materials, texel);
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Shares of 8 rays weighted by the sky's radiance (sky-view lookups
+        // through asin and acos, 4096 ulps on Vulkan): 1e-3; a ray that
+        // grazes an edge may go either way on the two backends (1/8 of a
+        // pixel's share), at most 1 % of the values.
+        let cpu_values = cpu.get::<Vec4>(&SKY_VISIBILITY);
+        compare_rgb("skylight visibility", gpu.get(&SKY_VISIBILITY), cpu_values, 1e-3, cpu_values.len() * 3 / 100 + 1)
+    }
+}
+
 pub struct SkyLight;
 
 impl Pass for SkyLight {
@@ -651,7 +725,8 @@ impl Pass for SkyLight {
             SKY_PARAMS,
             SKY_TRANSMITTANCE,
             SKY_VIEW,
-            SKY_IRRADIANCE
+            SKY_IRRADIANCE,
+            SKY_VISIBILITY
         ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
@@ -668,32 +743,24 @@ impl Pass for SkyLight {
             return skip;
         }
         let rays = scene.sky.params.light_rays;
-        let shadow = if rays == 0 { "unshadowed".to_string() } else { format!("{rays} visibility rays per pixel") };
+        let shadow = if rays == 0 { "unshadowed".to_string() } else { "visibility from sky_visibility".to_string() };
         Plan::run(format!("the sky's light on diffuse surfaces (irradiance table), {shadow}"), 0)
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let n = common.band_pixels as usize;
         let p = &scene.sky.params;
-        let blank = slicelight_shaders::common::surface::no_surface();
         let geometry = scene.geometry();
         frame.write_all::<Vec4>(&SKY_LIGHT_RADIANCE, n, |frame, out| {
-            let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
-            let sky_view = frame.get::<Vec4>(&SKY_VIEW);
-            let irradiance = frame.get::<Vec4>(&SKY_IRRADIANCE);
+            let sky = SkyTables {
+                p,
+                transmittance: frame.get::<Vec4>(&SKY_TRANSMITTANCE),
+                sky_view: frame.get::<Vec4>(&SKY_VIEW),
+                irradiance: frame.get::<Vec4>(&SKY_IRRADIANCE),
+            };
             let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+            let visibility = frame.get::<Vec4>(&SKY_VISIBILITY);
             for_each_invocation(out, common.band_start, progress, |i, v| {
-                let texel = gbuffer.get((i - common.band_start) as usize).unwrap_or(&blank);
-                *v = sky_light_pixel(
-                    i,
-                    common,
-                    p,
-                    transmittance,
-                    sky_view,
-                    irradiance,
-                    &geometry,
-                    &scene.materials,
-                    texel,
-                );
+                *v = sky_light_pixel(i, common, &sky, &geometry, &scene.materials, gbuffer, visibility);
             });
         });
     }

@@ -107,10 +107,55 @@ pub fn visibility_direction(n: Vec3, k: u32, count: u32) -> Vec3 {
     local.normalize()
 }
 
+/// The sky tables the skylight reads: the parameters, the transmittance
+/// and sky-view tables and the irradiance table.
+pub struct SkyTables<'a> {
+    pub p: &'a SkyParams,
+    pub transmittance: &'a [Vec4],
+    pub sky_view: &'a [Vec4],
+    pub irradiance: &'a [Vec4],
+}
+
+/// `V` at `point` (unit `normal`): the share of the hemisphere's sky light
+/// that arrives, the radiance-weighted share of `light_rays` visibility
+/// rays (`visibility_direction`) that escape the scene's geometry, rgb in
+/// [0, 1]; 1 with no rays.
+pub fn sky_visibility(
+    p: &SkyParams,
+    transmittance: &[Vec4],
+    sky_view: &[Vec4],
+    geometry: &Geometry,
+    point: Vec3,
+    n: Vec3,
+) -> Vec3 {
+    if p.light_rays == 0 {
+        return Vec3::ONE;
+    }
+    let scale = point.abs().max_element().max(1.0);
+    let mut all = Vec3::ZERO;
+    let mut free = Vec3::ZERO;
+    let mut k = 0;
+    while k < p.light_rays {
+        let w = visibility_direction(n, k, p.light_rays);
+        let l = sky_radiance(p, transmittance, sky_view, w);
+        all += l;
+        let t_min = 1e-5 * scale / n.dot(w).max(1e-3);
+        // Out to 10^30 m (short of `NO_HIT`): the sky is beyond everything.
+        if !occluded(point, w, t_min, 1e30, geometry) {
+            free += l;
+        }
+        k += 1;
+    }
+    Vec3::new(
+        if all.x > 0.0 { free.x / all.x } else { 1.0 },
+        if all.y > 0.0 { free.y / all.y } else { 1.0 },
+        if all.z > 0.0 { free.z / all.z } else { 1.0 },
+    )
+}
+
 /// The sky's light reflected by a diffuse surface of `albedo` at `point`
 /// (unit `normal`, turned toward the viewer), rgb W/(m^2 sr):
-/// `rho / pi E(n) V`, `V` the radiance-weighted share of `light_rays`
-/// visibility rays that escape the scene's geometry (1 with none).
+/// `rho / pi E(n) V` (`sky_visibility`).
 #[allow(clippy::too_many_arguments)]
 pub fn sky_light_at(
     p: &SkyParams,
@@ -123,65 +168,158 @@ pub fn sky_light_at(
     albedo: Vec3,
 ) -> Vec3 {
     let e = irradiance_lookup(p, irradiance, n);
-    let mut seen = Vec3::ONE;
-    if p.light_rays > 0 {
-        // The share of the hemisphere's sky light that arrives: rays that
-        // escape, weighted by the sky's radiance their way.
-        let scale = point.abs().max_element().max(1.0);
-        let mut all = Vec3::ZERO;
-        let mut free = Vec3::ZERO;
-        let mut k = 0;
-        while k < p.light_rays {
-            let w = visibility_direction(n, k, p.light_rays);
-            let l = sky_radiance(p, transmittance, sky_view, w);
-            all += l;
-            let t_min = 1e-5 * scale / n.dot(w).max(1e-3);
-            // Out to 10^30 m (short of `NO_HIT`): the sky is beyond everything.
-            if !occluded(point, w, t_min, 1e30, geometry) {
-                free += l;
-            }
-            k += 1;
-        }
-        seen = Vec3::new(
-            if all.x > 0.0 { free.x / all.x } else { 1.0 },
-            if all.y > 0.0 { free.y / all.y } else { 1.0 },
-            if all.z > 0.0 { free.z / all.z } else { 1.0 },
-        );
-    }
-    albedo * FRAC_1_PI * e * seen
+    albedo * FRAC_1_PI * e * sky_visibility(p, transmittance, sky_view, geometry, point, n)
 }
 
-/// Per-pixel skylight kernel: the sky's light reflected toward the eye by
-/// the diffuse surface pixel `index` sees (rgb, W/(m^2 sr); w = 0),
-/// `sky_light_at` times `exp(-sigma_t t)` (the medium between eye and
-/// surface as the surface pass takes it), 0 where the pixel sees no surface
-/// or glass (`sky.glass` lights what is seen through glass). With
-/// `light_rays` 0, `V` is 1 (unshadowed).
+/// Whether pixel `(x, y)` traces the visibility rays: both coordinates
+/// multiples of `light_spacing` (every pixel with a spacing of 1).
+pub fn traces_visibility(p: &SkyParams, x: u32, y: u32) -> bool {
+    let s = p.light_spacing.max(1);
+    x % s == 0 && y % s == 0
+}
+
+/// The point pixel `(x, y)`'s G-buffer `texel` sees, and the diffuse
+/// material there; not found where it sees no surface, or one that is not
+/// diffuse (glass, whose view `sky.glass` lights), or lies outside the image.
+fn diffuse_seen(
+    common: &CommonParams,
+    materials: &[GpuMaterial],
+    x: u32,
+    y: u32,
+    texel: &GBufferTexel,
+) -> (bool, Vec3) {
+    if texel.object == NO_OBJECT
+        || !in_image(common, x, y)
+        || materials[texel.material as usize].kind != MATERIAL_DIFFUSE
+    {
+        return (false, Vec3::ZERO);
+    }
+    let (origin, dir) = camera_ray(common, x, y);
+    (true, origin + dir * texel.normal_distance.w)
+}
+
+/// Skylight visibility kernel (the first of the skylight's two passes):
+/// at a pixel that traces (`traces_visibility`) and sees a diffuse
+/// surface, `V` there (`sky_visibility`; rgb, w = 1); elsewhere 0 (w = 0:
+/// no value).
 #[allow(clippy::too_many_arguments)]
-pub fn sky_light_pixel(
+pub fn visibility_pixel(
     index: u32,
     common: &CommonParams,
     p: &SkyParams,
     transmittance: &[Vec4],
     sky_view: &[Vec4],
-    irradiance: &[Vec4],
     geometry: &Geometry,
     materials: &[GpuMaterial],
     texel: &GBufferTexel,
 ) -> Vec4 {
     let (x, y) = (index % common.width, index / common.width);
-    if texel.object == NO_OBJECT || !in_image(common, x, y) {
+    if !traces_visibility(p, x, y) {
         return Vec4::ZERO;
     }
-    let material = &materials[texel.material as usize];
-    if material.kind != MATERIAL_DIFFUSE {
+    let (found, point) = diffuse_seen(common, materials, x, y, texel);
+    if !found {
         return Vec4::ZERO;
     }
-    let (origin, dir) = camera_ray(common, x, y);
-    let t = texel.normal_distance.w;
-    let point = origin + dir * t;
     let n = texel.normal_distance.xyz();
-    let light = sky_light_at(p, transmittance, sky_view, irradiance, geometry, point, n, material.albedo.xyz());
-    let medium = (-common.sigma_t.xyz() * t).exp();
+    sky_visibility(p, transmittance, sky_view, geometry, point, n).extend(1.0)
+}
+
+/// Normals of a pixel and a tracing pixel whose `V` it takes agree to
+/// this cosine (18 degrees): `V` turns with the normal's hemisphere.
+const SAME_NORMAL: f32 = 0.95;
+/// A tracing pixel's point lies within this share of the pixel's distance
+/// of the pixel's tangent plane: the same surface, not one in front of or
+/// behind it.
+const SAME_PLANE: f32 = 0.02;
+
+/// `V` at pixel `(x, y)` (its G-buffer `texel`, the `point` it sees) from
+/// the tracing pixels around it, `light_spacing` apart: the bilinear
+/// weights of the up to four around it, each kept only where that pixel
+/// sees the same object, with the normal within `SAME_NORMAL` and its point
+/// within `SAME_PLANE` of the pixel's tangent plane (a joint bilateral
+/// upsampling). rgb times the weights kept, and their sum in w (0: none kept).
+#[allow(clippy::too_many_arguments)]
+fn nearby_visibility(
+    common: &CommonParams,
+    p: &SkyParams,
+    gbuffer: &[GBufferTexel],
+    visibility: &[Vec4],
+    x: u32,
+    y: u32,
+    texel: &GBufferTexel,
+    point: Vec3,
+) -> Vec4 {
+    let s = p.light_spacing.max(1);
+    let n = texel.normal_distance.xyz();
+    let (x0, y0) = (x - x % s, y - y % s);
+    let (fx, fy) = ((x % s) as f32 / s as f32, (y % s) as f32 / s as f32);
+    let mut sum = Vec4::ZERO;
+    let mut corner = 0;
+    while corner < 4 {
+        let (i, j) = (corner % 2, corner / 2);
+        let w = (if i == 0 { 1.0 - fx } else { fx }) * (if j == 0 { 1.0 - fy } else { fy });
+        let (xs, ys) = (x0 + i * s, y0 + j * s);
+        let k = ys * common.width + xs;
+        corner += 1;
+        if w <= 0.0 || xs >= common.width || k < common.band_start || k - common.band_start >= common.band_pixels {
+            continue;
+        }
+        let b = (k - common.band_start) as usize;
+        let v = visibility[b];
+        let other = &gbuffer[b];
+        if v.w == 0.0 || other.object != texel.object || other.normal_distance.xyz().dot(n) < SAME_NORMAL {
+            continue;
+        }
+        let (origin, dir) = camera_ray(common, xs, ys);
+        let q = origin + dir * other.normal_distance.w;
+        if (q - point).dot(n).abs() > SAME_PLANE * texel.normal_distance.w {
+            continue;
+        }
+        sum += Vec4::new(v.x * w, v.y * w, v.z * w, w);
+    }
+    sum
+}
+
+/// Per-pixel skylight kernel (the second pass): the sky's light reflected
+/// toward the eye by the diffuse surface pixel `index` sees (rgb,
+/// W/(m^2 sr); w = 0), `rho / pi E(n) V` times `exp(-sigma_t t)` (the
+/// medium between eye and surface as the surface pass takes it), 0 where
+/// the pixel sees no surface or glass (`sky.glass` lights what is seen
+/// through glass). `V` is the tracing pixels' around it where they see the
+/// same surface (`nearby_visibility`), else its own rays' (a pixel
+/// `light_spacing` apart from none that matches traces them itself); with
+/// `light_rays` 0, 1 (unshadowed). `gbuffer` and `visibility` hold the band.
+#[allow(clippy::too_many_arguments)]
+pub fn sky_light_pixel(
+    index: u32,
+    common: &CommonParams,
+    sky: &SkyTables,
+    geometry: &Geometry,
+    materials: &[GpuMaterial],
+    gbuffer: &[GBufferTexel],
+    visibility: &[Vec4],
+) -> Vec4 {
+    let (x, y) = (index % common.width, index / common.width);
+    let texel = &gbuffer[(index - common.band_start) as usize];
+    let (found, point) = diffuse_seen(common, materials, x, y, texel);
+    if !found {
+        return Vec4::ZERO;
+    }
+    let p = sky.p;
+    let n = texel.normal_distance.xyz();
+    let mut seen = Vec3::ONE;
+    if p.light_rays > 0 {
+        // With a spacing of 1, the pixel's own.
+        let near = nearby_visibility(common, p, gbuffer, visibility, x, y, texel, point);
+        seen = if near.w > 0.0 {
+            near.xyz() / near.w
+        } else {
+            sky_visibility(p, sky.transmittance, sky.sky_view, geometry, point, n)
+        };
+    }
+    let albedo = materials[texel.material as usize].albedo.xyz();
+    let light = albedo * FRAC_1_PI * irradiance_lookup(p, sky.irradiance, n) * seen;
+    let medium = (-common.sigma_t.xyz() * texel.normal_distance.w).exp();
     (light * medium).extend(0.0)
 }

@@ -107,8 +107,11 @@ pub struct SkyParams {
     /// through glass, which the skylight pass (one G-buffer texel, the
     /// glass's) does not reach.
     pub lights_surfaces: u32,
+    /// Pixels between the pixels that trace the visibility rays
+    /// (`light::visibility_pixel`; 1: every pixel traces its own).
+    pub light_spacing: u32,
     /// Padding to a whole number of `Vec4`s.
-    pub pad: [u32; 3],
+    pub pad: [u32; 2],
 }
 
 #[cfg(not(target_arch = "spirv"))]
@@ -697,19 +700,47 @@ pub fn sky_light_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] transmittance: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] sky_view: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 62)] irradiance: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 86)] visibility: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 63)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
         let geometry = crate::scene_geometry(common, spheres, triangles, nodes);
-        radiance[index as usize] = light::sky_light_pixel(
+        let sky = light::SkyTables { p: &params[0], transmittance, sky_view, irradiance };
+        radiance[index as usize] =
+            light::sky_light_pixel(common.band_start + index, common, &sky, &geometry, materials, gbuffer, visibility);
+    }
+}
+
+/// The skylight's visibility at the pixels that trace it
+/// (`light::visibility_pixel`).
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn sky_visibility_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[crate::types::GpuMaterial],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 8)] gbuffer: &[GBufferTexel],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] params: &[SkyParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] transmittance: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] sky_view: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 86)] visibility: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let common = &common[0];
+    if index < common.band_pixels {
+        let geometry = crate::scene_geometry(common, spheres, triangles, nodes);
+        visibility[index as usize] = light::visibility_pixel(
             common.band_start + index,
             common,
             &params[0],
             transmittance,
             sky_view,
-            irradiance,
             &geometry,
             materials,
             &gbuffer[index as usize],

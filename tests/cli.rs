@@ -94,6 +94,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "caustics.shafts",
         "sky_transmittance",
         "sky_view",
+        "sky_sphere",
         "sky_irradiance",
         "sky",
         "sky.glass",

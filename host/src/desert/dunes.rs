@@ -276,13 +276,16 @@ pub fn configure(field: &str, s: &Settings, size: [f32; 2]) -> Result<Setup> {
         repose: repose_slabs as u32,
         shadow_drop: shadow_drop.max(1.0) as u32,
         shadow_reach: MAX_SHADOW_REACH.min(nx.saturating_sub(1)),
+        height_bound: u32::MAX,
     };
     Ok(Setup { params, steps: s.steps, wind, cells: s.cells, slab })
 }
 
 /// Runs dispatches `first..first + count` of the kernel on the CPU from
 /// `state` (the lattice after dispatch `first - 1`), the same function per
-/// cell as on the GPU.
+/// cell as on the GPU. Each step's saltation phase is given the lattice's
+/// highest cell as `height_bound` (its wind-shadow scans stop below it;
+/// the same decisions as unbounded, `sand.rs`).
 pub fn run_dispatches(
     p: &SandParams,
     mut state: Vec<UVec2>,
@@ -292,8 +295,12 @@ pub fn run_dispatches(
 ) -> Vec<UVec2> {
     let mut next = vec![UVec2::ZERO; p.cells as usize];
     let quiet = ProgressBar::hidden();
+    let mut q = *p;
     for k in first..first + count {
-        for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, p, &state));
+        if k >= 1 && (k - 1).is_multiple_of(p.phases.max(1)) {
+            q.height_bound = p.height_bound.min(state.iter().map(|c| c.x).max().unwrap_or(0));
+        }
+        for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, &q, &state));
         std::mem::swap(&mut state, &mut next);
         if (k + 1 - first).is_multiple_of(p.phases.max(1)) {
             progress.inc(1);
@@ -392,6 +399,7 @@ static NO_PARAMS: SandParams = SandParams {
     repose: 0,
     shadow_drop: 0,
     shadow_reach: 0,
+    height_bound: 0,
 };
 fn lattice_bytes(s: &SceneData) -> u64 {
     s.desert.dunes.as_ref().map_or(0, |d| d.params.cells as u64 * 8)

@@ -85,11 +85,18 @@ pub struct SandParams {
     pub shadow_drop: u32,
     /// Cells behind a crest its shadow may reach.
     pub shadow_reach: u32,
+    /// No cell is higher than this (slabs) when the step's saltation phase
+    /// reads the lattice, or `u32::MAX` (no bound): the wind-shadow scan
+    /// stops where its line falls below the bound, since no top upwind can
+    /// rise above it there (the same answer, fewer reads; the CPU run
+    /// bounds each step by its highest cell, the GPU self-check runs
+    /// unbounded, and the equivalence test holds the two to the bit).
+    pub height_bound: u32,
 }
 
 #[cfg(not(target_arch = "spirv"))]
 mod pod {
-    // SAFETY: `repr(C)` of 4-byte scalars, 80 bytes, no padding.
+    // SAFETY: `repr(C)` of 4-byte scalars, 84 bytes, no padding.
     unsafe impl bytemuck::Zeroable for super::SandParams {}
     unsafe impl bytemuck::Pod for super::SandParams {}
 }
@@ -159,6 +166,11 @@ fn shadowed(p: &SandParams, state: &[UVec2], x: i32, z: i32) -> bool {
     while d <= p.shadow_reach {
         xi = if xi == 0 { p.nx - 1 } else { xi - 1 };
         fall += p.shadow_drop;
+        // No top upwind is above the bound, which the line now clears
+        // (`h < 2^31`, `fall >> 8 < 2^24`: the sum does not wrap).
+        if h + (fall >> 8) >= p.height_bound {
+            return false;
+        }
         let up = state[(row + xi) as usize].x;
         if up > h && up - h > fall >> 8 {
             return true;
@@ -384,6 +396,7 @@ mod tests {
             repose: 3,
             shadow_drop: 256,
             shadow_reach: 8,
+            height_bound: u32::MAX,
         }
     }
 
@@ -406,6 +419,36 @@ mod tests {
                 assert_eq!(state.iter().map(|c| c.x).sum::<u32>(), total, "{nx}x{nz}, dispatch {k}");
             }
         }
+    }
+
+    #[test]
+    fn the_height_bound_changes_no_decision() {
+        // Steps bounded by their highest cell against unbounded ones, on a
+        // field tall enough that shadows form (a 0.4-slab fall per cell).
+        let mut p = params(32, 8);
+        p.mean_sand = 20;
+        p.shadow_drop = 100;
+        p.shadow_reach = 31;
+        let mut free = run(&p, 1);
+        let mut bounded = free.clone();
+        for k in 1..1 + 40 * p.phases {
+            let mut q = p;
+            q.height_bound = bounded.iter().map(|c| c.x).max().unwrap_or(0);
+            free = (0..p.cells).map(|i| sand_cell(i, k, &p, &free)).collect();
+            bounded = (0..p.cells).map(|i| sand_cell(i, k, &q, &bounded)).collect();
+            assert_eq!(free, bounded, "dispatch {k}");
+        }
+        // A bound that does stop scans: a crest 10 slabs above the rest.
+        let mut state = vec![UVec2::new(20, 0); 32];
+        state[4].x = 30;
+        let mut q = params(32, 1);
+        q.shadow_drop = 256;
+        q.shadow_reach = 31;
+        for x in 0..32 {
+            let tight = SandParams { height_bound: 30, ..q };
+            assert_eq!(shadowed(&tight, &state, x, 0), shadowed(&q, &state, x, 0), "cell {x}");
+        }
+        assert!(shadowed(&q, &state, 13, 0) && !shadowed(&q, &state, 14, 0));
     }
 
     #[test]

@@ -51,30 +51,63 @@ pub fn irradiance_normal(p: &SkyParams, index: u32) -> Vec3 {
     (a * phi.cos() + b * phi.sin()) * theta.sin() + Vec3::Y * theta.cos()
 }
 
+/// Sky directions on the quadrature's sphere.
+pub const SPHERE_DIRECTIONS: u32 = SPHERE_AZIMUTHS * SPHERE_ZENITHS;
+
+/// The cosine of the zenith angle of the quadrature's ring `j` (midpoints).
+fn sphere_mu(j: u32) -> f32 {
+    -1.0 + 2.0 * (j as f32 + 0.5) / SPHERE_ZENITHS as f32
+}
+
+/// The unit direction of the quadrature's cell `k` (ring `k /
+/// SPHERE_AZIMUTHS`, azimuth `k % SPHERE_AZIMUTHS`, each at its midpoint).
+pub fn sphere_direction(k: u32) -> Vec3 {
+    let mu = sphere_mu(k / SPHERE_AZIMUTHS);
+    let ring = (1.0 - mu * mu).max(0.0).sqrt();
+    let phi = TAU * ((k % SPHERE_AZIMUTHS) as f32 + 0.5) / SPHERE_AZIMUTHS as f32;
+    Vec3::new(ring * phi.cos(), mu, ring * phi.sin())
+}
+
+/// Sphere table kernel: the sky's radiance (rgb, W/(m^2 sr)) toward the
+/// quadrature's direction `index` (`sphere_direction`), from the sky-view
+/// table (or integrated, as the sky pass takes it). Looked up once here,
+/// not once per irradiance texel: the table's lookups (through asin and
+/// acos) were most of the irradiance pass.
+pub fn sphere_texel(index: u32, p: &SkyParams, transmittance: &[Vec4], sky_view: &[Vec4]) -> Vec4 {
+    sky_radiance(p, transmittance, sky_view, sphere_direction(index)).extend(0.0)
+}
+
 /// Irradiance table kernel: `E(n)` (rgb, W/m^2) for texel `index`'s normal,
 /// by the midpoint rule over `SPHERE_AZIMUTHS x SPHERE_ZENITHS` equal
-/// solid angles, the sky's radiance from the sky-view table (or integrated,
-/// as the sky pass takes it).
-pub fn irradiance_texel(index: u32, p: &SkyParams, transmittance: &[Vec4], sky_view: &[Vec4]) -> Vec4 {
+/// solid angles `4 pi / (AZIMUTHS ZENITHS)` of the sky's radiance `sphere`
+/// (`sphere_texel`). A ring's directions are stepped by a rotation of the
+/// azimuth (two sines a ring, not two a direction; the rotation's rounding
+/// after 64 steps is ~1e-6 of a direction).
+pub fn irradiance_texel(index: u32, p: &SkyParams, sphere: &[Vec4]) -> Vec4 {
     let n = irradiance_normal(p, index);
+    let step = TAU / SPHERE_AZIMUTHS as f32;
+    let (step_sin, step_cos) = (step.sin(), step.cos());
     let mut sum = Vec3::ZERO;
     let mut j = 0;
     while j < SPHERE_ZENITHS {
-        let mu = -1.0 + 2.0 * (j as f32 + 0.5) / SPHERE_ZENITHS as f32;
+        let mu = sphere_mu(j);
         let ring = (1.0 - mu * mu).max(0.0).sqrt();
+        // n . w = n.y mu + ring (n.x cos(phi) + n.z sin(phi)).
+        let (mut c, mut s) = ((0.5 * step).cos(), (0.5 * step).sin());
         let mut i = 0;
         while i < SPHERE_AZIMUTHS {
-            let phi = TAU * (i as f32 + 0.5) / SPHERE_AZIMUTHS as f32;
-            let w = Vec3::new(ring * phi.cos(), mu, ring * phi.sin());
-            let c = n.dot(w);
-            if c > 0.0 {
-                sum += sky_radiance(p, transmittance, sky_view, w) * c;
+            let cosine = n.y * mu + ring * (n.x * c + n.z * s);
+            if cosine > 0.0 {
+                sum += sphere[(j * SPHERE_AZIMUTHS + i) as usize].xyz() * cosine;
             }
+            let next_c = c * step_cos - s * step_sin;
+            s = s * step_cos + c * step_sin;
+            c = next_c;
             i += 1;
         }
         j += 1;
     }
-    (sum * (4.0 * PI / (SPHERE_AZIMUTHS * SPHERE_ZENITHS) as f32)).extend(0.0)
+    (sum * (4.0 * PI / SPHERE_DIRECTIONS as f32)).extend(0.0)
 }
 
 /// `E(n)` for unit normal `n`, bilinear in the irradiance table.
@@ -175,7 +208,7 @@ pub fn sky_light_at(
 /// multiples of `light_spacing` (every pixel with a spacing of 1).
 pub fn traces_visibility(p: &SkyParams, x: u32, y: u32) -> bool {
     let s = p.light_spacing.max(1);
-    x % s == 0 && y % s == 0
+    x.is_multiple_of(s) && y.is_multiple_of(s)
 }
 
 /// The point pixel `(x, y)`'s G-buffer `texel` sees, and the diffuse

@@ -668,19 +668,35 @@ pub fn sky_kernel(
     }
 }
 
+/// The sky's radiance toward the irradiance quadrature's directions
+/// (`light::sphere_texel`).
+#[spirv(compute(threads(64)))]
+pub fn sphere_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] params: &[SkyParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] transmittance: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] sky_view: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 87)] sphere: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    if index < light::SPHERE_DIRECTIONS {
+        sphere[index as usize] = light::sphere_texel(index, &params[0], transmittance, sky_view);
+    }
+}
+
 /// The skylight's irradiance table over normals (`light::irradiance_texel`).
 #[spirv(compute(threads(64)))]
 pub fn irradiance_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
     #[spirv(num_workgroups)] groups: UVec3,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 15)] params: &[SkyParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 16)] transmittance: &[Vec4],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 17)] sky_view: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 87)] sphere: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 62)] irradiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     if index < light::IRRADIANCE_WIDTH * light::IRRADIANCE_HEIGHT {
-        irradiance[index as usize] = light::irradiance_texel(index, &params[0], transmittance, sky_view);
+        irradiance[index as usize] = light::irradiance_texel(index, &params[0], sphere);
     }
 }
 

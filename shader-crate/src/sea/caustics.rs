@@ -396,13 +396,18 @@ fn mip_bilinear(p: &SeaParams, shafts: &[Vec4], k: u32, l: u32, x: f32, z: f32) 
     let base = k * shaft_mip_len(p) + level_offset(m, l);
     let delta = 0.5 - 0.5 / (1u32 << p.shaft_level) as f32;
     let scale = (1u32 << l) as f32;
+    // Reciprocals of powers of two (the level's scale; `s`, which is one
+    // since the wave map's side is): multiplying by them is exact, as the
+    // divisions were, and this is the underwater frame's hottest function.
+    let (inv_scale, inv_s) = (1.0 / scale, 1.0 / s as f32);
     // (Functions, not closures: a closure capturing a storage buffer's
     // slice is a type the SPIR-V front end rejects.)
-    let fx = mip_coord(x / p.wave_size, m, s, delta, scale);
-    let fz = mip_coord(z / p.wave_size, m, s, delta, scale);
+    let fx = mip_coord(x / p.wave_size, m, s, delta, scale, inv_scale, inv_s);
+    let fz = mip_coord(z / p.wave_size, m, s, delta, scale, inv_scale, inv_s);
     let (x0, z0) = ((fx as u32).min(s - 1), (fz as u32).min(s - 1));
     let (ax, az) = (fx - x0 as f32, fz - z0 as f32);
-    let (x1, z1) = ((x0 + 1) % s, (z0 + 1) % s);
+    // The next texel, wrapped (`x0 < s`: a comparison, not a division).
+    let (x1, z1) = (if x0 + 1 == s { 0 } else { x0 + 1 }, if z0 + 1 == s { 0 } else { z0 + 1 });
     let t00 = shafts[(base + z0 * s + x0) as usize].xyz();
     let t10 = shafts[(base + z0 * s + x1) as usize].xyz();
     let t01 = shafts[(base + z1 * s + x0) as usize].xyz();
@@ -412,8 +417,9 @@ fn mip_bilinear(p: &SeaParams, shafts: &[Vec4], k: u32, l: u32, x: f32, z: f32) 
 
 /// A position in tiles `u` as a continuous texel coordinate of a level
 /// `s` texels wide (`mip_bilinear`), wrapped into `[0, s)`.
-fn mip_coord(u: f32, m: u32, s: u32, delta: f32, scale: f32) -> f32 {
+/// `inv_scale` and `inv_s` are `1 / scale` and `1 / s`, both powers of two.
+fn mip_coord(u: f32, m: u32, s: u32, delta: f32, scale: f32, inv_scale: f32, inv_s: f32) -> f32 {
     let f0 = (u - u.floor()) * m as f32 - delta;
-    let f = (f0 - (scale - 1.0) * 0.5) / scale;
-    f - (f / s as f32).floor() * s as f32
+    let f = (f0 - (scale - 1.0) * 0.5) * inv_scale;
+    f - (f * inv_s).floor() * s as f32
 }

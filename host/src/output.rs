@@ -297,6 +297,20 @@ pub fn cache_directory() -> Option<std::path::PathBuf> {
     }
 }
 
+/// FNV-1a over `bytes`: a hash stable across runs and builds, for the
+/// names of cached results.
+pub fn stable_hash(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+}
+
+/// The stable hash of a cached result's `key`, its family's format
+/// `version` and the digest of the kernels' sources: a result written by
+/// other kernels is never read back.
+pub fn cache_key(version: u32, key: &str) -> u64 {
+    let digest = include_str!("../spirv/slicelight_shaders.digest");
+    stable_hash(format!("{version}|{digest}|{key}").as_bytes())
+}
+
 /// Whether the command line asked for no messages but errors (`--quiet`):
 /// notes from deep inside a render (a cached state used) respect it.
 pub static QUIET: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);

@@ -323,23 +323,106 @@ pub fn run(setup: &Setup, progress: &ProgressBar) -> Vec<UVec2> {
 /// The automaton is deterministic, and a scene is built again from its
 /// file for every view the viewer shows and every frame of an animation:
 /// the last `FORMED_KEPT` fields are kept in memory by their settings, so
-/// those rebuilds take no seconds of sand.
+/// those rebuilds take no seconds of sand. Across processes (the next
+/// render of the same scene) the field is read from the cache folder
+/// (`output::cache_directory`) where an earlier run wrote it.
 pub fn formed(setup: &Setup, progress: &ProgressBar) -> Result<(Vec<u32>, Vec<f32>)> {
+    formed_in(setup, progress, crate::output::cache_directory().as_deref())
+}
+
+/// `formed` with the cache folder `dir` (none: no cache on disk).
+fn formed_in(setup: &Setup, progress: &ProgressBar, dir: Option<&std::path::Path>) -> Result<(Vec<u32>, Vec<f32>)> {
     let key = format!("{setup:?}");
     let kept = || FORMED.lock().unwrap_or_else(|e| e.into_inner());
     if let Some((_, slabs, heights)) = kept().iter().find(|(k, _, _)| *k == key) {
         progress.inc(setup.dispatches() as u64);
         return Ok((slabs.clone(), heights.clone()));
     }
-    let slabs: Vec<u32> = run(setup, progress).iter().map(|c| c.x).collect();
-    let (settled, _) = settle(&setup.params, &slabs, 1 << 20)?;
-    let heights = setup.metres(&settled);
+    let cells = setup.params.cells as usize;
+    let file = dir.map(|dir| field_path(dir, &key));
+    let (slabs, heights) = match file.as_deref().and_then(|f| read_field(f, &key, cells)) {
+        Some(field) => {
+            progress.inc(setup.dispatches() as u64);
+            field
+        }
+        None => {
+            let slabs: Vec<u32> = run(setup, progress).iter().map(|c| c.x).collect();
+            let (settled, _) = settle(&setup.params, &slabs, 1 << 20)?;
+            let heights = setup.metres(&settled);
+            if let Some(f) = &file {
+                // A cache that cannot be written costs the next run its
+                // seconds, nothing else.
+                if let Err(e) = write_field(f, &key, &slabs, &heights) {
+                    crate::output::note(&format!("desert: the formed field was not cached: {e:#}"));
+                }
+            }
+            (slabs, heights)
+        }
+    };
     let mut fields = kept();
     if fields.len() >= FORMED_KEPT {
         fields.remove(0);
     }
     fields.push((key, slabs.clone(), heights.clone()));
     Ok((slabs, heights))
+}
+
+/// The cached fields' format: bump when what `formed` returns for the same
+/// settings changes other than through the kernels' sources (whose digest
+/// is in the file's name, as is this file's own text).
+const FIELD_VERSION: u32 = 1;
+const FIELD_MAGIC: &[u8; 8] = b"SLDUNES1";
+/// Fields kept in the cache folder (the newest; each 8 bytes a cell).
+const FIELDS_ON_DISK: usize = 8;
+
+/// Where the field of settings `key` is cached in `dir`.
+fn field_path(dir: &std::path::Path, key: &str) -> std::path::PathBuf {
+    let source = crate::output::stable_hash(include_str!("dunes.rs").as_bytes());
+    dir.join(format!("dunes-{:016x}.field", crate::output::cache_key(FIELD_VERSION, &format!("{source:x}|{key}"))))
+}
+
+/// A field `write_field` wrote for `key` and `cells` cells, or nothing
+/// (no file, another key, or anything but a whole field: then it is
+/// computed again).
+fn read_field(path: &std::path::Path, key: &str, cells: usize) -> Option<(Vec<u32>, Vec<f32>)> {
+    crate::output::regular_file("dunes cache", path, crate::output::MAX_DATA_BYTES).ok()?;
+    let bytes = std::fs::read(path).ok()?;
+    let head = FIELD_MAGIC.len() + 8 + key.len();
+    if bytes.len() != head + 8 * cells
+        || &bytes[..8] != FIELD_MAGIC
+        || bytes[8..16] != (key.len() as u64).to_le_bytes()
+        || &bytes[16..head] != key.as_bytes()
+    {
+        return None;
+    }
+    let (slabs, heights) = bytes[head..].split_at(4 * cells);
+    let slabs = slabs.as_chunks::<4>().0.iter().map(|c| u32::from_le_bytes(*c)).collect();
+    let heights = heights.as_chunks::<4>().0.iter().map(|c| f32::from_le_bytes(*c)).collect();
+    Some((slabs, heights))
+}
+
+/// Writes the field of `key` to `path` whole or not at all, and removes all
+/// but the newest `FIELDS_ON_DISK` fields beside it.
+fn write_field(path: &std::path::Path, key: &str, slabs: &[u32], heights: &[f32]) -> Result<()> {
+    let dir = path.parent().expect("a file in the cache folder");
+    std::fs::create_dir_all(dir)?;
+    let mut out = Vec::with_capacity(16 + key.len() + 8 * slabs.len());
+    out.extend_from_slice(FIELD_MAGIC);
+    out.extend_from_slice(&(key.len() as u64).to_le_bytes());
+    out.extend_from_slice(key.as_bytes());
+    out.extend(slabs.iter().flat_map(|h| h.to_le_bytes()));
+    out.extend(heights.iter().flat_map(|h| h.to_le_bytes()));
+    crate::output::write_atomically(path, &out)?;
+    let mut fields: Vec<(std::time::SystemTime, std::path::PathBuf)> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("dunes-"))
+        .filter_map(|e| Some((e.metadata().ok()?.modified().ok()?, e.path())))
+        .collect();
+    fields.sort();
+    for (_, old) in fields.iter().take(fields.len().saturating_sub(FIELDS_ON_DISK)) {
+        let _ = std::fs::remove_file(old);
+    }
+    Ok(())
 }
 
 /// Fields `formed` keeps: a scene's dunes and ripples, and one edit's.
@@ -492,5 +575,67 @@ impl Pass for Dunes {
         }
         let slabs: u64 = a.iter().map(|c| c.x as u64).sum();
         Ok(format!("all {} cells identical after {} dispatches ({slabs} slabs)", a.len(), k.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn small(seed: u32) -> Setup {
+        let settings: Settings = toml::from_str(&format!("cells = [16, 8]\nsteps = 30\nseed = {seed}")).unwrap();
+        configure("terrain[0]", &settings, [16.0, 8.0]).unwrap()
+    }
+
+    fn forget(key: &str) {
+        FORMED.lock().unwrap().retain(|(k, _, _)| k != key);
+    }
+
+    /// A field is written once, read back whole by the next process (here:
+    /// after the memory's copy is forgotten), and anything but a whole field
+    /// of the same settings is computed again.
+    #[test]
+    fn formed_fields_are_cached_on_disk_and_read_back_only_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let hidden = ProgressBar::hidden();
+        let setup = small(4242);
+        let key = format!("{setup:?}");
+        forget(&key);
+        let computed = formed_in(&setup, &hidden, Some(dir.path())).unwrap();
+        let path = field_path(dir.path(), &key);
+        assert!(path.is_file(), "no cached field at {}", path.display());
+        assert_eq!(read_field(&path, &key, computed.0.len()), Some(computed.clone()));
+        // Another key, another size, a truncated file: not read.
+        assert_eq!(read_field(&path, &format!("{key} "), computed.0.len()), None);
+        assert_eq!(read_field(&path, &key, computed.0.len() + 1), None);
+        let whole = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &whole[..whole.len() - 1]).unwrap();
+        assert_eq!(read_field(&path, &key, computed.0.len()), None);
+        forget(&key);
+        assert_eq!(formed_in(&setup, &hidden, Some(dir.path())).unwrap(), computed, "computed again");
+        assert_eq!(std::fs::read(&path).unwrap(), whole, "written again, whole");
+        // A field in the cache is what a later build takes: marked heights
+        // come back as they were written.
+        let mut marked = computed.clone();
+        marked.1[0] = -1234.5;
+        write_field(&path, &key, &marked.0, &marked.1).unwrap();
+        forget(&key);
+        assert_eq!(formed_in(&setup, &hidden, Some(dir.path())).unwrap(), marked);
+        forget(&key);
+    }
+
+    #[test]
+    fn the_cache_keeps_the_newest_fields() {
+        let dir = tempfile::tempdir().unwrap();
+        for k in 0..FIELDS_ON_DISK + 3 {
+            let key = format!("field {k}");
+            write_field(&field_path(dir.path(), &key), &key, &[k as u32], &[k as f32]).unwrap();
+            // Distinct modification times, so that "newest" is defined.
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        let left = std::fs::read_dir(dir.path()).unwrap().count();
+        assert_eq!(left, FIELDS_ON_DISK);
+        let last = format!("field {}", FIELDS_ON_DISK + 2);
+        assert!(read_field(&field_path(dir.path(), &last), &last, 1).is_some(), "the newest was removed");
     }
 }

@@ -20,17 +20,11 @@ pub const KEEP: usize = 4;
 /// kernels' changes are caught by their sources' digest, below).
 const VERSION: u32 = 2;
 
-/// A stable 64-bit hash (FNV-1a) of a configuration's key, the state's
-/// version and the digest of the kernels' sources: a state written by
-/// other code is never read back.
+/// A stable 64-bit hash of a configuration's key, the state's version and
+/// the digest of the kernels' sources (`output::cache_key`): a state
+/// written by other code is never read back.
 pub fn key_hash(key: &str) -> u64 {
-    let digest = include_str!("../../spirv/slicelight_shaders.digest");
-    bytes_hash(format!("{VERSION}|{digest}|{key}").as_bytes())
-}
-
-/// FNV-1a over `bytes`: stable across runs and builds.
-pub fn bytes_hash(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+    crate::output::cache_key(VERSION, key)
 }
 
 fn file_name(hash: u64, step: u32) -> String {

@@ -430,7 +430,7 @@ pub fn simulate(
         config.rules,
         config.tolerance,
         config.max_iterations,
-        cache::bytes_hash(bytemuck::cast_slice(&fluid_cells))
+        crate::output::stable_hash(bytemuck::cast_slice(&fluid_cells))
     );
     let hash = cache::key_hash(&key);
     let steps = config.steps_to(seconds);

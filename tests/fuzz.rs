@@ -151,22 +151,33 @@ fn mutated_scene_files_load_or_fail_with_an_error_never_a_panic() {
         .collect();
     // Every build on every core (each is independent; about 18 000 of them).
     use rayon::prelude::*;
-    let outcomes: Vec<(bool, Option<String>)> = cases
+    enum Outcome {
+        Built,
+        Refused,
+        Panicked(String),
+    }
+    let outcomes: Vec<Outcome> = cases
         .par_iter()
         .map(|(path, original, (p, r))| {
             let t = Instant::now();
             let outcome = match build(&mutated(original, p, r), &dir) {
-                Ok(Ok(())) => (false, None),
-                Ok(Err(_)) => (true, None),
-                Err(_) => (false, Some(format!("{} {p:?} = {r}", path.display()))),
+                Ok(Ok(())) => Outcome::Built,
+                Ok(Err(_)) => Outcome::Refused,
+                Err(_) => Outcome::Panicked(format!("{} {p:?} = {r}", path.display())),
             };
             assert!(t.elapsed() < Duration::from_secs(30), "{} {p:?} = {r}: {:?}", path.display(), t.elapsed());
             outcome
         })
         .collect();
     let executions = outcomes.len();
-    let refused = outcomes.iter().filter(|o| o.0).count();
-    let panics: Vec<String> = outcomes.into_iter().filter_map(|o| o.1).collect();
+    let refused = outcomes.iter().filter(|o| matches!(o, Outcome::Refused)).count();
+    let panics: Vec<String> = outcomes
+        .into_iter()
+        .filter_map(|o| match o {
+            Outcome::Panicked(what) => Some(what),
+            Outcome::Built | Outcome::Refused => None,
+        })
+        .collect();
     let _ = std::panic::take_hook();
     println!("{executions} mutated scenes built, {refused} refused with an error, {} panics", panics.len());
     assert!(executions > 1000, "{executions}");

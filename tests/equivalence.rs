@@ -121,6 +121,7 @@ fn scenes() -> Vec<(&'static str, SceneData)> {
         ("cloud_grid", sky("cloud_grid", 160, 120)),
         ("cloud_sea", sky("cloud_sea", 160, 120)),
         ("dunes, 32x32 cells, 60 steps", small_dunes()),
+        ("barchans, piles on bare ground, 32x32 cells, 60 steps", small_barchans()),
     ]
 }
 
@@ -142,16 +143,29 @@ fn under_a_shore() -> SceneData {
     data
 }
 
-/// `desert_dunes` with a small field and few steps (each step is eight
-/// dispatches), its automaton's self-check requested.
-fn small_dunes() -> SceneData {
-    let text = std::fs::read_to_string(common::root().join("scenes/desert_dunes.toml")).unwrap();
-    let text = text
-        .replace("resolution = [720, 480]", "resolution = [96, 64]")
-        .replace("cells = [128, 128], steps = 1500", "cells = [32, 32], steps = 60, creep = 0.3");
+/// A shipped desert scene at 96x64 with its dune field's `field` (the
+/// text of its cells and steps) made `small` (32x32 cells), its
+/// automaton's self-check requested.
+fn small_desert(scene: &str, field: &str, small: &str) -> SceneData {
+    let text = std::fs::read_to_string(common::root().join(format!("scenes/{scene}.toml"))).unwrap();
+    let text = text.replace("resolution = [720, 480]", "resolution = [96, 64]").replace(field, small);
     let mut data = common::scene_from_str(&text);
-    assert!(data.desert.dunes.as_ref().is_some_and(|d| d.params.cells == 1024));
+    assert!(data.desert.dunes.as_ref().is_some_and(|d| d.params.cells == 1024), "{scene}");
     data.requested_passes.push("desert.dunes".into());
+    data
+}
+
+/// `desert_dunes` with a small field and few steps (each step is eight
+/// dispatches).
+fn small_dunes() -> SceneData {
+    small_desert("desert_dunes", "cells = [128, 128], steps = 1500", "cells = [32, 32], steps = 60, creep = 0.3")
+}
+
+/// `desert_barchans` (piles of sand laid by the host, read by the
+/// automaton's start; bare ground of its own albedo) with a small field.
+fn small_barchans() -> SceneData {
+    let data = small_desert("desert_barchans", "cells = [256, 256], steps = 800", "cells = [32, 32], steps = 60");
+    assert_eq!(data.desert.dunes.as_ref().map(|d| d.params.given_start), Some(1));
     data
 }
 

@@ -21,12 +21,15 @@ use crate::scene::{invalid, SceneData};
 pub struct Settings {
     /// Cells along x and z over the terrain's rectangle (each even or 1).
     pub cells: [u32; 2],
-    /// Steps run from the random start.
+    /// Steps run from the start.
     pub steps: u32,
     #[serde(default)]
     pub seed: u32,
-    /// Mean depth of loose sand at the start (m); default 1.
+    /// Mean depth of loose sand at the start (m); default 1, or 0 with `piles`.
     pub sand: Option<f32>,
+    /// Piles of sand on the bed at the start: `[x, z, radius, height]`
+    /// (m, the scene's x and z): cones, wrapped around the field's edges.
+    pub piles: Option<Vec<[f32; 4]>>,
     /// A slab's height (m); default a tenth of a cell's width.
     pub slab: Option<f32>,
     /// Wind speed (m/s, 10 m above the sand); default 10.
@@ -63,6 +66,10 @@ pub struct Settings {
 pub const MAX_CELLS: u64 = 1 << 24;
 /// Most steps.
 pub const MAX_STEPS: u32 = 1_000_000;
+/// Most piles at the start (each is laid over the cells around it at load).
+const MAX_PILES: usize = 4096;
+/// Most cells the piles may cover in all (the work of laying them).
+const MAX_PILE_WORK: u64 = 1 << 28;
 /// Most dispatches (steps times phases) a self-check may run on the GPU.
 const MAX_DISPATCHES: u64 = u32::MAX as u64;
 /// Wind speed (m/s) at which `jump` is the saltation length.
@@ -92,6 +99,21 @@ pub struct Setup {
     pub cells: [u32; 2],
     /// A slab's height (m).
     pub slab: f32,
+    /// The given start's slabs per lattice cell (the piles), or empty.
+    pub start: Start,
+}
+
+/// Slabs per lattice cell laid on the bed at the start. Its `Debug` (part
+/// of the key the formed fields are kept and cached by) is its length and
+/// a hash of its contents, not every cell.
+#[derive(Clone, Default, PartialEq, Eq)]
+pub struct Start(pub Vec<u32>);
+
+impl std::fmt::Debug for Start {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let hash = crate::output::stable_hash(bytemuck::cast_slice(&self.0));
+        write!(f, "Start({} cells, {hash:016x})", self.0.len())
+    }
 }
 
 impl Setup {
@@ -139,9 +161,9 @@ fn positive(field: &str, v: f32) -> Result<f32> {
     Ok(v)
 }
 
-/// Validates `s` (the field `field`) for a terrain `size` metres wide and
-/// builds the kernel's parameters.
-pub fn configure(field: &str, s: &Settings, size: [f32; 2]) -> Result<Setup> {
+/// Validates `s` (the field `field`) for a terrain over `min .. min + size`
+/// (m, x and z) and builds the kernel's parameters and the start.
+pub fn configure(field: &str, s: &Settings, min: [f32; 2], size: [f32; 2]) -> Result<Setup> {
     let f = |name: &str| format!("{field}.dunes.{name}");
     let [cx, cz] = s.cells;
     let even_or_one = |n: u32| n == 1 || (n.is_multiple_of(2) && (2..=8192).contains(&n));
@@ -168,7 +190,7 @@ pub fn configure(field: &str, s: &Settings, size: [f32; 2]) -> Result<Setup> {
         ));
     }
     let slab = positive(&f("slab"), s.slab.unwrap_or(dx / 10.0))?;
-    let sand = s.sand.unwrap_or(1.0);
+    let sand = s.sand.unwrap_or(if s.piles.is_some() { 0.0 } else { 1.0 });
     if !(sand.is_finite() && sand >= 0.0) {
         bail!(invalid(&f("sand"), "a depth of at least 0 m", sand));
     }
@@ -177,6 +199,15 @@ pub fn configure(field: &str, s: &Settings, size: [f32; 2]) -> Result<Setup> {
     // of heights are 32-bit signed).
     if (2 * mean_sand + 1) * cells >= 1 << 31 {
         bail!(invalid(&f("sand"), "less sand: at most 2^31 slabs in all (raise slab or lower sand)", sand));
+    }
+    let piles = piles(&f("piles"), s.piles.as_deref().unwrap_or(&[]), min, size, s.cells, slab)?;
+    let pile_slabs: u64 = piles.iter().map(|&v| v as u64).sum();
+    if (2 * mean_sand + 1) * cells + pile_slabs >= 1 << 31 {
+        bail!(invalid(
+            &f("piles"),
+            "less sand: at most 2^31 slabs in all with the bed (lower or narrow the piles)",
+            pile_slabs
+        ));
     }
     let wind = match s.wind_direction.as_deref().unwrap_or("+x") {
         "+x" => Wind::PlusX,
@@ -264,6 +295,7 @@ pub fn configure(field: &str, s: &Settings, size: [f32; 2]) -> Result<Setup> {
         avalanche_rounds,
         creep_rounds,
         mean_sand: mean_sand as u32,
+        given_start: !piles.is_empty() as u32,
         jump: jump_fixed,
         jump_growth: growth_fixed,
         max_jump,
@@ -278,16 +310,112 @@ pub fn configure(field: &str, s: &Settings, size: [f32; 2]) -> Result<Setup> {
         shadow_reach: MAX_SHADOW_REACH.min(nx.saturating_sub(1)),
         height_bound: u32::MAX,
     };
-    Ok(Setup { params, steps: s.steps, wind, cells: s.cells, slab })
+    let mut setup = Setup { params, steps: s.steps, wind, cells: s.cells, slab, start: Start::default() };
+    if !piles.is_empty() {
+        // The piles were laid over the terrain's cells (x fastest); the
+        // kernel reads them in the lattice's order (the wind along its x).
+        let mut start = vec![0; cells as usize];
+        for k in 0..s.cells[1] {
+            for i in 0..s.cells[0] {
+                start[setup.lattice_index(i, k)] = piles[(k * s.cells[0] + i) as usize];
+            }
+        }
+        setup.start = Start(start);
+    }
+    Ok(setup)
+}
+
+/// The piles `[x, z, radius, height]` (field `field`) as slabs over the
+/// terrain's cells (x fastest; empty without piles): each a cone of sand,
+/// `height (1 - d / radius)` at a cell centre `d` metres from the pile's
+/// centre (the nearest of its copies around the wrapping field), rounded
+/// to whole slabs of `slab` m; overlapping piles add.
+fn piles(
+    field: &str,
+    piles: &[[f32; 4]],
+    min: [f32; 2],
+    size: [f32; 2],
+    cells: [u32; 2],
+    slab: f32,
+) -> Result<Vec<u32>> {
+    if piles.is_empty() {
+        return Ok(Vec::new());
+    }
+    if piles.len() > MAX_PILES {
+        bail!(invalid(field, &format!("at most {MAX_PILES} piles"), piles.len()));
+    }
+    let dx = size[0] / cells[0] as f32;
+    let mut out = vec![0u32; (cells[0] * cells[1]) as usize];
+    let mut work = 0u64;
+    for (n, &[x, z, radius, height]) in piles.iter().enumerate() {
+        let inside = |v: f32, a: usize| v.is_finite() && v >= min[a] && v <= min[a] + size[a];
+        if !(inside(x, 0) && inside(z, 1)) {
+            bail!(invalid(
+                &format!("{field}[{n}]"),
+                &format!("a centre [x, z] on the terrain ({:?} to {:?})", min, [min[0] + size[0], min[1] + size[1]]),
+                [x, z]
+            ));
+        }
+        let widest = 0.5 * size[0].min(size[1]);
+        if !(radius.is_finite() && radius >= 0.5 * dx && radius <= widest) {
+            bail!(invalid(
+                &format!("{field}[{n}]"),
+                &format!("a radius (third number) from half a cell ({} m) to half the terrain ({widest} m)", 0.5 * dx),
+                radius
+            ));
+        }
+        if !(height.is_finite() && height >= 0.0 && height / slab < (1u64 << 31) as f32) {
+            bail!(invalid(
+                &format!("{field}[{n}]"),
+                "a height (fourth number) of at least 0 m, under 2^31 slabs",
+                height
+            ));
+        }
+        // Cells within the radius, each once (a pile wider than the field
+        // covers all of it along that axis).
+        let reach = (radius / dx).ceil() as i64 + 1;
+        let span = |centre: f32, n: u32| -> Vec<u32> {
+            let c = centre.floor() as i64;
+            if 2 * reach + 1 >= n as i64 {
+                (0..n).collect()
+            } else {
+                (c - reach..=c + reach).map(|v| v.rem_euclid(n as i64) as u32).collect()
+            }
+        };
+        let (is, ks) = (span((x - min[0]) / dx, cells[0]), span((z - min[1]) / dx, cells[1]));
+        work += (is.len() * ks.len()) as u64;
+        if work > MAX_PILE_WORK {
+            bail!(invalid(
+                field,
+                &format!("piles covering at most {MAX_PILE_WORK} cells in all (fewer or narrower)"),
+                n + 1
+            ));
+        }
+        let wrapped = |d: f32, span: f32| d - span * (d / span).round();
+        for &k in &ks {
+            for &i in &is {
+                let ddx = wrapped(min[0] + (i as f32 + 0.5) * dx - x, size[0]);
+                let ddz = wrapped(min[1] + (k as f32 + 0.5) * dx - z, size[1]);
+                let h = height * (1.0 - (ddx * ddx + ddz * ddz).sqrt() / radius);
+                if h > 0.0 {
+                    let cell = &mut out[(k * cells[0] + i) as usize];
+                    *cell = cell.saturating_add((h / slab).round() as u32);
+                }
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// Runs dispatches `first..first + count` of the kernel on the CPU from
-/// `state` (the lattice after dispatch `first - 1`), the same function per
-/// cell as on the GPU. Each step's saltation phase is given the lattice's
+/// `state` (the lattice after dispatch `first - 1`; `start`: the given
+/// start's slabs, read by dispatch 0 where `p.given_start` is 1), the same
+/// function per cell as on the GPU. Each step's saltation phase is given the lattice's
 /// highest cell as `height_bound` (its wind-shadow scans stop below it;
 /// the same decisions as unbounded, `sand.rs`).
 pub fn run_dispatches(
     p: &SandParams,
+    start: &[u32],
     mut state: Vec<UVec2>,
     first: u32,
     count: u32,
@@ -300,7 +428,7 @@ pub fn run_dispatches(
         if k >= 1 && (k - 1).is_multiple_of(p.phases.max(1)) {
             q.height_bound = p.height_bound.min(state.iter().map(|c| c.x).max().unwrap_or(0));
         }
-        for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, &q, &state));
+        for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, &q, start, &state));
         std::mem::swap(&mut state, &mut next);
         if (k + 1 - first).is_multiple_of(p.phases.max(1)) {
             progress.inc(1);
@@ -312,8 +440,9 @@ pub fn run_dispatches(
 /// The automaton's lattice after all its steps (before settling): what the
 /// self-check pass computes.
 pub fn run(setup: &Setup, progress: &ProgressBar) -> Vec<UVec2> {
-    let start = run_dispatches(&setup.params, vec![UVec2::ZERO; setup.params.cells as usize], 0, 1, progress);
-    run_dispatches(&setup.params, start, 1, setup.steps * setup.params.phases, progress)
+    let start =
+        run_dispatches(&setup.params, &setup.start.0, vec![UVec2::ZERO; setup.params.cells as usize], 0, 1, progress);
+    run_dispatches(&setup.params, &setup.start.0, start, 1, setup.steps * setup.params.phases, progress)
 }
 
 /// The field the automaton `setup` forms: its slabs after all steps (what
@@ -470,6 +599,7 @@ static NO_PARAMS: SandParams = SandParams {
     avalanche_rounds: 0,
     creep_rounds: 0,
     mean_sand: 0,
+    given_start: 0,
     jump: 0,
     jump_growth: 0,
     max_jump: 0,
@@ -496,6 +626,16 @@ pub static SAND_NEXT: Resource =
 pub static SAND_COUNTER: Resource = Resource { binding: 60, name: "sand dispatch", kind: ResourceKind::Frame(|_| 4) };
 pub static SAND_NEXT_COUNTER: Resource =
     Resource { binding: 61, name: "sand next dispatch", kind: ResourceKind::Frame(|_| 4) };
+/// The given start's slabs per lattice cell (one zero word without piles:
+/// the kernel reads it only where `given_start` is 1).
+pub static SAND_START: Resource = Resource {
+    binding: 118,
+    name: "sand start",
+    kind: ResourceKind::Scene(|s| match s.desert.dunes.as_ref().filter(|d| !d.start.0.is_empty()) {
+        Some(d) => bytemuck::cast_slice(&d.start.0),
+        None => &[0; 4],
+    }),
+};
 
 /// The dunes' automaton run on the backend: a self-check (the terrain is
 /// built on the CPU at load, since the BVH needs its heights), requested by
@@ -510,7 +650,7 @@ impl Pass for Dunes {
         "desert::sand::sand_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![SAND_PARAMS, SAND_STATE, SAND_COUNTER]
+        resources![SAND_PARAMS, SAND_STATE, SAND_COUNTER, SAND_START]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SAND_NEXT, SAND_NEXT_COUNTER]
@@ -584,7 +724,7 @@ mod tests {
 
     fn small(seed: u32) -> Setup {
         let settings: Settings = toml::from_str(&format!("cells = [16, 8]\nsteps = 30\nseed = {seed}")).unwrap();
-        configure("terrain[0]", &settings, [16.0, 8.0]).unwrap()
+        configure("terrain[0]", &settings, [0.0, 0.0], [16.0, 8.0]).unwrap()
     }
 
     fn forget(key: &str) {

@@ -49,6 +49,18 @@ pub struct Terrain {
     /// meshed (display only: the automaton's whole slabs become slopes);
     /// default 1 for dunes, 0 otherwise.
     pub smoothing: Option<u32>,
+    /// The ground where the field has (next to) no sand: its own albedo,
+    /// and no ripples.
+    pub bare: Option<Bare>,
+}
+
+/// `bare = { albedo, depth = 0.05 }`: triangles whose three corners lie
+/// less than `depth` m above the terrain's height 0 are bare ground.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Bare {
+    pub albedo: [f32; 3],
+    pub depth: Option<f32>,
 }
 
 fn default_sand() -> [f32; 3] {
@@ -236,6 +248,13 @@ pub fn configure(terrains: &[Terrain], base: &Path, progress: &ProgressBar) -> R
             bail!(invalid(&format!("{field}.elevation"), "a finite height (m)", terrain.elevation));
         }
         validate::albedo(&format!("{field}.albedo"), terrain.albedo)?;
+        if let Some(b) = &terrain.bare {
+            validate::albedo(&format!("{field}.bare.albedo"), b.albedo)?;
+            let depth = b.depth.unwrap_or(DEFAULT_BARE_DEPTH);
+            if !(depth.is_finite() && depth > 0.0 && depth <= 1e7) {
+                bail!(invalid(&format!("{field}.bare.depth"), "a positive depth of sand, m", depth));
+            }
+        }
         let sources =
             terrain.heights.is_some() as u32 + terrain.procedural.is_some() as u32 + terrain.dunes.is_some() as u32;
         if sources != 1 {
@@ -247,7 +266,7 @@ pub fn configure(terrains: &[Terrain], base: &Path, progress: &ProgressBar) -> R
             procedural(&format!("{field}.procedural"), p)?
         } else {
             let d = terrain.dunes.as_ref().expect("one source");
-            let s = dunes::configure(&field, d, terrain.size)?;
+            let s = dunes::configure(&field, d, terrain.min, terrain.size)?;
             let (slabs, heights) = dunes::formed(&s, progress)?;
             let field = Field { nx: s.cells[0], nz: s.cells[1], heights, periodic: true };
             if setup.dunes.is_none() {
@@ -322,10 +341,11 @@ fn ripple_texture(
         repose_deg: None,
         shadow_deg: None,
         creep: Some(r.creep.unwrap_or(0.3)),
+        piles: None,
         avalanche_rounds: None,
         creep_rounds: None,
     };
-    let s = dunes::configure(field, &settings, [size, size])?;
+    let s = dunes::configure(field, &settings, [0.0, 0.0], [size, size])?;
     let mut heights: Vec<f32> = dunes::formed(&s, progress)?.1.iter().map(|h| h * strength).collect();
     let offset = setup.ripple_normals.len() as u32;
     let mut side = n;
@@ -373,6 +393,24 @@ fn ripple_texture(
 
 /// The terrain's mesh: `mesh` quadrilaterals (default the field's, at most
 /// 512 a side), two triangles each facing up, vertices on the field.
+/// The depth of sand (m) under which the ground shows (`bare`).
+const DEFAULT_BARE_DEPTH: f32 = 0.05;
+
+/// `mesh` split into the sand's triangles and, with `bare`, the bare
+/// ground's (every corner less than `bare.depth` above height 0; `None`
+/// without `bare` or where no triangle is bare). Both keep every vertex.
+pub fn sand_and_bare(terrain: &Terrain, mesh: IndexedMesh) -> (IndexedMesh, Option<IndexedMesh>) {
+    let Some(b) = &terrain.bare else { return (mesh, None) };
+    let below = terrain.elevation + b.depth.unwrap_or(DEFAULT_BARE_DEPTH);
+    let (bare, sand): (Vec<[u32; 3]>, Vec<[u32; 3]>) =
+        mesh.indices.iter().partition(|f| f.iter().all(|&i| mesh.positions[i as usize].y < below));
+    if bare.is_empty() {
+        return (mesh, None);
+    }
+    let ground = IndexedMesh { positions: mesh.positions.clone(), normals: mesh.normals.clone(), indices: bare };
+    (IndexedMesh { indices: sand, ..mesh }, Some(ground))
+}
+
 pub fn mesh(terrain: &Terrain, field: &Field) -> IndexedMesh {
     let [mx, mz] = terrain.mesh.unwrap_or_else(|| field.quads().map(|q| q.min(512)));
     let (x0, z0) = (terrain.min[0] as f64, terrain.min[1] as f64);

@@ -549,7 +549,11 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
     let desert = crate::desert::configure(&file.terrain, base, &indicatif::ProgressBar::hidden())?;
     for (k, (t, f)) in file.terrain.iter().zip(&desert.fields).enumerate() {
         let ripples = desert.ripple_of_terrain[k];
-        geometry::push_diffuse(&mut objects, &crate::desert::mesh(t, f), Vec3::from(t.albedo).extend(0.0), ripples);
+        let (sand, bare) = crate::desert::sand_and_bare(t, crate::desert::mesh(t, f));
+        geometry::push_diffuse(&mut objects, &sand, Vec3::from(t.albedo).extend(0.0), ripples);
+        if let (Some(ground), Some(b)) = (bare, &t.bare) {
+            geometry::push_diffuse(&mut objects, &ground, Vec3::from(b.albedo).extend(0.0), 0);
+        }
     }
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
     // The lights cover the geometry and the volumes' boxes (a directional

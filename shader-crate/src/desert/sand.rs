@@ -63,6 +63,9 @@ pub struct SandParams {
     pub creep_rounds: u32,
     /// The random start: `mean_sand` slabs per cell, give or take one.
     pub mean_sand: u32,
+    /// 1: the start adds the host's slabs per cell (`start`: piles of sand
+    /// the scene places), 0: the random bed alone.
+    pub given_start: u32,
     /// Saltation length `L0` (1/256 cells) and its growth `b` per slab of
     /// the source's height (1/256 cells per slab); at most `max_jump` cells.
     pub jump: u32,
@@ -96,7 +99,7 @@ pub struct SandParams {
 
 #[cfg(not(target_arch = "spirv"))]
 mod pod {
-    // SAFETY: `repr(C)` of 4-byte scalars, 84 bytes, no padding.
+    // SAFETY: `repr(C)` of 4-byte scalars, 88 bytes, no padding.
     unsafe impl bytemuck::Zeroable for super::SandParams {}
     unsafe impl bytemuck::Pod for super::SandParams {}
 }
@@ -144,12 +147,15 @@ fn at(p: &SandParams, x: i32, z: i32) -> usize {
 }
 
 /// The cell at step 0: a nearly flat bed, `mean_sand` slabs give or take
-/// one (uniform over the three), or bare (`mean_sand` 0).
-pub fn start_height(index: u32, p: &SandParams) -> u32 {
+/// one (uniform over the three), or bare (`mean_sand` 0), plus the given
+/// start's slabs (`start[index]`, where `given_start` is 1: the scene's
+/// piles, laid out by the host).
+pub fn start_height(index: u32, p: &SandParams, start: &[u32]) -> u32 {
+    let given = if p.given_start != 0 { start[index as usize] } else { 0 };
     if p.mean_sand == 0 {
-        return 0;
+        return given;
     }
-    p.mean_sand + random(index, 0, p.seed, STREAM_START) % 3 - 1
+    given + p.mean_sand + random(index, 0, p.seed, STREAM_START) % 3 - 1
 }
 
 /// Whether cell `(x, z)` lies in the wind shadow of a crest upwind: some
@@ -317,11 +323,12 @@ pub fn relax_apply(index: u32, p: &SandParams, state: &[UVec2]) -> UVec2 {
 }
 
 /// Cell `index` after the automaton's dispatch `counter`: dispatch 0 lays
-/// the random start, dispatch `1 + s phases + k` is phase `k` of step `s`.
-/// `x` of each cell is its height (slabs), `y` what a phase hands the next.
-pub fn sand_cell(index: u32, counter: u32, p: &SandParams, state: &[UVec2]) -> UVec2 {
+/// the start (`start_height`), dispatch `1 + s phases + k` is phase `k` of
+/// step `s`. `x` of each cell is its height (slabs), `y` what a phase
+/// hands the next.
+pub fn sand_cell(index: u32, counter: u32, p: &SandParams, start: &[u32], state: &[UVec2]) -> UVec2 {
     if counter == 0 {
-        return UVec2::new(start_height(index, p), 0);
+        return UVec2::new(start_height(index, p, start), 0);
     }
     let step = (counter - 1) / p.phases;
     let phase = (counter - 1) % p.phases;
@@ -347,6 +354,8 @@ pub fn sand_cell(index: u32, counter: u32, p: &SandParams, state: &[UVec2]) -> U
 /// The automaton's entry point: every cell, `state` after dispatch
 /// `counter[0] - 1` to `next`; invocation 0 advances the counter (the host
 /// copies `next` and `counter_next` back between dispatches: `Pass::carry`).
+// One binding a buffer: the lattices, the dispatch counters, the start.
+#[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
 pub fn sand_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
@@ -356,6 +365,7 @@ pub fn sand_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 59)] next: &mut [UVec2],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 60)] counter: &[u32],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 61)] counter_next: &mut [u32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 118)] start: &[u32],
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
@@ -363,7 +373,7 @@ pub fn sand_kernel(
         return;
     }
     let k = counter[0];
-    next[index as usize] = sand_cell(index, k, p, state);
+    next[index as usize] = sand_cell(index, k, p, start, state);
     if index == 0 {
         counter_next[0] = k + 1;
     }
@@ -384,6 +394,7 @@ mod tests {
             avalanche_rounds: 2,
             creep_rounds: 1,
             mean_sand: 4,
+            given_start: 0,
             jump: 3 * 256,
             jump_growth: 0,
             max_jump: 3,
@@ -403,7 +414,7 @@ mod tests {
     fn run(p: &SandParams, dispatches: u32) -> Vec<UVec2> {
         let mut state = vec![UVec2::ZERO; p.cells as usize];
         for k in 0..dispatches {
-            state = (0..p.cells).map(|i| sand_cell(i, k, p, &state)).collect();
+            state = (0..p.cells).map(|i| sand_cell(i, k, p, &[], &state)).collect();
         }
         state
     }
@@ -415,7 +426,7 @@ mod tests {
             let mut state = run(&p, 1);
             let total: u32 = state.iter().map(|c| c.x).sum();
             for k in 1..200 {
-                state = (0..p.cells).map(|i| sand_cell(i, k, &p, &state)).collect();
+                state = (0..p.cells).map(|i| sand_cell(i, k, &p, &[], &state)).collect();
                 assert_eq!(state.iter().map(|c| c.x).sum::<u32>(), total, "{nx}x{nz}, dispatch {k}");
             }
         }
@@ -434,8 +445,8 @@ mod tests {
         for k in 1..1 + 40 * p.phases {
             let mut q = p;
             q.height_bound = bounded.iter().map(|c| c.x).max().unwrap_or(0);
-            free = (0..p.cells).map(|i| sand_cell(i, k, &p, &free)).collect();
-            bounded = (0..p.cells).map(|i| sand_cell(i, k, &q, &bounded)).collect();
+            free = (0..p.cells).map(|i| sand_cell(i, k, &p, &[], &free)).collect();
+            bounded = (0..p.cells).map(|i| sand_cell(i, k, &q, &[], &bounded)).collect();
             assert_eq!(free, bounded, "dispatch {k}");
         }
         // A bound that does stop scans: a crest 10 slabs above the rest.
@@ -449,6 +460,21 @@ mod tests {
             assert_eq!(shadowed(&tight, &state, x, 0), shadowed(&q, &state, x, 0), "cell {x}");
         }
         assert!(shadowed(&q, &state, 13, 0) && !shadowed(&q, &state, 14, 0));
+    }
+
+    #[test]
+    fn a_given_start_adds_its_slabs_to_the_bed() {
+        let mut p = params(4, 2);
+        let start = [0, 7, 0, 0, 3, 0, 0, 1];
+        let bed: Vec<u32> = (0..8).map(|i| start_height(i, &p, &start)).collect();
+        assert!(bed.iter().all(|&h| (3..=5).contains(&h)), "{bed:?}");
+        p.given_start = 1;
+        for i in 0..8 {
+            assert_eq!(start_height(i, &p, &start), bed[i as usize] + start[i as usize]);
+            assert_eq!(sand_cell(i, 0, &p, &start, &[]).x, bed[i as usize] + start[i as usize]);
+        }
+        p.mean_sand = 0;
+        assert_eq!((0..8).map(|i| start_height(i, &p, &start)).collect::<Vec<_>>(), start);
     }
 
     #[test]

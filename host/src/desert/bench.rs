@@ -73,8 +73,8 @@ fn meshed(data: &SceneData, n: u32) -> Result<SceneData> {
 }
 
 /// The scene's first dunes on `n x n` cells of the scene's cell width and
-/// slab (the terrain grows), for `steps` steps, their self-check pass
-/// requested.
+/// slab (the terrain grows or shrinks; its piles wrapped into it), for
+/// `steps` steps, their self-check pass requested.
 fn dunes_on(data: &SceneData, n: u32, steps: u32) -> Result<Option<SceneData>> {
     if !data.source.file.terrain.iter().any(|t| t.dunes.is_some()) {
         return Ok(None);
@@ -87,7 +87,16 @@ fn dunes_on(data: &SceneData, n: u32, steps: u32) -> Result<Option<SceneData>> {
                 dunes.slab = Some(dunes.slab.unwrap_or(cell / 10.0));
                 dunes.cells = [n, n];
                 dunes.steps = steps;
-                t.size = [cell * n as f32; 2];
+                let side = cell * n as f32;
+                t.size = [side; 2];
+                // Piles keep their place in the field, wrapped into the
+                // new one (and no wider than half of it).
+                let min = t.min;
+                for pile in dunes.piles.iter_mut().flatten() {
+                    pile[0] = min[0] + (pile[0] - min[0]).rem_euclid(side);
+                    pile[1] = min[1] + (pile[1] - min[1]).rem_euclid(side);
+                    pile[2] = pile[2].min(0.5 * side);
+                }
             }
             // The automaton alone: a frame of one pixel.
             f.camera.resolution = [1, 1];

@@ -20,6 +20,9 @@ use spirv_std::num_traits::Float;
 /// heights (1.2 and 8 km), so 250 m keeps the rule's error far below the
 /// 0.5 % asked.
 pub const AERIAL_STEP: f32 = 250.0;
+/// The smallest |cosine| a step's length is figured with: level rays take
+/// steps of `AERIAL_STEP / AERIAL_FLATTEST`.
+pub const AERIAL_FLATTEST: f32 = 0.25;
 
 /// The air's light along unit view direction `dir` from the observer to
 /// distance `t` (m; rgb, W/(m^2 sr)) and its transmittance over that
@@ -32,7 +35,10 @@ pub fn aerial_segment(p: &SkyParams, table: &[Vec4], dir: Vec3, t: f32) -> (Vec3
     if t1 <= t0 {
         return (Vec3::ZERO, Vec3::ONE);
     }
-    let mut n = ((t1 - t0) / AERIAL_STEP).ceil() as u32;
+    // Each step climbs or falls at most `AERIAL_STEP`, and is at most
+    // `AERIAL_STEP / AERIAL_FLATTEST` long (nearly level rays).
+    let rise = if mu.abs() > AERIAL_FLATTEST { mu.abs() } else { AERIAL_FLATTEST };
+    let mut n = ((t1 - t0) * rise / AERIAL_STEP).ceil() as u32;
     if n < 1 {
         n = 1;
     }

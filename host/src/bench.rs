@@ -286,6 +286,17 @@ pub fn save_plot(
     crate::output::write_atomically(path, png.get_ref())
 }
 
+/// Marker `shape` (0 circle, 1 triangle, else square) centred `at` pixels
+/// from its anchor.
+fn marker<DB: DrawingBackend>(shape: usize, at: (i32, i32), color: RGBColor) -> DynElement<'static, DB, (i32, i32)> {
+    let (x, y) = at;
+    match shape {
+        0 => Circle::new((x, y), 4, color.filled()).into_dyn(),
+        1 => Polygon::new(vec![(x, y - 5), (x - 5, y + 4), (x + 5, y + 4)], color.filled()).into_dyn(),
+        _ => Rectangle::new([(x - 4, y - 4), (x + 4, y + 4)], color.filled()).into_dyn(),
+    }
+}
+
 /// Labels of a log-log plot of lines with markers.
 pub struct LogLogPlot<'a> {
     pub caption: &'a str,
@@ -321,13 +332,20 @@ pub fn plot_log_log(path: &Path, labels: &LogLogPlot, series: &[(String, Vec<(f6
             .label_style(("sans-serif", 15))
             .draw()?;
         for (i, (label, pts)) in series.iter().enumerate() {
+            // Past the palette, the colours come round again with another
+            // marker: circles, then triangles, then squares.
             let color = COLORS[i % COLORS.len()];
+            let shape = (i / COLORS.len()) % 3;
             let pts: Vec<(f64, f64)> = pts.iter().map(|&(x, y)| (x.max(floor), y.max(floor))).collect();
             chart
                 .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))?
                 .label(label.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+                .legend(move |(x, y)| {
+                    EmptyElement::at((x, y))
+                        + PathElement::new(vec![(0, 0), (20, 0)], color.stroke_width(2))
+                        + marker(shape, (10, 0), color)
+                });
+            chart.draw_series(pts.iter().map(|&p| EmptyElement::at(p) + marker(shape, (0, 0), color)))?;
         }
         draw_legend(&mut chart)
     })

@@ -354,7 +354,8 @@ fn assert_finite_and_conserved(data: &slicelight::scene::SceneData, what: &str) 
 
 /// The edges of the automaton's parameters: no wind (only avalanches and
 /// creep move sand), a gale of 100 m/s (jumps capped at 32 cells), a field
-/// one cell wide either way, a flat field, bare ground.
+/// one cell wide either way, a flat field, bare ground, piles at their
+/// edges (the widest, of height 0, on 2 x 2 cells, 4096 of them).
 #[test]
 fn dunes_at_the_edges_of_their_parameters() {
     // No wind: saltation stops; the nearly flat start is already at rest
@@ -377,10 +378,18 @@ fn dunes_at_the_edges_of_their_parameters() {
             [64.0, 64.0],
             "-z, growing jumps",
         ),
+        // Piles at their edges: one as wide as the field allows, at its far
+        // corner; one of height 0; the most piles, all in one place.
+        ("cells = [32, 32], steps = 20, piles = [[32.0, 32.0, 32.0, 20.0]]", [64.0, 64.0], "the widest pile"),
+        ("cells = [32, 32], steps = 20, piles = [[0.0, 0.0, 4.0, 0.0]]", [64.0, 64.0], "a pile of height 0"),
+        ("cells = [2, 2], steps = 20, piles = [[-31.0, -31.0, 0.5, 1.0]]", [2.0, 2.0], "a pile on 2 x 2 cells"),
     ] {
         let data = sized_dune_field(&format!("{body}, slab = 0.05"), size);
         assert_finite_and_conserved(&data, what);
     }
+    let many = vec!["[0.0, 0.0, 2.0, 1.0]"; 4096].join(", ");
+    let data = dune_field(&format!("cells = [32, 32], steps = 5, piles = [{many}]"));
+    assert_finite_and_conserved(&data, "4096 piles");
     // A flat field: sand evenly everywhere (0 slabs of noise come from
     // the start only; creep and avalanches find nothing to move).
     let flat = common::scene_from_str(&terrain_scene(

@@ -7,6 +7,7 @@
 use anyhow::{bail, Result};
 use glam::UVec2;
 use indicatif::ProgressBar;
+use rayon::prelude::*;
 use serde::Deserialize;
 use slicelight_shaders::desert::sand::{avalanche, relax_apply, relax_choose, sand_cell, SandParams};
 use slicelight_shaders::types::CommonParams;
@@ -410,9 +411,11 @@ fn piles(
 /// Runs dispatches `first..first + count` of the kernel on the CPU from
 /// `state` (the lattice after dispatch `first - 1`; `start`: the given
 /// start's slabs, read by dispatch 0 where `p.given_start` is 1), the same
-/// function per cell as on the GPU. Each step's saltation phase is given the lattice's
-/// highest cell as `height_bound` (its wind-shadow scans stop below it;
-/// the same decisions as unbounded, `sand.rs`).
+/// function per cell as on the GPU. Each step's saltation phase is given
+/// the lattice's highest cell as `height_bound` (its wind-shadow scans stop
+/// below it; the same decisions as unbounded, `sand.rs`), and its gather
+/// the step's longest jump as `window` (test
+/// `bounded_steps_give_the_unbounded_lattice`).
 pub fn run_dispatches(
     p: &SandParams,
     start: &[u32],
@@ -427,6 +430,13 @@ pub fn run_dispatches(
     for k in first..first + count {
         if k >= 1 && (k - 1).is_multiple_of(p.phases.max(1)) {
             q.height_bound = p.height_bound.min(state.iter().map(|c| c.x).max().unwrap_or(0));
+        }
+        // The gather (phase 1) looks upwind only as far as the step's
+        // longest jump (`y`, phase 0's offsets): the same counts, since no
+        // slab lands farther, in fewer reads (ripples: a window of 32
+        // cells where the jumps reach about 20).
+        if k >= 1 && (k - 1) % p.phases.max(1) == 1 {
+            q.window = p.window.min(state.par_iter().map(|c| c.y).max().unwrap_or(0));
         }
         for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, &q, start, &state));
         std::mem::swap(&mut state, &mut next);
@@ -762,6 +772,29 @@ mod tests {
         forget(&key);
         assert_eq!(formed_in(&setup, &hidden, Some(dir.path())).unwrap(), marked);
         forget(&key);
+    }
+
+    /// The CPU run bounds each step's gather by its longest jump (and its
+    /// shadow scans by the highest cell): the same lattice, bit for bit,
+    /// as every dispatch run unbounded, on ripples' settings (jumps that
+    /// grow with the height, a window of 32 cells).
+    #[test]
+    fn bounded_steps_give_the_unbounded_lattice() {
+        let settings: Settings = toml::from_str(
+            "cells = [64, 16]\nsteps = 40\nsand = 0.2\nslab = 0.02\njump = 1.0\njump_growth = 50.0\nhops = 1\ncreep = 0.3",
+        )
+        .unwrap();
+        let setup = configure("t", &settings, [0.0, 0.0], [64.0, 16.0]).unwrap();
+        assert_eq!(setup.params.window, MAX_JUMP);
+        let bounded = run(&setup, &ProgressBar::hidden());
+        let p = &setup.params;
+        let mut free = vec![UVec2::ZERO; p.cells as usize];
+        for k in 0..setup.dispatches() {
+            free = (0..p.cells).map(|i| sand_cell(i, k, p, &[], &free)).collect();
+        }
+        assert_eq!(bounded, free);
+        let longest = (0..p.cells).map(|i| sand_cell(i, 1, p, &[], &free).y).max().unwrap();
+        assert!(longest > 1 && longest < p.window, "a bound that bounds: {longest} of {}", p.window);
     }
 
     #[test]

@@ -52,6 +52,7 @@ fn sand_is_conserved_exactly_over_ten_thousand_steps() {
         &settings("cells = [32, 32]\nsteps = 1\nsand = 1.0\nslab = 0.1\ncreep = 0.2"),
         [0.0, 0.0],
         [32.0, 32.0],
+        0.0,
     )
     .unwrap();
     let mut h = start(&s);
@@ -87,6 +88,7 @@ fn settled_sand_rests_at_the_angle_of_repose() {
         &settings("cells = [48, 48]\nsteps = 1\nsand = 0.0\nslab = 0.1"),
         [0.0, 0.0],
         [48.0, 48.0],
+        0.0,
     )
     .unwrap();
     assert_eq!(s.params.repose, 6);
@@ -112,6 +114,7 @@ fn migration(height: u32, steps: u32) -> f64 {
         &settings("cells = [256, 8]\nsteps = 1\nsand = 0.0\nslab = 0.1\ncreep = 0.0\nseed = 4"),
         [0.0, 0.0],
         [256.0, 8.0],
+        0.0,
     )
     .unwrap();
     let bump = |x: usize| {
@@ -171,6 +174,7 @@ fn ripple_wavelength_grows_with_the_saltation_length() {
             )),
             [0.0, 0.0],
             [256.0, 32.0],
+            0.0,
         )
         .unwrap();
         let h = evolve(&s, &start(&s), 200);
@@ -321,6 +325,12 @@ fn bad_terrains_name_the_field() {
             "terrain[0].dunes.piles: expected less sand: at most 2^31 slabs in all",
         ),
         ("dunes = { cells = [32, 32], steps = 1 }", "bare = { albedo = [2.0, 0.5, 0.5] }", &[], "terrain[0].bare.albedo"),
+        (
+            "dunes = { cells = [32, 32], steps = 1, steps_per_second = -1.0 }",
+            "",
+            &[],
+            "terrain[0].dunes.steps_per_second: expected a rate in [0, 1000] steps per second",
+        ),
         (
             "dunes = { cells = [32, 32], steps = 1 }",
             "bare = { albedo = [0.5, 0.5, 0.5], depth = -1.0 }",
@@ -527,6 +537,7 @@ fn a_pile_on_bare_ground_becomes_a_barchan() {
         &settings("cells = [160, 64]\nsteps = 500\nslab = 0.1\njump = 3\nseed = 5\npiles = [[40.0, 32.0, 20.0, 6.0]]"),
         [0.0, 0.0],
         [160.0, 64.0],
+        0.0,
     )
     .unwrap();
     let start: Vec<u32> = (0..s.params.cells)

@@ -22,8 +22,11 @@ use crate::scene::{invalid, SceneData};
 pub struct Settings {
     /// Cells along x and z over the terrain's rectangle (each even or 1).
     pub cells: [u32; 2],
-    /// Steps run from the start.
+    /// Steps run from the start (at time 0).
     pub steps: u32,
+    /// Steps more per second of the scene's time (`steps + round(rate t)`
+    /// at time `t`: the dunes migrate in an animation); default 0.
+    pub steps_per_second: Option<f32>,
     #[serde(default)]
     pub seed: u32,
     /// Mean depth of loose sand at the start (m); default 1, or 0 with `piles`.
@@ -163,8 +166,9 @@ fn positive(field: &str, v: f32) -> Result<f32> {
 }
 
 /// Validates `s` (the field `field`) for a terrain over `min .. min + size`
-/// (m, x and z) and builds the kernel's parameters and the start.
-pub fn configure(field: &str, s: &Settings, min: [f32; 2], size: [f32; 2]) -> Result<Setup> {
+/// (m, x and z) at the scene's time `time` (s) and builds the kernel's
+/// parameters and the start.
+pub fn configure(field: &str, s: &Settings, min: [f32; 2], size: [f32; 2], time: f64) -> Result<Setup> {
     let f = |name: &str| format!("{field}.dunes.{name}");
     let [cx, cz] = s.cells;
     let even_or_one = |n: u32| n == 1 || (n.is_multiple_of(2) && (2..=8192).contains(&n));
@@ -182,6 +186,19 @@ pub fn configure(field: &str, s: &Settings, min: [f32; 2], size: [f32; 2]) -> Re
     if !(1..=MAX_STEPS).contains(&s.steps) {
         bail!(invalid(&f("steps"), &format!("a step count in 1..={MAX_STEPS}"), s.steps));
     }
+    let rate = s.steps_per_second.unwrap_or(0.0);
+    if !(rate.is_finite() && (0.0..=1000.0).contains(&rate)) {
+        bail!(invalid(&f("steps_per_second"), "a rate in [0, 1000] steps per second", rate));
+    }
+    let more = (rate as f64 * time.max(0.0)).round();
+    if s.steps as f64 + more > MAX_STEPS as f64 {
+        bail!(invalid(
+            &f("steps_per_second"),
+            &format!("at most {MAX_STEPS} steps in all at t = {time} s (steps + steps_per_second x t)"),
+            rate
+        ));
+    }
+    let steps = s.steps + more as u32;
     let dx = size[0] / cx as f32;
     if (size[1] / cz as f32 - dx).abs() > 1e-3 * dx {
         bail!(invalid(
@@ -279,8 +296,8 @@ pub fn configure(field: &str, s: &Settings, min: [f32; 2], size: [f32; 2]) -> Re
     let avalanche_rounds = rounds("avalanche_rounds", s.avalanche_rounds, 2)?;
     let creep_rounds = rounds("creep_rounds", s.creep_rounds, 1)?;
     let phases = 2 + 4 * (avalanche_rounds + creep_rounds);
-    if 1 + s.steps as u64 * phases as u64 > MAX_DISPATCHES {
-        bail!(invalid(&f("steps"), "fewer steps times rounds (the dispatch counter is 32 bits)", s.steps));
+    if 1 + steps as u64 * phases as u64 > MAX_DISPATCHES {
+        bail!(invalid(&f("steps"), "fewer steps times rounds (the dispatch counter is 32 bits)", steps));
     }
     // The saltation length in cells, proportional to the wind (1/256 cells).
     let scale = u / REFERENCE_WIND;
@@ -311,7 +328,7 @@ pub fn configure(field: &str, s: &Settings, min: [f32; 2], size: [f32; 2]) -> Re
         shadow_reach: MAX_SHADOW_REACH.min(nx.saturating_sub(1)),
         height_bound: u32::MAX,
     };
-    let mut setup = Setup { params, steps: s.steps, wind, cells: s.cells, slab, start: Start::default() };
+    let mut setup = Setup { params, steps, wind, cells: s.cells, slab, start: Start::default() };
     if !piles.is_empty() {
         // The piles were laid over the terrain's cells (x fastest); the
         // kernel reads them in the lattice's order (the wind along its x).
@@ -462,7 +479,11 @@ pub fn run(setup: &Setup, progress: &ProgressBar) -> Vec<UVec2> {
 /// The automaton is deterministic, and a scene is built again from its
 /// file for every view the viewer shows and every frame of an animation:
 /// the last `FORMED_KEPT` fields are kept in memory by their settings, so
-/// those rebuilds take no seconds of sand. Across processes (the next
+/// those rebuilds take no seconds of sand; a field of the same settings
+/// and more steps (the next frame of an animation, `steps_per_second`)
+/// continues from the kept one with the most steps short of it, which
+/// gives the same bits as a run from the start (test
+/// `a_kept_field_continues_to_more_steps`). Across processes (the next
 /// render of the same scene) the field is read from the cache folder
 /// (`output::cache_directory`) where an earlier run wrote it.
 pub fn formed(setup: &Setup, progress: &ProgressBar) -> Result<(Vec<u32>, Vec<f32>)> {
@@ -472,11 +493,13 @@ pub fn formed(setup: &Setup, progress: &ProgressBar) -> Result<(Vec<u32>, Vec<f3
 /// `formed` with the cache folder `dir` (none: no cache on disk).
 fn formed_in(setup: &Setup, progress: &ProgressBar, dir: Option<&std::path::Path>) -> Result<(Vec<u32>, Vec<f32>)> {
     let key = format!("{setup:?}");
+    let family = family(setup);
     let kept = || FORMED.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some((_, slabs, heights)) = kept().iter().find(|(k, _, _)| *k == key) {
+    if let Some(f) = kept().iter().find(|f| f.key == key) {
         progress.inc(setup.dispatches() as u64);
-        return Ok((slabs.clone(), heights.clone()));
+        return Ok((f.slabs.clone(), f.heights.clone()));
     }
+    let earlier = earlier_field(setup);
     let cells = setup.params.cells as usize;
     let file = dir.map(|dir| field_path(dir, &key));
     let (slabs, heights) = match file.as_deref().and_then(|f| read_field(f, &key, cells)) {
@@ -485,7 +508,21 @@ fn formed_in(setup: &Setup, progress: &ProgressBar, dir: Option<&std::path::Path
             field
         }
         None => {
-            let slabs: Vec<u32> = run(setup, progress).iter().map(|c| c.x).collect();
+            let slabs: Vec<u32> = match earlier {
+                // After a whole step every cell's `y` is 0 (the last
+                // phase clears it): the lattice is the slabs alone.
+                Some((steps, slabs)) => {
+                    let p = &setup.params;
+                    progress.inc(1 + (steps * p.phases) as u64);
+                    let state = slabs.iter().map(|&h| UVec2::new(h, 0)).collect();
+                    let rest = (setup.steps - steps) * p.phases;
+                    run_dispatches(p, &setup.start.0, state, 1 + steps * p.phases, rest, progress)
+                }
+                None => run(setup, progress),
+            }
+            .iter()
+            .map(|c| c.x)
+            .collect();
             let (settled, _) = settle(&setup.params, &slabs, 1 << 20)?;
             let heights = setup.metres(&settled);
             if let Some(f) = &file {
@@ -502,8 +539,24 @@ fn formed_in(setup: &Setup, progress: &ProgressBar, dir: Option<&std::path::Path
     if fields.len() >= FORMED_KEPT {
         fields.remove(0);
     }
-    fields.push((key, slabs.clone(), heights.clone()));
+    fields.push(Formed { key, family, steps: setup.steps, slabs: slabs.clone(), heights: heights.clone() });
     Ok((slabs, heights))
+}
+
+/// `setup`'s settings but its steps: the fields that one continues.
+fn family(setup: &Setup) -> String {
+    format!("{:?}", Setup { steps: 0, ..setup.clone() })
+}
+
+/// The kept field of `setup`'s family with the most steps short of its
+/// own: those steps and the slabs.
+fn earlier_field(setup: &Setup) -> Option<(u32, Vec<u32>)> {
+    let family = family(setup);
+    let kept = FORMED.lock().unwrap_or_else(|e| e.into_inner());
+    kept.iter()
+        .filter(|f| f.family == family && f.steps < setup.steps)
+        .max_by_key(|f| f.steps)
+        .map(|f| (f.steps, f.slabs.clone()))
 }
 
 /// The cached fields' format: bump when what `formed` returns for the same
@@ -567,8 +620,15 @@ fn write_field(path: &std::path::Path, key: &str, slabs: &[u32], heights: &[f32]
 /// Fields `formed` keeps: a scene's dunes and ripples, and one edit's.
 const FORMED_KEPT: usize = 4;
 
-/// A kept field: its settings (`Setup`'s `Debug`), slabs and heights.
-type Formed = (String, Vec<u32>, Vec<f32>);
+/// A kept field: its settings (`Setup`'s `Debug`), the same without the
+/// steps, its steps, slabs and heights.
+struct Formed {
+    key: String,
+    family: String,
+    steps: u32,
+    slabs: Vec<u32>,
+    heights: Vec<f32>,
+}
 static FORMED: std::sync::Mutex<Vec<Formed>> = std::sync::Mutex::new(Vec::new());
 
 /// Avalanche rounds (both colours) on `slabs` until nothing moves; returns
@@ -734,11 +794,11 @@ mod tests {
 
     fn small(seed: u32) -> Setup {
         let settings: Settings = toml::from_str(&format!("cells = [16, 8]\nsteps = 30\nseed = {seed}")).unwrap();
-        configure("terrain[0]", &settings, [0.0, 0.0], [16.0, 8.0]).unwrap()
+        configure("terrain[0]", &settings, [0.0, 0.0], [16.0, 8.0], 0.0).unwrap()
     }
 
     fn forget(key: &str) {
-        FORMED.lock().unwrap().retain(|(k, _, _)| k != key);
+        FORMED.lock().unwrap().retain(|f| f.key != key);
     }
 
     /// A field is written once, read back whole by the next process (here:
@@ -784,7 +844,7 @@ mod tests {
             "cells = [64, 16]\nsteps = 40\nsand = 0.2\nslab = 0.02\njump = 1.0\njump_growth = 50.0\nhops = 1\ncreep = 0.3",
         )
         .unwrap();
-        let setup = configure("t", &settings, [0.0, 0.0], [64.0, 16.0]).unwrap();
+        let setup = configure("t", &settings, [0.0, 0.0], [64.0, 16.0], 0.0).unwrap();
         assert_eq!(setup.params.window, MAX_JUMP);
         let bounded = run(&setup, &ProgressBar::hidden());
         let p = &setup.params;
@@ -795,6 +855,31 @@ mod tests {
         assert_eq!(bounded, free);
         let longest = (0..p.cells).map(|i| sand_cell(i, 1, p, &[], &free).y).max().unwrap();
         assert!(longest > 1 && longest < p.window, "a bound that bounds: {longest} of {}", p.window);
+    }
+
+    /// An animation's frames: the field at a later time continues from the
+    /// one kept at an earlier time, and equals a run from the start.
+    #[test]
+    fn a_kept_field_continues_to_more_steps() {
+        let hidden = ProgressBar::hidden();
+        let settings: Settings =
+            toml::from_str("cells = [16, 8]\nsteps = 20\nseed = 4243\nsteps_per_second = 10.0").unwrap();
+        let at = |t: f64| configure("terrain[0]", &settings, [0.0, 0.0], [16.0, 8.0], t).unwrap();
+        let (early, late) = (at(1.0), at(2.5));
+        assert_eq!((early.steps, late.steps), (30, 45));
+        for s in [&early, &late] {
+            forget(&format!("{s:?}"));
+        }
+        formed_in(&early, &hidden, None).unwrap();
+        assert_eq!(earlier_field(&late).map(|f| f.0), Some(30), "the later field continues the earlier");
+        let continued = formed_in(&late, &hidden, None).unwrap();
+        forget(&format!("{late:?}"));
+        forget(&format!("{early:?}"));
+        let fresh = formed_in(&late, &hidden, None).unwrap();
+        assert_eq!(continued, fresh);
+        assert_ne!(formed_in(&early, &hidden, None).unwrap().0, fresh.0, "the sand moved in 15 steps");
+        forget(&format!("{late:?}"));
+        forget(&format!("{early:?}"));
     }
 
     #[test]

@@ -236,7 +236,7 @@ const MAX_NODES: u64 = 1 << 26;
 
 /// Validates the terrains and builds their fields (running the dunes'
 /// automaton, with a progress bar when `progress` is shown).
-pub fn configure(terrains: &[Terrain], base: &Path, progress: &ProgressBar) -> Result<Setup> {
+pub fn configure(terrains: &[Terrain], base: &Path, time: f64, progress: &ProgressBar) -> Result<Setup> {
     let mut setup = Setup::default();
     for (t, terrain) in terrains.iter().enumerate() {
         let field = format!("terrain[{t}]");
@@ -266,7 +266,7 @@ pub fn configure(terrains: &[Terrain], base: &Path, progress: &ProgressBar) -> R
             procedural(&format!("{field}.procedural"), p)?
         } else {
             let d = terrain.dunes.as_ref().expect("one source");
-            let s = dunes::configure(&field, d, terrain.min, terrain.size)?;
+            let s = dunes::configure(&field, d, terrain.min, terrain.size, time)?;
             let (slabs, heights) = dunes::formed(&s, progress)?;
             let field = Field { nx: s.cells[0], nz: s.cells[1], heights, periodic: true };
             if setup.dunes.is_none() {
@@ -327,6 +327,7 @@ fn ripple_texture(
     let settings = dunes::Settings {
         cells: [n, n],
         steps: r.steps.unwrap_or(300),
+        steps_per_second: None,
         seed: r.seed,
         sand: Some(dx * 0.2),
         slab: Some(dx * 0.02),
@@ -345,7 +346,7 @@ fn ripple_texture(
         avalanche_rounds: None,
         creep_rounds: None,
     };
-    let s = dunes::configure(field, &settings, [0.0, 0.0], [size, size])?;
+    let s = dunes::configure(field, &settings, [0.0, 0.0], [size, size], 0.0)?;
     let mut heights: Vec<f32> = dunes::formed(&s, progress)?.1.iter().map(|h| h * strength).collect();
     let offset = setup.ripple_normals.len() as u32;
     let mut side = n;

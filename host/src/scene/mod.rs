@@ -546,7 +546,7 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         ));
     }
     let mut objects = geometry::build(&file.object, base)?;
-    let desert = crate::desert::configure(&file.terrain, base, &indicatif::ProgressBar::hidden())?;
+    let desert = crate::desert::configure(&file.terrain, base, time, &indicatif::ProgressBar::hidden())?;
     for (k, (t, f)) in file.terrain.iter().zip(&desert.fields).enumerate() {
         let ripples = desert.ripple_of_terrain[k];
         let (sand, bare) = crate::desert::sand_and_bare(t, crate::desert::mesh(t, f));

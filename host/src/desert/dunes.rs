@@ -499,7 +499,6 @@ fn formed_in(setup: &Setup, progress: &ProgressBar, dir: Option<&std::path::Path
         progress.inc(setup.dispatches() as u64);
         return Ok((f.slabs.clone(), f.heights.clone()));
     }
-    let earlier = earlier_field(setup);
     let cells = setup.params.cells as usize;
     let file = dir.map(|dir| field_path(dir, &key));
     let (slabs, heights) = match file.as_deref().and_then(|f| read_field(f, &key, cells)) {
@@ -508,7 +507,7 @@ fn formed_in(setup: &Setup, progress: &ProgressBar, dir: Option<&std::path::Path
             field
         }
         None => {
-            let slabs: Vec<u32> = match earlier {
+            let slabs: Vec<u32> = match earlier_field(setup, &family) {
                 // After a whole step every cell's `y` is 0 (the last
                 // phase clears it): the lattice is the slabs alone.
                 Some((steps, slabs)) => {
@@ -548,10 +547,9 @@ fn family(setup: &Setup) -> String {
     format!("{:?}", Setup { steps: 0, ..setup.clone() })
 }
 
-/// The kept field of `setup`'s family with the most steps short of its
-/// own: those steps and the slabs.
-fn earlier_field(setup: &Setup) -> Option<(u32, Vec<u32>)> {
-    let family = family(setup);
+/// The kept field of `setup`'s `family` (`family(setup)`) with the most
+/// steps short of its own: those steps and the slabs.
+fn earlier_field(setup: &Setup, family: &str) -> Option<(u32, Vec<u32>)> {
     let kept = FORMED.lock().unwrap_or_else(|e| e.into_inner());
     kept.iter()
         .filter(|f| f.family == family && f.steps < setup.steps)
@@ -871,7 +869,11 @@ mod tests {
             forget(&format!("{s:?}"));
         }
         formed_in(&early, &hidden, None).unwrap();
-        assert_eq!(earlier_field(&late).map(|f| f.0), Some(30), "the later field continues the earlier");
+        assert_eq!(
+            earlier_field(&late, &family(&late)).map(|f| f.0),
+            Some(30),
+            "the later field continues the earlier"
+        );
         let continued = formed_in(&late, &hidden, None).unwrap();
         forget(&format!("{late:?}"));
         forget(&format!("{early:?}"));

@@ -398,9 +398,10 @@ fn ripple_texture(
 const DEFAULT_BARE_DEPTH: f32 = 0.05;
 
 /// `mesh` split into the sand's triangles and, with `bare`, the bare
-/// ground's (every corner less than `bare.depth` above height 0; `None`
-/// without `bare` or where no triangle is bare). Both keep every vertex.
-pub fn sand_and_bare(terrain: &Terrain, mesh: IndexedMesh) -> (IndexedMesh, Option<IndexedMesh>) {
+/// ground's (every corner less than `bare.depth` above height 0) with its
+/// albedo (`None` without `bare` or where no triangle is bare). Both keep
+/// every vertex.
+pub fn sand_and_bare(terrain: &Terrain, mesh: IndexedMesh) -> (IndexedMesh, Option<(IndexedMesh, [f32; 3])>) {
     let Some(b) = &terrain.bare else { return (mesh, None) };
     let below = terrain.elevation + b.depth.unwrap_or(DEFAULT_BARE_DEPTH);
     let (bare, sand): (Vec<[u32; 3]>, Vec<[u32; 3]>) =
@@ -409,7 +410,7 @@ pub fn sand_and_bare(terrain: &Terrain, mesh: IndexedMesh) -> (IndexedMesh, Opti
         return (mesh, None);
     }
     let ground = IndexedMesh { positions: mesh.positions.clone(), normals: mesh.normals.clone(), indices: bare };
-    (IndexedMesh { indices: sand, ..mesh }, Some(ground))
+    (IndexedMesh { indices: sand, ..mesh }, Some((ground, b.albedo)))
 }
 
 pub fn mesh(terrain: &Terrain, field: &Field) -> IndexedMesh {

@@ -551,8 +551,8 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         let ripples = desert.ripple_of_terrain[k];
         let (sand, bare) = crate::desert::sand_and_bare(t, crate::desert::mesh(t, f));
         geometry::push_diffuse(&mut objects, &sand, Vec3::from(t.albedo).extend(0.0), ripples);
-        if let (Some(ground), Some(b)) = (bare, &t.bare) {
-            geometry::push_diffuse(&mut objects, &ground, Vec3::from(b.albedo).extend(0.0), 0);
+        if let Some((ground, albedo)) = bare {
+            geometry::push_diffuse(&mut objects, &ground, Vec3::from(albedo).extend(0.0), 0);
         }
     }
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);

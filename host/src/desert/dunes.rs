@@ -9,7 +9,7 @@ use glam::UVec2;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Deserialize;
-use slicelight_shaders::desert::sand::{avalanche, relax_apply, relax_choose, sand_cell, SandParams};
+use slicelight_shaders::desert::sand::{avalanche, relax_apply, relax_choose, saltation_row, sand_cell, SandParams};
 use slicelight_shaders::types::CommonParams;
 
 use crate::cpu::for_each_invocation;
@@ -430,9 +430,10 @@ fn piles(
 /// start's slabs, read by dispatch 0 where `p.given_start` is 1), the same
 /// function per cell as on the GPU. Each step's saltation phase is given
 /// the lattice's highest cell as `height_bound` (its wind-shadow scans stop
-/// below it; the same decisions as unbounded, `sand.rs`), and its gather
-/// the step's longest jump as `window` (test
-/// `bounded_steps_give_the_unbounded_lattice`).
+/// below it; the same decisions as unbounded, `sand.rs`); its saltation
+/// runs row by row as one pass (`saltation_row`), or where a run starts or
+/// ends between the two phases, the gather looks upwind as far as the
+/// step's longest jump (test `bounded_steps_give_the_unbounded_lattice`).
 pub fn run_dispatches(
     p: &SandParams,
     start: &[u32],
@@ -443,23 +444,39 @@ pub fn run_dispatches(
 ) -> Vec<UVec2> {
     let mut next = vec![UVec2::ZERO; p.cells as usize];
     let quiet = ProgressBar::hidden();
+    let phases = p.phases.max(1);
     let mut q = *p;
-    for k in first..first + count {
-        if k >= 1 && (k - 1).is_multiple_of(p.phases.max(1)) {
+    let mut k = first;
+    while k < first + count {
+        let phase = k.checked_sub(1).map(|c| c % phases);
+        if phase == Some(0) {
             q.height_bound = p.height_bound.min(state.iter().map(|c| c.x).max().unwrap_or(0));
         }
-        // The gather (phase 1) looks upwind only as far as the step's
-        // longest jump (`y`, phase 0's offsets): the same counts, since no
-        // slab lands farther, in fewer reads (ripples: a window of 32
-        // cells where the jumps reach about 20).
-        if k >= 1 && (k - 1) % p.phases.max(1) == 1 {
-            q.window = p.window.min(state.par_iter().map(|c| c.y).max().unwrap_or(0));
+        // A step's saltation (phases 0 and 1) row by row in one pass, where
+        // both are asked for: each row's sources scattered to where they
+        // land (`saltation_row`, the same counts as the gather).
+        let fused = phase == Some(0) && k + 1 < first + count;
+        if fused {
+            let step = (k - 1) / phases;
+            next.par_chunks_mut(p.nx as usize)
+                .enumerate()
+                .for_each(|(z, row)| saltation_row(z as u32, step, &q, &state, row));
+        } else {
+            // The gather (phase 1) looks upwind only as far as the step's
+            // longest jump (`y`, phase 0's offsets): the same counts, since
+            // no slab lands farther, in fewer reads.
+            if phase == Some(1) {
+                q.window = p.window.min(state.par_iter().map(|c| c.y).max().unwrap_or(0));
+            }
+            for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, &q, start, &state));
         }
-        for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, &q, start, &state));
         std::mem::swap(&mut state, &mut next);
-        if (k + 1 - first).is_multiple_of(p.phases.max(1)) {
-            progress.inc(1);
+        for done in k..k + if fused { 2 } else { 1 } {
+            if (done + 1 - first).is_multiple_of(phases) {
+                progress.inc(1);
+            }
         }
+        k += if fused { 2 } else { 1 };
     }
     state
 }
@@ -832,8 +849,9 @@ mod tests {
         forget(&key);
     }
 
-    /// The CPU run bounds each step's gather by its longest jump (and its
-    /// shadow scans by the highest cell): the same lattice, bit for bit,
+    /// The CPU run scatters each row's saltation (or bounds the gather by
+    /// the step's longest jump) and bounds the shadow scans by the highest
+    /// cell: the same lattice, bit for bit,
     /// as every dispatch run unbounded, on ripples' settings (jumps that
     /// grow with the height, a window of 32 cells).
     #[test]
@@ -853,6 +871,12 @@ mod tests {
         assert_eq!(bounded, free);
         let longest = (0..p.cells).map(|i| sand_cell(i, 1, p, &[], &free).y).max().unwrap();
         assert!(longest > 1 && longest < p.window, "a bound that bounds: {longest} of {}", p.window);
+        // Runs cut between a step's two saltation phases (the row pass
+        // does not apply; the gather with its bounded window does).
+        let hidden = ProgressBar::hidden();
+        let cut = 1 + 5 * p.phases + 1;
+        let part = run_dispatches(p, &[], vec![UVec2::ZERO; p.cells as usize], 0, cut, &hidden);
+        assert_eq!(run_dispatches(p, &[], part, cut, setup.dispatches() - cut, &hidden), free);
     }
 
     /// An animation's frames: the field at a later time continues from the

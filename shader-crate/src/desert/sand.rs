@@ -251,6 +251,28 @@ fn gathered(index: u32, p: &SandParams, state: &[UVec2]) -> u32 {
     h
 }
 
+/// Phases 1 and 2 for row `z` at once, for the CPU, which runs a row as one
+/// task (the GPU runs the two phases as dispatches): `row` gets the row's
+/// cells after the saltation of step `step` from `state`. Each source's
+/// slab is taken from it and added where its jump ends, the same counts as
+/// `gathered` sums (integer adds commute), without its scan of `window`
+/// cells per cell (test `the_row_scatter_is_the_gather`).
+#[cfg(not(target_arch = "spirv"))]
+pub fn saltation_row(z: u32, step: u32, p: &SandParams, state: &[UVec2], row: &mut [UVec2]) {
+    let first = (z * p.nx) as usize;
+    for (c, s) in row.iter_mut().zip(&state[first..first + p.nx as usize]) {
+        *c = UVec2::new(s.x, 0);
+    }
+    for x in 0..p.nx {
+        let d = saltation_offset(first as u32 + x, step, p, state);
+        if d != 0 {
+            // A source holds a slab (`own > 0`): no wrap below zero.
+            row[x as usize].x -= 1;
+            row[((x + d) % p.nx) as usize].x += 1;
+        }
+    }
+}
+
 /// The 4-neighbours of `(x, z)` (wrapped around), in the order +x, -x,
 /// +z, -z (directions 1 to 4).
 fn neighbours(p: &SandParams, x: u32, z: u32) -> [u32; 4] {
@@ -494,6 +516,32 @@ mod tests {
         state[2].y = 3;
         assert_eq!(gathered(5, &p, &state), 1);
         assert_eq!(gathered(2, &p, &state), 0);
+    }
+
+    #[test]
+    fn the_row_scatter_is_the_gather() {
+        // Rows of 16 and 6 cells (jumps of up to 9 cells wrap around the
+        // short one more than once), a tall bed so that shadows form too.
+        for (nx, nz) in [(16, 8), (6, 4), (1, 6)] {
+            let mut p = params(nx, nz);
+            p.mean_sand = 12;
+            p.shadow_drop = 128;
+            let mut state = run(&p, 1);
+            for step in 0..30 {
+                let k = 1 + step * p.phases;
+                let offsets: Vec<UVec2> = (0..p.cells).map(|i| sand_cell(i, k, &p, &[], &state)).collect();
+                let gather: Vec<UVec2> = (0..p.cells).map(|i| sand_cell(i, k + 1, &p, &[], &offsets)).collect();
+                // (On a 1-cell row every jump comes back to its source.)
+                assert!(nx == 1 || offsets.iter().any(|c| c.y != 0), "{nx}x{nz}: no slab moved, step {step}");
+                let mut scatter = vec![UVec2::ZERO; p.cells as usize];
+                for (z, row) in scatter.chunks_mut(nx as usize).enumerate() {
+                    saltation_row(z as u32, step, &p, &state, row);
+                }
+                assert_eq!(scatter, gather, "{nx}x{nz}, step {step}");
+                state = (k + 2..k + p.phases)
+                    .fold(gather, |s, k| (0..p.cells).map(|i| sand_cell(i, k, &p, &[], &s)).collect());
+            }
+        }
     }
 
     #[test]

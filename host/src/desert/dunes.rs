@@ -9,7 +9,9 @@ use glam::UVec2;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Deserialize;
-use slicelight_shaders::desert::sand::{avalanche, relax_apply, relax_choose, saltation_row, sand_cell, SandParams};
+use slicelight_shaders::desert::sand::{
+    avalanche, relax_apply, relax_choose, relax_rows, relax_rule, saltation_row, sand_cell, SandParams,
+};
 use slicelight_shaders::types::CommonParams;
 
 use crate::cpu::for_each_invocation;
@@ -431,9 +433,11 @@ fn piles(
 /// function per cell as on the GPU. Each step's saltation phase is given
 /// the lattice's highest cell as `height_bound` (its wind-shadow scans stop
 /// below it; the same decisions as unbounded, `sand.rs`); its saltation
-/// runs row by row as one pass (`saltation_row`), or where a run starts or
-/// ends between the two phases, the gather looks upwind as far as the
-/// step's longest jump (test `bounded_steps_give_the_unbounded_lattice`).
+/// runs row by row as one pass (`saltation_row`), each relaxation band by
+/// band as one pass (`relax_rows`), and where a run starts or ends between
+/// two such phases, they run as the GPU's dispatches, the gather looking
+/// upwind only as far as the step's longest jump (test
+/// `bounded_steps_give_the_unbounded_lattice`).
 pub fn run_dispatches(
     p: &SandParams,
     start: &[u32],
@@ -455,12 +459,22 @@ pub fn run_dispatches(
         // A step's saltation (phases 0 and 1) row by row in one pass, where
         // both are asked for: each row's sources scattered to where they
         // land (`saltation_row`, the same counts as the gather).
-        let fused = phase == Some(0) && k + 1 < first + count;
+        // A relaxation's choose and apply phases likewise, by bands of rows
+        // (`relax_rows`: the choices wait in a ring of three rows).
+        let fused = phase.is_some_and(|f| f % 2 == 0) && k + 1 < first + count;
         if fused {
-            let step = (k - 1) / phases;
-            next.par_chunks_mut(p.nx as usize)
-                .enumerate()
-                .for_each(|(z, row)| saltation_row(z as u32, step, &q, &state, row));
+            let (step, phase) = ((k - 1) / phases, (k - 1) % phases);
+            if phase == 0 {
+                next.par_chunks_mut(p.nx as usize)
+                    .enumerate()
+                    .for_each(|(z, row)| saltation_row(z as u32, step, &q, &state, row));
+            } else {
+                let rule = relax_rule(&q, phase);
+                let band = relax_band(p.nz);
+                next.par_chunks_mut((band * p.nx) as usize)
+                    .enumerate()
+                    .for_each(|(b, rows)| relax_rows(b as u32 * band, step, &q, &state, rule, rows));
+            }
         } else {
             // The gather (phase 1) looks upwind only as far as the step's
             // longest jump (`y`, phase 0's offsets): the same counts, since
@@ -479,6 +493,13 @@ pub fn run_dispatches(
         k += if fused { 2 } else { 1 };
     }
     state
+}
+
+/// Rows per task of a relaxation on the CPU: 32 tasks or more (both cores
+/// busy to the end), and bands of at least 8 rows, since each band chooses
+/// two rows more than it applies.
+fn relax_band(nz: u32) -> u32 {
+    (nz / 32).max(8)
 }
 
 /// The automaton's lattice after all its steps (before settling): what the

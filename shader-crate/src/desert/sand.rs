@@ -204,7 +204,15 @@ pub fn jump_length(p: &SandParams, h: u32) -> u32 {
 /// the offset downwind (0: none). The wind shadow is looked up only where a
 /// decision needs it (a scan of up to `shadow_reach` cells).
 fn saltation_offset(index: u32, step: u32, p: &SandParams, state: &[UVec2]) -> u32 {
-    let (x, z) = ((index % p.nx) as i32, (index / p.nx) as i32);
+    saltation_offset_at(index % p.nx, index / p.nx, step, p, state)
+}
+
+/// `saltation_offset` of cell `(x, z)` (for a caller that walks rows: no
+/// division).
+#[inline(always)]
+fn saltation_offset_at(x: u32, z: u32, step: u32, p: &SandParams, state: &[UVec2]) -> u32 {
+    let index = z * p.nx + x;
+    let (x, z) = (x as i32, z as i32);
     let own = state[index as usize].x;
     if own == 0 || random(index, step, p.seed, STREAM_ERODE) >= p.erode || shadowed(p, state, x, z) {
         return 0;
@@ -264,7 +272,7 @@ pub fn saltation_row(z: u32, step: u32, p: &SandParams, state: &[UVec2], row: &m
         *c = UVec2::new(s.x, 0);
     }
     for x in 0..p.nx {
-        let d = saltation_offset(first as u32 + x, step, p, state);
+        let d = saltation_offset_at(x, z, step, p, state);
         if d != 0 {
             // A source holds a slab (`own > 0`): no wrap below zero.
             row[x as usize].x -= 1;
@@ -287,6 +295,7 @@ fn neighbours(p: &SandParams, x: u32, z: u32) -> [u32; 4] {
 /// The direction cell `(x, z)` sends a slab to under `rule` (0: none): its
 /// steepest 4-neighbour if the drop exceeds the threshold (the first in
 /// the order +x, -x, +z, -z on ties).
+#[inline(always)]
 fn relax_choice(p: &SandParams, state: &[UVec2], x: u32, z: u32, step: u32, rule: Relax) -> u32 {
     if (x + z) & 1 != rule.colour {
         return 0;
@@ -321,12 +330,17 @@ pub fn relax_choose(index: u32, step: u32, p: &SandParams, state: &[UVec2], rule
 /// Phase 3b, a round's moves: cell `index`'s height after the round whose
 /// choices `state`'s `y` holds (`relax_choose`), and `y` cleared.
 pub fn relax_apply(index: u32, p: &SandParams, state: &[UVec2]) -> UVec2 {
-    let own = state[index as usize];
+    relax_apply_at(index % p.nx, index / p.nx, p, state)
+}
+
+/// `relax_apply` of cell `(x, z)` (for a caller that walks rows).
+#[inline(always)]
+fn relax_apply_at(x: u32, z: u32, p: &SandParams, state: &[UVec2]) -> UVec2 {
+    let own = state[(z * p.nx + x) as usize];
     if own.y != 0 {
         // A sender this round (its neighbours are of the other colour).
         return UVec2::new(own.x - 1, 0);
     }
-    let (x, z) = (index % p.nx, index / p.nx);
     let n = neighbours(p, x, z);
     let mut h = own.x;
     let mut dir = 0;
@@ -362,16 +376,51 @@ pub fn sand_cell(index: u32, counter: u32, p: &SandParams, start: &[u32], state:
         0 => UVec2::new(own.x, saltation_offset(index, step, p, state)),
         1 => UVec2::new(gathered(index, p, state), 0),
         _ if phase % 2 == 1 => relax_apply(index, p, state),
-        _ => {
-            // Relaxation `r` (a round's colour): its choose phase.
-            let r = (phase - 2) / 2;
-            let round = r / 2;
-            let rule = if round < p.avalanche_rounds {
-                avalanche(p, r % 2)
-            } else {
-                Relax { colour: r % 2, threshold: 1, probability: p.creep, stream: STREAM_RELAX + r }
-            };
-            relax_choose(index, step, p, state, rule)
+        _ => relax_choose(index, step, p, state, relax_rule(p, phase)),
+    }
+}
+
+/// The rule of a step's relaxation whose choose phase is `phase` (even, at
+/// least 2): relaxation `r = (phase - 2) / 2` is round `r / 2`'s colour
+/// `r % 2`, avalanches for the first `avalanche_rounds` rounds, then creep.
+pub fn relax_rule(p: &SandParams, phase: u32) -> Relax {
+    let r = (phase - 2) / 2;
+    if r / 2 < p.avalanche_rounds {
+        avalanche(p, r % 2)
+    } else {
+        Relax { colour: r % 2, threshold: 1, probability: p.creep, stream: STREAM_RELAX + r }
+    }
+}
+
+/// A relaxation's two phases (choose, then apply) for rows `z0..z0 + n` at
+/// once, for the CPU, which runs a band of rows as one task (`out`: the
+/// band's `n` rows after the relaxation of `state`, whose rows wrap around).
+/// The choices of rows `z - 1`, `z` and `z + 1` wait in a ring of three
+/// rows, at slot `(z + 1) mod 3`: `relax_apply` on that ring as a lattice of
+/// three rows (wrapping around) reads the neighbours it would read in the
+/// whole lattice. One pass over the lattice where the GPU makes two (test
+/// `a_band_relaxes_as_the_two_phases`).
+#[cfg(not(target_arch = "spirv"))]
+pub fn relax_rows(z0: u32, step: u32, p: &SandParams, state: &[UVec2], rule: Relax, out: &mut [UVec2]) {
+    let nx = p.nx as usize;
+    let ring_p = SandParams { nz: 3, cells: 3 * p.nx, ..*p };
+    let mut ring = vec![UVec2::ZERO; 3 * nx];
+    // Row `z0 + z` (z from -1) chosen into its slot.
+    let choose = |ring: &mut [UVec2], z: i32| {
+        let gz = wrap(z0 as i32 + z, p.nz);
+        let slot = ((z + 1) % 3) as usize * nx;
+        for x in 0..p.nx {
+            let h = state[(gz * p.nx + x) as usize].x;
+            ring[slot + x as usize] = UVec2::new(h, relax_choice(p, state, x, gz, step, rule));
+        }
+    };
+    choose(&mut ring, -1);
+    choose(&mut ring, 0);
+    for (z, out_row) in out.chunks_mut(nx).enumerate() {
+        choose(&mut ring, z as i32 + 1);
+        let slot = ((z + 1) % 3) as u32;
+        for (x, c) in out_row.iter_mut().enumerate() {
+            *c = relax_apply_at(x as u32, slot, &ring_p, &ring);
         }
     }
 }
@@ -541,6 +590,38 @@ mod tests {
                 state = (k + 2..k + p.phases)
                     .fold(gather, |s, k| (0..p.cells).map(|i| sand_cell(i, k, &p, &[], &s)).collect());
             }
+        }
+    }
+
+    #[test]
+    fn a_band_relaxes_as_the_two_phases() {
+        // Bands of 1, 2 and 3 rows (one shorter at the end) on lattices
+        // whose axes are 1, 2 or more cells, a steep bed so that every
+        // rule moves slabs; each relaxation of a step against its choose
+        // and apply dispatches.
+        for (nx, nz) in [(16, 8), (6, 4), (2, 2), (1, 6), (6, 1), (2, 4), (4, 5)] {
+            let mut p = params(nx, nz);
+            p.mean_sand = 12;
+            p.repose = 2;
+            let mut state: Vec<UVec2> = (0..p.cells).map(|i| UVec2::new(random(i, 9, 9, 9) % 13, 0)).collect();
+            let mut moved = 0;
+            for step in 0..4 {
+                for phase in (2..p.phases).step_by(2) {
+                    let k = 1 + step * p.phases + phase;
+                    let chosen: Vec<UVec2> = (0..p.cells).map(|i| sand_cell(i, k, &p, &[], &state)).collect();
+                    let applied: Vec<UVec2> = (0..p.cells).map(|i| sand_cell(i, k + 1, &p, &[], &chosen)).collect();
+                    for band in 1..=3 {
+                        let mut out = vec![UVec2::MAX; p.cells as usize];
+                        for (b, rows) in out.chunks_mut((band * nx) as usize).enumerate() {
+                            relax_rows(b as u32 * band, step, &p, &state, relax_rule(&p, phase), rows);
+                        }
+                        assert_eq!(out, applied, "{nx}x{nz}, step {step}, phase {phase}, bands of {band}");
+                    }
+                    moved += chosen.iter().filter(|c| c.y != 0).count();
+                    state = applied;
+                }
+            }
+            assert!(moved > 0, "{nx}x{nz}: nothing moved");
         }
     }
 

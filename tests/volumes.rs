@@ -310,8 +310,12 @@ fn the_sorted_order_is_the_counted_one() {
 /// The default, multiple scattering by delta-Eddington columns, against
 /// the Monte Carlo reference (all orders) on the cumulus at 24x18 pixel
 /// centres, beside the octaves and single scattering on the same pixels.
-/// Measured (docs/volumes.md): columns energy 0.990, 4.46 % RMS (8-bit);
-/// octaves 0.972, 5.69 %; single scattering 0.657, 19.2 %. The issue asks
+/// Measured (docs/volumes.md): columns energy 0.987, 4.48 % RMS (8-bit);
+/// octaves 0.970, 5.70 %; single scattering 0.655, 19.3 %. The reference
+/// stops doubling its paths at a change of 6e-3 (14 s here): at 3e-3 (48
+/// s) the figures were 0.990, 4.46 %; 0.972, 5.69 %; 0.657, 19.2 %, so its
+/// noise moves them by a few hundredths of a percent, far inside the
+/// bounds' margins. The issue asks
 /// 5 % energy and 3 % RMS: the columns meet the first here, not the
 /// second. The bounds hold most of what the columns gained over the
 /// octaves (RMS below 5 %, energy within 5 %) and keep them at least
@@ -321,7 +325,7 @@ fn multiple_scattering_against_monte_carlo() {
     use slicelight::volumes::Scattering;
     let data = shipped("cloud_cumulus", 24, 18);
     assert!(data.volumes.params.columns == 1, "multiple scattering by columns is the default");
-    let (reference, _) = slicelight::reference::render_converged(&data, 3e-3);
+    let (reference, _) = slicelight::reference::render_converged(&data, 6e-3);
     let against = |d: &SceneData| difference(&to_f64(&cpu_image(d)), &reference, data.exposure);
     let columns = against(&data);
     let octaves = against(&data.reconfigure(move |f| f.volumes.scattering = Scattering::Octaves).unwrap());

@@ -104,13 +104,28 @@ fn reference_converges() {
 
 /// The target: within 0.5 % RMS of the sky's peak (sun's disk
 /// excluded), every sun angle from the zenith to 6 degrees below the
-/// horizon, with the default settings (sky-view table) and integrated per pixel.
+/// horizon, with the default settings (sky-view table) and integrated per
+/// pixel: three tests of three angles each (all nine took 39 s alone).
 #[test]
-fn sky_matches_reference_for_every_sun_angle() {
+fn sky_matches_reference_with_the_sun_high() {
+    sky_matches_reference_for_sun_zeniths(&[0.0, 30.0, 60.0]);
+}
+
+#[test]
+fn sky_matches_reference_with_the_sun_low() {
+    sky_matches_reference_for_sun_zeniths(&[80.0, 88.0, 90.0]);
+}
+
+#[test]
+fn sky_matches_reference_with_the_sun_below_the_horizon() {
+    sky_matches_reference_for_sun_zeniths(&[92.0, 94.0, 96.0]);
+}
+
+fn sky_matches_reference_for_sun_zeniths(zeniths: &[f32]) {
     // Every other pixel in x and y of the 48x48 fisheye (the reference's
     // quadrature is the test's cost): the lattice still spans the whole
     // hemisphere, zenith to horizon, in steps of 3.75 degrees.
-    for zenith in [0.0f32, 30.0, 60.0, 80.0, 88.0, 90.0, 92.0, 94.0, 96.0] {
+    for &zenith in zeniths {
         let data = fisheye(48, zenith, "");
         let pixels = sky_pixels(&data, 2);
         let (refvals, _) = reference::render_converged_at(&data, &pixels, 2e-4);

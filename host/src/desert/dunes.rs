@@ -10,7 +10,7 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Deserialize;
 use slicelight_shaders::desert::sand::{
-    avalanche, relax_apply, relax_choose, relax_rows, relax_rule, saltation_row, sand_cell, SandParams,
+    avalanche, relax_rows, relax_rule, saltation_row, sand_cell, Relax, SandParams,
 };
 use slicelight_shaders::types::CommonParams;
 
@@ -461,19 +461,15 @@ pub fn run_dispatches(
         // land (`saltation_row`, the same counts as the gather).
         // A relaxation's choose and apply phases likewise, by bands of rows
         // (`relax_rows`: the choices wait in a ring of three rows).
-        let fused = phase.is_some_and(|f| f % 2 == 0) && k + 1 < first + count;
-        if fused {
-            let (step, phase) = ((k - 1) / phases, (k - 1) % phases);
+        let fused = phase.filter(|f| f % 2 == 0 && k + 1 < first + count);
+        if let Some(phase) = fused {
+            let step = (k - 1) / phases;
             if phase == 0 {
                 next.par_chunks_mut(p.nx as usize)
                     .enumerate()
                     .for_each(|(z, row)| saltation_row(z as u32, step, &q, &state, row));
             } else {
-                let rule = relax_rule(&q, phase);
-                let band = relax_band(p.nz);
-                next.par_chunks_mut((band * p.nx) as usize)
-                    .enumerate()
-                    .for_each(|(b, rows)| relax_rows(b as u32 * band, step, &q, &state, rule, rows));
+                relax_pass(&q, step, relax_rule(&q, phase), &state, &mut next);
             }
         } else {
             // The gather (phase 1) looks upwind only as far as the step's
@@ -485,21 +481,26 @@ pub fn run_dispatches(
             for_each_invocation(&mut next, 0, &quiet, |i, out| *out = sand_cell(i, k, &q, start, &state));
         }
         std::mem::swap(&mut state, &mut next);
-        for done in k..k + if fused { 2 } else { 1 } {
-            if (done + 1 - first).is_multiple_of(phases) {
+        let done = if fused.is_some() { 2 } else { 1 };
+        for d in k..k + done {
+            if (d + 1 - first).is_multiple_of(phases) {
                 progress.inc(1);
             }
         }
-        k += if fused { 2 } else { 1 };
+        k += done;
     }
     state
 }
 
-/// Rows per task of a relaxation on the CPU: 32 tasks or more (both cores
-/// busy to the end), and bands of at least 8 rows, since each band chooses
-/// two rows more than it applies.
-fn relax_band(nz: u32) -> u32 {
-    (nz / 32).max(8)
+/// One relaxation of the whole lattice on the CPU, its choose and apply
+/// phases at once (`relax_rows`): `next` gets `state` after it. Bands of
+/// rows as tasks: 32 tasks or more (both cores busy to the end), and at
+/// least 8 rows, since each band chooses two rows more than it applies.
+fn relax_pass(p: &SandParams, step: u32, rule: Relax, state: &[UVec2], next: &mut [UVec2]) {
+    let band = (p.nz / 32).max(8);
+    next.par_chunks_mut((band * p.nx) as usize)
+        .enumerate()
+        .for_each(|(b, rows)| relax_rows(b as u32 * band, step, p, state, rule, rows));
 }
 
 /// The automaton's lattice after all its steps (before settling): what the
@@ -676,11 +677,8 @@ pub fn settle(p: &SandParams, slabs: &[u32], limit: u32) -> Result<(Vec<u32>, u3
     for round in 0..limit {
         let mut moved = false;
         for colour in 0..2 {
-            let rule = avalanche(p, colour);
-            let quiet = ProgressBar::hidden();
-            for_each_invocation(&mut next, 0, &quiet, |i, out| *out = relax_choose(i, 0, p, &state, rule));
-            std::mem::swap(&mut state, &mut next);
-            for_each_invocation(&mut next, 0, &quiet, |i, out| *out = relax_apply(i, p, &state));
+            // Every `y` is 0 between relaxations: a change is a slab moved.
+            relax_pass(p, 0, avalanche(p, colour), &state, &mut next);
             moved |= next != state;
             std::mem::swap(&mut state, &mut next);
         }

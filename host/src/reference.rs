@@ -731,6 +731,7 @@ pub fn inscatter_pixel(data: &SceneData, x: u32, y: u32, sub: u32, t_surface: f6
 pub fn render_converged_at(data: &SceneData, pixels: &[u32], tolerance: f64) -> (Vec<DVec3>, u32) {
     let w = data.width();
     let spp = data.samples_per_pixel();
+    crate::sky::reference::prepare(data);
     // Every (pixel, sub-pixel sample), each traced and shaded once.
     let rays: Vec<(u32, u32)> = pixels.iter().flat_map(|&i| (0..spp).map(move |s| (i, s))).collect();
     let surfaces: Vec<(DVec3, f64)> =
@@ -819,5 +820,6 @@ pub fn render_converged(data: &SceneData, tolerance: f64) -> (Vec<DVec3>, u32) {
 /// The reference image's surface term alone (no in-scattering), rgb in f64.
 pub fn render_surfaces(data: &SceneData) -> Vec<DVec3> {
     let w = data.width();
+    crate::sky::reference::prepare(data);
     (0..data.pixel_count()).into_par_iter().map(|i| surface_pixel(data, i % w, i / w)).collect()
 }

@@ -45,33 +45,44 @@ impl Aabb {
     }
 }
 
+/// A triangle as the build sees it (its index into the input, not the
+/// triangle itself: the partitions move 32 bytes, not 100).
 struct Item {
     bounds: Aabb,
     centroid: Vec3,
-    triangle: GpuTriangle,
+    triangle: u32,
 }
 
 impl Bvh {
     pub fn build(triangles: Vec<GpuTriangle>) -> Bvh {
+        Bvh::build_with(triangles, PARALLEL_ITEMS)
+    }
+
+    /// `build`, subtrees of `parallel` triangles or more on two cores.
+    fn build_with(triangles: Vec<GpuTriangle>, parallel: usize) -> Bvh {
         let mut items: Vec<Item> = triangles
-            .into_iter()
-            .map(|t| {
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
                 let bounds = [t.v0, t.v1, t.v2].iter().fold(Aabb::EMPTY, |b, v| b.grow(v.truncate()));
-                Item { bounds, centroid: (bounds.lo + bounds.hi) * 0.5, triangle: t }
+                Item { bounds, centroid: (bounds.lo + bounds.hi) * 0.5, triangle: i as u32 }
             })
             .collect();
         let mut nodes = Vec::with_capacity(2 * items.len().div_ceil(MAX_LEAF));
         if !items.is_empty() {
             let n = items.len();
-            build_node(&mut items, 0, n, 0, &mut nodes);
+            build_node(&mut items, 0, n, 0, parallel, &mut nodes);
         }
-        Bvh { nodes, triangles: items.into_iter().map(|i| i.triangle).collect() }
+        Bvh { nodes, triangles: items.into_iter().map(|i| triangles[i.triangle as usize]).collect() }
     }
 }
 
+/// Nodes over which the two subtrees are built on two cores.
+const PARALLEL_ITEMS: usize = 8192;
+
 /// Appends the subtree over `items[first..end]` to `nodes` in depth-first
 /// order and sets its skip link.
-fn build_node(items: &mut [Item], first: usize, end: usize, depth: u32, nodes: &mut Vec<GpuBvhNode>) {
+fn build_node(items: &mut [Item], first: usize, end: usize, depth: u32, parallel: usize, nodes: &mut Vec<GpuBvhNode>) {
     let slice = &mut items[first..end];
     let bounds = slice.iter().fold(Aabb::EMPTY, |b, i| b.union(i.bounds));
     let index = nodes.len();
@@ -82,13 +93,44 @@ fn build_node(items: &mut [Item], first: usize, end: usize, depth: u32, nodes: &
             nodes[index].first = first as u32;
             nodes[index].count = slice.len() as u32;
         }
-        Some(mid) => {
-            build_node(items, first, first + mid, depth + 1, nodes);
+        Some(mid) if slice.len() >= parallel => {
+            // The two subtrees on two cores, each into its own list (links
+            // from its own start), then appended with their links moved:
+            // the same nodes as the serial order.
+            let (left, right) = slice.split_at_mut(mid);
+            let subtree = |part: &mut [Item], first: usize, parallel: usize| {
+                let mut own = Vec::new();
+                build_node(part, 0, part.len(), depth + 1, parallel, &mut own);
+                (own, first)
+            };
+            let ((l, l_first), (r, r_first)) =
+                rayon::join(|| subtree(left, first, parallel), || subtree(right, first + mid, parallel));
+            append(nodes, l, l_first);
             nodes[index].right = nodes.len() as u32;
-            build_node(items, first + mid, end, depth + 1, nodes);
+            append(nodes, r, r_first);
+        }
+        Some(mid) => {
+            build_node(items, first, first + mid, depth + 1, parallel, nodes);
+            nodes[index].right = nodes.len() as u32;
+            build_node(items, first + mid, end, depth + 1, parallel, nodes);
         }
     }
     nodes[index].skip = nodes.len() as u32;
+}
+
+/// Appends a subtree built into its own list (links from its start, leaves
+/// from item 0) for items from `first` on.
+fn append(nodes: &mut Vec<GpuBvhNode>, part: Vec<GpuBvhNode>, first: usize) {
+    let offset = nodes.len() as u32;
+    nodes.extend(part.into_iter().map(|mut n| {
+        n.skip += offset;
+        if n.count > 0 {
+            n.first += first as u32;
+        } else {
+            n.right += offset;
+        }
+        n
+    }));
 }
 
 /// Partitions `items` and returns the size of the first part, or `None` if
@@ -107,18 +149,26 @@ fn choose_split(items: &mut [Item], bounds: Aabb, depth: u32) -> Option<usize> {
         return Some(mid);
     }
     let mut best: Option<(f32, usize, usize)> = None; // (cost, axis, last bin of the left part)
+    let bin_of = |c: Vec3, axis: usize| (((c[axis] - cb.lo[axis]) / extent[axis] * BINS as f32) as usize).min(BINS - 1);
+    // The three axes' bins in one pass over the items.
+    let mut counts = [[0usize; BINS]; 3];
+    let mut boxes = [[Aabb::EMPTY; BINS]; 3];
+    // (`bin_of`'s arithmetic on the three axes at once: the same IEEE
+    // operations, so the same bins.)
+    let (lo, ext) = (glam::Vec3A::from(cb.lo), glam::Vec3A::from(extent));
+    for it in items.iter() {
+        let f = (glam::Vec3A::from(it.centroid) - lo) / ext * BINS as f32;
+        for axis in 0..3 {
+            let b = (f[axis] as usize).min(BINS - 1);
+            counts[axis][b] += 1;
+            boxes[axis][b] = boxes[axis][b].union(it.bounds);
+        }
+    }
     for axis in 0..3 {
         if extent[axis] <= 0.0 {
             continue;
         }
-        let bin_of = |c: Vec3| (((c[axis] - cb.lo[axis]) / extent[axis] * BINS as f32) as usize).min(BINS - 1);
-        let mut counts = [0usize; BINS];
-        let mut boxes = [Aabb::EMPTY; BINS];
-        for it in items.iter() {
-            let b = bin_of(it.centroid);
-            counts[b] += 1;
-            boxes[b] = boxes[b].union(it.bounds);
-        }
+        let (counts, boxes) = (&counts[axis], &boxes[axis]);
         // Sweep: right-side areas and counts from the top, then the left.
         let mut right_area = [0.0f32; BINS];
         let mut right_count = [0usize; BINS];
@@ -148,7 +198,7 @@ fn choose_split(items: &mut [Item], bounds: Aabb, depth: u32) -> Option<usize> {
     if split_cost >= leaf_cost && items.len() <= 4 * MAX_LEAF {
         return None;
     }
-    let threshold = |c: Vec3| (((c[axis] - cb.lo[axis]) / extent[axis] * BINS as f32) as usize).min(BINS - 1) <= last;
+    let threshold = |c: Vec3| bin_of(c, axis) <= last;
     let mut mid = 0;
     for i in 0..items.len() {
         if threshold(items[i].centroid) {
@@ -222,6 +272,22 @@ mod tests {
             .collect()
     }
 
+    /// Exponentially spaced triangles: each binned SAH split peels off the
+    /// farthest few, the deepest tree the build can make.
+    fn chain() -> Vec<GpuTriangle> {
+        (0..3000)
+            .map(|i| {
+                let c = Vec3::new(1.02f32.powi(i), 0.0, 0.0);
+                GpuTriangle {
+                    v0: c.extend(1.0),
+                    v1: (c + Vec3::Y).extend(1.0),
+                    v2: (c + Vec3::Z).extend(1.0),
+                    ..Default::default()
+                }
+            })
+            .collect()
+    }
+
     #[test]
     fn every_triangle_is_in_exactly_one_leaf_inside_every_box_above_it() {
         let bvh = Bvh::build(random_triangles(5000));
@@ -258,6 +324,22 @@ mod tests {
     }
 
     #[test]
+    fn subtrees_on_two_cores_give_the_serial_tree() {
+        // Random soups and the degenerate chain (median splits past
+        // SAH_DEPTH), split onto two cores from 64 triangles up: the same
+        // nodes, links and triangle order, bit for bit.
+        for triangles in [random_triangles(5000), random_triangles(70), chain()] {
+            let serial = Bvh::build_with(triangles.clone(), usize::MAX);
+            let parallel = Bvh::build_with(triangles, 64);
+            assert_eq!(bytemuck::cast_slice::<_, u8>(&serial.nodes), bytemuck::cast_slice::<_, u8>(&parallel.nodes));
+            assert_eq!(
+                bytemuck::cast_slice::<_, u8>(&serial.triangles),
+                bytemuck::cast_slice::<_, u8>(&parallel.triangles)
+            );
+        }
+    }
+
+    #[test]
     fn degenerate_inputs_build() {
         // All triangles at one point, and one triangle.
         let same: Vec<GpuTriangle> =
@@ -274,18 +356,7 @@ mod tests {
         // Exponentially spaced triangles: each binned SAH split peels off
         // the farthest few, the deepest tree the build can make; past
         // SAH_DEPTH, median splits bound it.
-        let chain: Vec<GpuTriangle> = (0..3000)
-            .map(|i| {
-                let c = Vec3::new(1.02f32.powi(i), 0.0, 0.0);
-                GpuTriangle {
-                    v0: c.extend(1.0),
-                    v1: (c + Vec3::Y).extend(1.0),
-                    v2: (c + Vec3::Z).extend(1.0),
-                    ..Default::default()
-                }
-            })
-            .collect();
-        let d = depth(&Bvh::build(chain).nodes);
+        let d = depth(&Bvh::build(chain()).nodes);
         assert!(d <= slicelight_shaders::geometry::BVH_STACK, "depth {d}");
     }
 

@@ -333,36 +333,46 @@ fn map_rectangle(
 }
 
 /// The light leaving the glass downward: exactly traced exit rays (point,
-/// direction) at up to 4096 vertices per light.
+/// direction) at up to 4096 vertices per light, in the order of the lights
+/// and vertices. On every core: a scene of 11 lights (`caustics_lights`)
+/// traces about 90 000 paths here at every build, cache or not.
 fn exit_rays(scene: &SceneData, channels: u32) -> Vec<(Vec3, Vec3)> {
+    use rayon::prelude::*;
     let geometry = scene.geometry();
     let glass = Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
     let stride = (scene.glass_vertices.len() / 4096).max(1);
+    let vertices: Vec<_> = scene.glass_vertices.iter().step_by(stride).collect();
     let mut out = Vec::new();
     for light in &scene.lights {
-        for v in scene.glass_vertices.iter().step_by(stride) {
-            let (lit, dir) = light_at_vertex(light, &geometry, v);
-            if !lit {
-                continue;
-            }
-            for c in if channels == 3 { [0, 2] } else { [0, 0] } {
-                let path = trace_through(
-                    &geometry,
-                    &glass,
-                    &scene.materials,
-                    v.position.truncate(),
-                    v.normal.truncate(),
-                    v.material,
-                    dir,
-                    c,
-                    v.object,
-                    false,
-                );
-                if path.status == PATH_OUT && path.direction.y < 0.0 {
-                    out.push((path.position, path.direction));
+        let rays: Vec<Vec<(Vec3, Vec3)>> = vertices
+            .par_iter()
+            .map(|v| {
+                let (lit, dir) = light_at_vertex(light, &geometry, v);
+                if !lit {
+                    return Vec::new();
                 }
-            }
-        }
+                let channels = if channels == 3 { [0, 2] } else { [0, 0] };
+                channels
+                    .into_iter()
+                    .filter_map(|c| {
+                        let path = trace_through(
+                            &geometry,
+                            &glass,
+                            &scene.materials,
+                            v.position.truncate(),
+                            v.normal.truncate(),
+                            v.material,
+                            dir,
+                            c,
+                            v.object,
+                            false,
+                        );
+                        (path.status == PATH_OUT && path.direction.y < 0.0).then_some((path.position, path.direction))
+                    })
+                    .collect()
+            })
+            .collect();
+        out.extend(rays.into_iter().flatten());
     }
     out
 }

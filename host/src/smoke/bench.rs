@@ -87,9 +87,19 @@ fn fluid_row(series: &'static str, backend: &'static str, advection: &'static st
     }
 }
 
-/// The median step time, the most iterations and the worst divergence of
-/// a hot plume on `n^3` cells (5 steps timed after 5) on `backend`.
-fn plume(n: u32, advection: &str, backend: &crate::render::Backend) -> Result<(f64, u32, f64)> {
+/// A plume's step times (medians, seconds) and solver figures.
+struct Plume {
+    seconds: f64,
+    /// The step's stages: advection, forces and diffusion, projection.
+    stages: [f64; 3],
+    iterations: u32,
+    divergence: f64,
+}
+
+/// The median step time (and of each stage), the most iterations and the
+/// worst divergence of a hot plume on `n^3` cells (5 steps timed after 5)
+/// on `backend`.
+fn plume(n: u32, advection: &str, backend: &crate::render::Backend) -> Result<Plume> {
     let size = 0.1 * n as f32;
     let body = format!(
         "cells = [{n}, {n}, {n}]\nadvection = \"{advection}\"\nwind = [0.5, 0.0, 0.0]\n[[source]]\nposition = [{c}, {y}, {c}]\nradius = {r}\nrate = 10.0\ntemperature = 600.0\nvelocity = [0.0, 1.0, 0.0]",
@@ -108,15 +118,19 @@ fn plume(n: u32, advection: &str, backend: &crate::render::Backend) -> Result<(f
     for _ in 0..5 {
         stepper.step(&mut f)?;
     }
-    let (mut times, mut iterations, mut divergence) = (Vec::new(), 0, 0.0f64);
+    let (mut times, mut stages, mut iterations, mut divergence) = (Vec::new(), [(); 3].map(|_| Vec::new()), 0, 0.0f64);
     for _ in 0..5 {
         let t = std::time::Instant::now();
         stepper.step(&mut f)?;
         times.push(t.elapsed().as_secs_f64());
+        for (series, s) in stages.iter_mut().zip([f.last.advect_seconds, f.last.forces_seconds, f.last.project_seconds])
+        {
+            series.push(s);
+        }
         iterations = iterations.max(f.last.solve.iterations);
         divergence = divergence.max(f.last.divergence);
     }
-    Ok((crate::bench::median(times), iterations, divergence))
+    Ok(Plume { seconds: crate::bench::median(times), stages: stages.map(crate::bench::median), iterations, divergence })
 }
 
 /// Runs the sweep and writes `smoke_bench.csv` and `smoke_time_vs_error.png`.
@@ -147,13 +161,14 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
         }
         for &n in step_sizes {
             for backend in backends {
-                let (seconds, iterations, divergence) = plume(n, name, backend)?;
+                let Plume { seconds, stages: [advect, forces, project], iterations, divergence } =
+                    plume(n, name, backend)?;
                 let mut row = fluid_row("step", backend.name(), name, n);
                 row.seconds_per_step = Some(seconds);
                 row.iterations = Some(iterations);
                 row.divergence = Some(divergence);
                 eprintln!(
-                    "plume {:>4} {name:>15} {n:>4}^3 {seconds:>9.5} s/step  {iterations} iterations, divergence {divergence:.1e}",
+                    "plume {:>4} {name:>15} {n:>4}^3 {seconds:>9.5} s/step (advect {advect:.4}, forces {forces:.4}, project {project:.4})  {iterations} iterations, divergence {divergence:.1e}",
                     backend.name()
                 );
                 rows.push(row);

@@ -198,15 +198,22 @@ pub fn sample_bounded(p: &FluidParams, kind: u32, q: &[f32], x: Vec3) -> (f32, f
     let g = (x - position(kind, UVec3::ZERO)).clamp(Vec3::ZERO, (e - UVec3::ONE).as_vec3());
     let base = g.floor().as_uvec3().min(e - UVec3::ONE);
     let f = g - base.as_vec3();
+    // The eight corners from one base index and three strides (zero
+    // where the upper corner is clamped onto the lower): the same elements
+    // as `index` of each corner, a third of the address arithmetic.
     let hi = (base + UVec3::ONE).min(e - UVec3::ONE);
-    let q000 = q[index(e, base.x, base.y, base.z)];
-    let q100 = q[index(e, hi.x, base.y, base.z)];
-    let q010 = q[index(e, base.x, hi.y, base.z)];
-    let q110 = q[index(e, hi.x, hi.y, base.z)];
-    let q001 = q[index(e, base.x, base.y, hi.z)];
-    let q101 = q[index(e, hi.x, base.y, hi.z)];
-    let q011 = q[index(e, base.x, hi.y, hi.z)];
-    let q111 = q[index(e, hi.x, hi.y, hi.z)];
+    let at = index(e, base.x, base.y, base.z);
+    let dx = (hi.x - base.x) as usize;
+    let dy = ((hi.y - base.y) * e.x) as usize;
+    let dz = ((hi.z - base.z) * e.x * e.y) as usize;
+    let q000 = q[at];
+    let q100 = q[at + dx];
+    let q010 = q[at + dy];
+    let q110 = q[at + dx + dy];
+    let q001 = q[at + dz];
+    let q101 = q[at + dx + dz];
+    let q011 = q[at + dy + dz];
+    let q111 = q[at + dx + dy + dz];
     let a = q000 + (q100 - q000) * f.x;
     let b = q010 + (q110 - q010) * f.x;
     let c = q001 + (q101 - q001) * f.x;

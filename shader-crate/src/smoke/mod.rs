@@ -197,7 +197,14 @@ pub fn sample_bounded(p: &FluidParams, kind: u32, q: &[f32], x: Vec3) -> (f32, f
     let e = extent(p, kind);
     let g = (x - position(kind, UVec3::ZERO)).clamp(Vec3::ZERO, (e - UVec3::ONE).as_vec3());
     let base = g.floor().as_uvec3().min(e - UVec3::ONE);
-    let f = g - base.as_vec3();
+    blend(q, e, base, g - base.as_vec3())
+}
+
+/// The trilinear blend of `q` (extent `e`) from the lower corner `base` and
+/// the fractions `f` (`sample_bounded`'s arithmetic); also the least and
+/// greatest of the eight values.
+#[inline(always)]
+fn blend(q: &[f32], e: UVec3, base: UVec3, f: Vec3) -> (f32, f32, f32) {
     // The eight corners from one base index and three strides (zero
     // where the upper corner is clamped onto the lower): the same elements
     // as `index` of each corner, a third of the address arithmetic.
@@ -245,6 +252,65 @@ pub fn velocity_at(p: &FluidParams, vel: Velocity, x: Vec3) -> Vec3 {
     Vec3::new(sample(p, KIND_U, vel.u, x), sample(p, KIND_V, vel.v, x), sample(p, KIND_W, vel.w, x))
 }
 
+/// Along one axis, the lower corner and the fraction at which
+/// `sample_bounded` reads an array of extent `e` (its elements `array_half`
+/// a half cell into their cells along the axis, else on the cell faces) at
+/// the element `c` of another array (`element_half` likewise): its clamp
+/// and floor for a point on the grid, in integers.
+#[inline(always)]
+fn grid_axis(c: u32, element_half: bool, array_half: bool, e: u32) -> (u32, f32) {
+    if element_half == array_half {
+        // The same offset: on an element of the array.
+        (c.min(e - 1), 0.0)
+    } else if element_half {
+        // c + 1/2 on a face array (one longer): between c and c + 1.
+        (c, 0.5)
+    } else if c == 0 {
+        // c - 1/2 on a centred array: clamped onto its first element,
+        (0, 0.0)
+    } else if c >= e {
+        // or its last,
+        (e - 1, 0.0)
+    } else {
+        // else between c - 1 and c.
+        (c - 1, 0.5)
+    }
+}
+
+/// Whether elements of `kind` sit a half cell into their cells along each axis.
+#[inline(always)]
+fn half_offsets(kind: u32) -> [bool; 3] {
+    [kind != KIND_U, kind != KIND_V, kind != KIND_W]
+}
+
+/// `velocity_at` at element `c` of `kind` (m/s), the same values: the
+/// lookups' corners and fractions worked out in integers (a back-trace's
+/// first stage starts on the grid).
+#[inline]
+pub fn velocity_at_element(p: &FluidParams, vel: Velocity, kind: u32, c: UVec3) -> Vec3 {
+    let at = half_offsets(kind);
+    let component = |array: u32, q: &[f32]| {
+        let e = extent(p, array);
+        let half = half_offsets(array);
+        let (bx, fx) = grid_axis(c.x, at[0], half[0], e.x);
+        let (by, fy) = grid_axis(c.y, at[1], half[1], e.y);
+        let (bz, fz) = grid_axis(c.z, at[2], half[2], e.z);
+        blend(q, e, UVec3::new(bx, by, bz), Vec3::new(fx, fy, fz)).0
+    };
+    Vec3::new(component(KIND_U, vel.u), component(KIND_V, vel.v), component(KIND_W, vel.w))
+}
+
+/// `trace` from element `c` of `kind` (cells), the same point.
+#[inline]
+pub fn trace_element(p: &FluidParams, vel: Velocity, kind: u32, c: UVec3, direction: f32) -> Vec3 {
+    let x = position(kind, c);
+    let s = direction * p.dt / p.h;
+    let v1 = velocity_at_element(p, vel, kind, c);
+    let mid = x - 0.5 * s * v1;
+    let v2 = velocity_at(p, vel, mid);
+    x - s * v2
+}
+
 /// Where the fluid at `x` (cells) was `dt` ago (`direction` 1) or will be
 /// `dt` on (`direction` -1): the explicit midpoint rule (RK2) through the
 /// velocity field, in cells.
@@ -261,15 +327,14 @@ pub fn trace(p: &FluidParams, vel: Velocity, x: Vec3, direction: f32) -> Vec3 {
 /// value found where its fluid came from (`direction` 1; -1: the reverse
 /// step, MacCormack's back-and-forth).
 pub fn advect(p: &FluidParams, kind: u32, flat: u32, q: &[f32], vel: Velocity, direction: f32) -> f32 {
-    let x = position(kind, coords(extent(p, kind), flat));
-    sample(p, kind, q, trace(p, vel, x, direction))
+    sample(p, kind, q, trace_element(p, vel, kind, coords(extent(p, kind), flat), direction))
 }
 
 /// Where the fluid at element `flat` of `kind` was `dt` ago (cells): the
 /// point `advect` samples (kept for MacCormack's limiter rather than
 /// traced twice).
 pub fn departure(p: &FluidParams, kind: u32, flat: u32, vel: Velocity) -> Vec3 {
-    trace(p, vel, position(kind, coords(extent(p, kind), flat)), 1.0)
+    trace_element(p, vel, kind, coords(extent(p, kind), flat), 1.0)
 }
 
 /// MacCormack's correction (Selle, Fedkiw, Kim, Liu and Rossignac 2008) of
@@ -293,8 +358,7 @@ pub fn maccormack_from(
 /// `advect` of the two cell-centred quantities, temperature and smoke,
 /// which share their back-trace: `(T, s)` after the step.
 pub fn advect_centres(p: &FluidParams, flat: u32, t: &[f32], s: &[f32], vel: Velocity, direction: f32) -> (f32, f32) {
-    let x = position(KIND_TEMPERATURE, coords(p.dims(), flat));
-    let b = trace(p, vel, x, direction);
+    let b = trace_element(p, vel, KIND_TEMPERATURE, coords(p.dims(), flat), direction);
     (sample(p, KIND_TEMPERATURE, t, b), sample(p, KIND_SMOKE, s, b))
 }
 
@@ -848,6 +912,37 @@ mod tests {
             gravity: 9.81,
             ambient: 300.0,
             ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_velocity_at_an_element_is_the_lookup_there_bit_for_bit() {
+        // Every element of every kind on boxes with one-cell axes, open
+        // faces and walls, a velocity with no pattern: the integer corners
+        // and fractions give the lookup's values to the bit.
+        for (n, walls) in [([4, 5, 3], 63), ([3, 1, 2], 0), ([1, 1, 1], 21), ([6, 2, 1], 42)] {
+            let p = FluidParams { walls, ..params(n) };
+            let field = |kind: u32, salt: u32| -> Vec<f32> {
+                let e = extent(&p, kind);
+                (0..e.x * e.y * e.z).map(|i| signed_uniform(i, salt, 7, kind) * 3.0).collect()
+            };
+            let (u, v, w) = (field(KIND_U, 1), field(KIND_V, 2), field(KIND_W, 3));
+            let vel = Velocity { u: &u, v: &v, w: &w };
+            for kind in [KIND_U, KIND_V, KIND_W, KIND_TEMPERATURE] {
+                let e = extent(&p, kind);
+                for flat in 0..e.x * e.y * e.z {
+                    let c = coords(e, flat);
+                    let fast = velocity_at_element(&p, vel, kind, c);
+                    let slow = velocity_at(&p, vel, position(kind, c));
+                    assert_eq!(
+                        fast.to_array().map(f32::to_bits),
+                        slow.to_array().map(f32::to_bits),
+                        "{n:?} kind {kind} {c}"
+                    );
+                    let (a, b) = (trace_element(&p, vel, kind, c, -1.0), trace(&p, vel, position(kind, c), -1.0));
+                    assert_eq!(a.to_array().map(f32::to_bits), b.to_array().map(f32::to_bits));
+                }
+            }
         }
     }
 

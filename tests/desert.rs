@@ -269,6 +269,12 @@ fn bad_terrains_name_the_field() {
         ),
         ("dunes = { cells = [32, 32], steps = 0 }", "", &[], "terrain[0].dunes.steps"),
         (
+            "procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }",
+            "ripples = { size = 4.0, lod = \"sideways\" }",
+            &[],
+            "expected true, false, \"triangle\", \"blend\" or \"full\", found \"sideways\"",
+        ),
+        (
             "dunes = { cells = [32, 32], steps = 1, deposit = [1.5, 0.4] }",
             "",
             &[],
@@ -436,7 +442,7 @@ fn written_heights_load_back_to_the_same_terrain() {
 
 /// `desert_dunes` at 180x120 with fewer steps, its ripples' LOD `lod`
 /// (`None`: no ripples).
-fn small_desert(lod: Option<bool>) -> slicelight::scene::SceneData {
+fn small_desert(lod: Option<&str>) -> slicelight::scene::SceneData {
     let text = std::fs::read_to_string(common::root().join("scenes/desert_dunes.toml")).unwrap();
     let ripples = match lod {
         Some(on) => format!("ripples = {{ size = 16.0, strength = 2.0, steps = 150, lod = {on} }}"),
@@ -460,7 +466,7 @@ fn small_desert(lod: Option<bool>) -> slicelight::scene::SceneData {
 #[test]
 fn ripple_lod_against_full_resolution() {
     use slicelight::render::{render, Backend};
-    let full = small_desert(Some(false));
+    let full = small_desert(Some("false"));
     let image =
         |d: &slicelight::scene::SceneData| slicelight::metrics::to_f64(&render(d, &Backend::Cpu, false).unwrap().0);
     let mut averaged = full.clone();
@@ -469,8 +475,12 @@ fn ripple_lod_against_full_resolution() {
     let f = image(&full);
     let measure = |i: &[glam::DVec3]| slicelight::metrics::difference(i, &truth, full.exposure);
     let (lod, point, none) =
-        (measure(&image(&small_desert(Some(true)))), measure(&f), measure(&image(&small_desert(None))));
-    println!("against the pixel-averaged full resolution:\n  LOD {lod:?}\n  full resolution at the centre {point:?}\n  no ripples {none:?}");
+        (measure(&image(&small_desert(Some("true")))), measure(&f), measure(&image(&small_desert(None))));
+    let blend = measure(&image(&small_desert(Some("\"blend\""))));
+    println!("against the pixel-averaged full resolution:\n  LOD {lod:?}\n  LOD blended {blend:?}\n  full resolution at the centre {point:?}\n  no ripples {none:?}");
+    // The blend of two levels by each point's distance: measured 1.63 %
+    // against the per-triangle choice's 1.73 % (and no seams).
+    assert!(blend.rms_8bit_percent < lod.rms_8bit_percent, "{blend:?} {lod:?}");
     // Measured: LOD 1.73 %, the centre samples 4.74 %, no ripples 1.69 %
     // RMS of the 8-bit range (2.10, 4.89, 2.08 before the scene's ground
     // to the horizon) (at 180x120 most ripples are narrower than a

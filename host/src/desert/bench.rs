@@ -142,6 +142,7 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
                 .iter()
                 .map(|&n| ("mesh", n))
                 .chain(rippled.then_some(("mesh-ripples-full", full)))
+                .chain(rippled.then_some(("mesh-ripples-blend", full)))
                 .chain(spacings.iter().map(|&s| ("skylight-spacing", s)));
             for (series, n) in configs {
                 let d = match series {
@@ -151,11 +152,23 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
                     "skylight-spacing" => finest
                         .reconfigure(move |f| {
                             f.sky.iter_mut().for_each(|s| s.sky_light_spacing = n);
-                            f.terrain.iter_mut().filter_map(|t| t.ripples.as_mut()).for_each(|r| r.lod = false)
+                            f.terrain
+                                .iter_mut()
+                                .filter_map(|t| t.ripples.as_mut())
+                                .for_each(|r| r.lod = super::RippleLod::Full)
                         })
                         .with_context(|| format!("desert bench: sky_light_spacing {n}"))?,
+                    "mesh-ripples-blend" => finest.reconfigure(move |f| {
+                        f.terrain
+                            .iter_mut()
+                            .filter_map(|t| t.ripples.as_mut())
+                            .for_each(|r| r.lod = super::RippleLod::Blend)
+                    })?,
                     _ => finest.reconfigure(move |f| {
-                        f.terrain.iter_mut().filter_map(|t| t.ripples.as_mut()).for_each(|r| r.lod = false)
+                        f.terrain
+                            .iter_mut()
+                            .filter_map(|t| t.ripples.as_mut())
+                            .for_each(|r| r.lod = super::RippleLod::Full)
                     })?,
                 };
                 let timed = time_renders(&d, backend, repeats, &[])?;

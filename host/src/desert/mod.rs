@@ -90,13 +90,60 @@ pub struct RippleSettings {
     pub creep: Option<f32>,
     /// How much the ripples tilt the surface: their heights times this; default 1.
     pub strength: Option<f32>,
-    /// `false`: always the full resolution (what the LOD is measured against).
-    #[serde(default = "yes")]
-    pub lod: bool,
+    /// The level of detail: `true` (default), each triangle at the level
+    /// its distance calls for (the paper's); `"blend"`, each point between
+    /// the two levels around its own distance (no seams between
+    /// triangles); `false`, always the full resolution (what the LOD is
+    /// measured against).
+    #[serde(default)]
+    pub lod: RippleLod,
 }
 
-fn yes() -> bool {
-    true
+/// How the ripples' resolution follows the distance (`RipplesSettings::lod`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RippleLod {
+    /// Always the full resolution (`lod = false`).
+    Full,
+    /// Each triangle at one level (`lod = true`), the paper's choice.
+    #[default]
+    Triangle,
+    /// Each point between two levels (`lod = "blend"`).
+    Blend,
+}
+
+impl<'de> serde::Deserialize<'de> for RippleLod {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        #[derive(serde::Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Flag(bool),
+            Name(String),
+        }
+        match Raw::deserialize(d)? {
+            Raw::Flag(true) => Ok(RippleLod::Triangle),
+            Raw::Flag(false) => Ok(RippleLod::Full),
+            Raw::Name(name) => match name.as_str() {
+                "triangle" => Ok(RippleLod::Triangle),
+                "blend" => Ok(RippleLod::Blend),
+                "full" => Ok(RippleLod::Full),
+                _ => Err(serde::de::Error::custom(format!(
+                    "expected true, false, \"triangle\", \"blend\" or \"full\", found \"{name}\""
+                ))),
+            },
+        }
+    }
+}
+
+impl RippleLod {
+    /// `RippleRecord::lod`'s value.
+    fn code(self) -> u32 {
+        use slicelight_shaders::desert::ripples::{LOD_BLEND, LOD_FULL, LOD_TRIANGLE};
+        match self {
+            RippleLod::Full => LOD_FULL,
+            RippleLod::Triangle => LOD_TRIANGLE,
+            RippleLod::Blend => LOD_BLEND,
+        }
+    }
 }
 
 /// `heights = { file, scale }`: a grey image (8- or 16-bit PNG, or a float
@@ -387,7 +434,7 @@ fn ripple_texture(
         resolution: n,
         levels,
         offset,
-        lod: r.lod as u32,
+        lod: r.lod.code(),
     });
     Ok(())
 }

@@ -3,7 +3,7 @@
 //! ray meets (the truth the ripples' level of detail is measured against).
 
 use glam::DVec3;
-use slicelight_shaders::desert::ripples::{rippled as ripple_normal_at, RippleRecord};
+use slicelight_shaders::desert::ripples::{rippled as ripple_normal_at, RippleRecord, LOD_FULL};
 
 use crate::reference::Surface;
 use crate::scene::SceneData;
@@ -15,7 +15,7 @@ pub(crate) fn rippled(data: &SceneData, o: DVec3, d: DVec3, hit: Surface) -> Sur
     if bump == 0 || hit.triangle == usize::MAX {
         return hit;
     }
-    let full = [RippleRecord { lod: 0, ..data.desert.ripple_records[(bump - 1) as usize] }];
+    let full = [RippleRecord { lod: LOD_FULL, ..data.desert.ripple_records[(bump - 1) as usize] }];
     let toward = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
     let p = o + d * hit.t;
     let n = ripple_normal_at(

@@ -144,6 +144,16 @@ fn scenes() -> Vec<CheckedScene> {
         ("cloud_grid", Volumes, || sky("cloud_grid", 160, 120)),
         ("cloud_sea", Volumes, || sky("cloud_sea", 160, 120)),
         ("dunes, 32x32 cells, 60 steps", Desert, small_dunes),
+        ("dunes, ripples blended between levels", Desert, || {
+            small_dunes()
+                .reconfigure(|f| {
+                    f.terrain
+                        .iter_mut()
+                        .filter_map(|t| t.ripples.as_mut())
+                        .for_each(|r| r.lod = slicelight::desert::RippleLod::Blend)
+                })
+                .unwrap()
+        }),
         ("barchans, piles on bare ground, 32x32 cells, 60 steps", Desert, small_barchans),
     ]
 }

@@ -162,9 +162,22 @@ fn mutated_scene_files_without_glass_load_or_fail_with_an_error_never_a_panic() 
     build_fuzzer(false);
 }
 
+/// Runs `f` on a thread pool of its own. The fuzzers run side by side in
+/// one process; on rayon's shared pool, a scene build's own parallel work
+/// (the caustics' exit rays, the BVH) queued behind the other fuzzer's
+/// thousands of cases, and a triage build waited 12-25 s for a thread: over
+/// `SLOW`, so CI left a different glass scene out of each run.
+fn own_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new().build().expect("a thread pool").install(f)
+}
+
 /// Every mutation of every fuzzable scene with glass (`glass`) or without
 /// is parsed, validated and built: a scene or an error, never a panic.
 fn build_fuzzer(glass: bool) {
+    own_pool(|| build_fuzzer_here(glass))
+}
+
+fn build_fuzzer_here(glass: bool) {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
     // Panics are expected to be caught here; keep their messages quiet.
     std::panic::set_hook(Box::new(|_| {}));
@@ -223,6 +236,10 @@ const MIN_RENDERED: u64 = 100;
 
 #[test]
 fn mutated_scenes_that_load_render_finite() {
+    own_pool(render_fuzzer)
+}
+
+fn render_fuzzer() {
     // The same mutations on every scene made 8 x 6 pixels, taken in a fixed
     // shuffled order for `render_budget()` and until `MIN_RENDERED` of them
     // have rendered: every scene that loads renders

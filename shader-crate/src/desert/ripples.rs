@@ -5,8 +5,9 @@
 //! distance from the eye calls for, "not mipmapping, since every
 //! quadrilateral's texture differs"; or (`LOD_BLEND`) each point between
 //! the two levels around its own distance, which leaves no seam where
-//! neighbouring triangles take different levels. The shading normal is the dune's, tilted by the
-//! ripple's slope (Blinn's bump mapping, the paper's [17]).
+//! neighbouring triangles take different levels. The shading normal is the
+//! dune's, tilted by the ripple's slope (Blinn's bump mapping, the paper's
+//! [17]).
 
 use crate::glam::{Vec3, Vec4, Vec4Swizzles};
 use crate::types::{CommonParams, GpuTriangle};
@@ -224,14 +225,17 @@ mod tests {
             texel: 1.0 / 8.0,
             resolution: 8,
             levels: 3,
-            lod: 1,
+            lod: LOD_BLEND,
             ..Default::default()
         };
         // A pixel of 1e-3 rad: footprint `distance * 1e-3` m.
         let common =
             CommonParams { camera_up: Vec4::new(0.0, 0.5e-3 * 1000.0, 0.0, 0.0), height: 1000, ..Default::default() };
         let point = Vec3::new(0.37, 0.0, 0.61);
-        let triangle = GpuTriangle::default();
+        // A triangle centred on the point, so that the per-triangle choice
+        // would change level at the same distances.
+        let triangle =
+            GpuTriangle { v0: point.extend(1.0), v1: point.extend(1.0), v2: point.extend(1.0), ..Default::default() };
         let at = |distance: f32| {
             let eye = point + Vec3::new(0.0, 0.6, 0.8) * distance;
             rippled(&common, &[r], &normals, 1, &triangle, eye, point, Vec3::Y)

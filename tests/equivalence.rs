@@ -145,14 +145,7 @@ fn scenes() -> Vec<CheckedScene> {
         ("cloud_sea", Volumes, || sky("cloud_sea", 160, 120)),
         ("dunes, 32x32 cells, 60 steps", Desert, small_dunes),
         ("dunes, ripples blended between levels", Desert, || {
-            small_dunes()
-                .reconfigure(|f| {
-                    f.terrain
-                        .iter_mut()
-                        .filter_map(|t| t.ripples.as_mut())
-                        .for_each(|r| r.lod = slicelight::desert::RippleLod::Blend)
-                })
-                .unwrap()
+            small_dunes().reconfigure(|f| slicelight::desert::RippleLod::Blend.apply(f)).unwrap()
         }),
         ("barchans, piles on bare ground, 32x32 cells, 60 steps", Desert, small_barchans),
     ]

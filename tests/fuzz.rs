@@ -87,8 +87,8 @@ fn build(value: &Value, base: &Path) -> std::thread::Result<Result<(), String>> 
 }
 
 /// The shipped scenes the fuzzers mutate (those `keep` takes), each edited
-/// by `edit` first: those that build, in under `SLOW`, without a simulation (the others are
-/// named on stdout with why).
+/// by `edit` first: those that build, in under `SLOW`, without a
+/// simulation (the others are named on stdout with why).
 fn fuzzable_scenes(dir: &Path, edit: impl Fn(&mut Value), keep: impl Fn(&Value) -> bool) -> Vec<(PathBuf, Value)> {
     let mut paths: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
@@ -154,12 +154,12 @@ fn has_glass(v: &Value) -> bool {
 // and 16 s alone on 2 cores; 40 s as one test): the same cases.
 #[test]
 fn mutated_scene_files_with_glass_load_or_fail_with_an_error_never_a_panic() {
-    build_fuzzer(true);
+    own_pool(|| build_fuzzer(true));
 }
 
 #[test]
 fn mutated_scene_files_without_glass_load_or_fail_with_an_error_never_a_panic() {
-    build_fuzzer(false);
+    own_pool(|| build_fuzzer(false));
 }
 
 /// Runs `f` on a thread pool of its own. The fuzzers run side by side in
@@ -174,14 +174,10 @@ fn own_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// Every mutation of every fuzzable scene with glass (`glass`) or without
 /// is parsed, validated and built: a scene or an error, never a panic.
 fn build_fuzzer(glass: bool) {
-    own_pool(|| build_fuzzer_here(glass))
-}
-
-fn build_fuzzer_here(glass: bool) {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
     // Panics are expected to be caught here; keep their messages quiet.
     std::panic::set_hook(Box::new(|_| {}));
-    let scenes: Vec<_> = fuzzable_scenes(&dir, |_| {}, |v| has_glass(v) == glass);
+    let scenes = fuzzable_scenes(&dir, |_| {}, |v| has_glass(v) == glass);
     let cases: Vec<_> = scenes
         .iter()
         .flat_map(|(path, original)| mutations(original).into_iter().map(move |m| (path, original, m)))

@@ -77,7 +77,7 @@ impl Bvh {
     }
 }
 
-/// Nodes over which the two subtrees are built on two cores.
+/// Triangles under a node from which its two subtrees are built on two cores.
 const PARALLEL_ITEMS: usize = 8192;
 
 /// Appends the subtree over `items[first..end]` to `nodes` in depth-first
@@ -98,16 +98,15 @@ fn build_node(items: &mut [Item], first: usize, end: usize, depth: u32, parallel
             // from its own start), then appended with their links moved:
             // the same nodes as the serial order.
             let (left, right) = slice.split_at_mut(mid);
-            let subtree = |part: &mut [Item], first: usize, parallel: usize| {
+            let subtree = |part: &mut [Item]| {
                 let mut own = Vec::new();
                 build_node(part, 0, part.len(), depth + 1, parallel, &mut own);
-                (own, first)
+                own
             };
-            let ((l, l_first), (r, r_first)) =
-                rayon::join(|| subtree(left, first, parallel), || subtree(right, first + mid, parallel));
-            append(nodes, l, l_first);
+            let (l, r) = rayon::join(|| subtree(left), || subtree(right));
+            append(nodes, l, first);
             nodes[index].right = nodes.len() as u32;
-            append(nodes, r, r_first);
+            append(nodes, r, first + mid);
         }
         Some(mid) => {
             build_node(items, first, first + mid, depth + 1, parallel, nodes);

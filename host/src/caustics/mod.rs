@@ -342,6 +342,8 @@ fn exit_rays(scene: &SceneData, channels: u32) -> Vec<(Vec3, Vec3)> {
     let glass = Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
     let stride = (scene.glass_vertices.len() / 4096).max(1);
     let vertices: Vec<_> = scene.glass_vertices.iter().step_by(stride).collect();
+    // The channels traced: red and blue through dispersive glass, else one.
+    let traced = if channels == 3 { [0, 2] } else { [0, 0] };
     let mut out = Vec::new();
     for light in &scene.lights {
         let rays: Vec<Vec<(Vec3, Vec3)>> = vertices
@@ -351,8 +353,7 @@ fn exit_rays(scene: &SceneData, channels: u32) -> Vec<(Vec3, Vec3)> {
                 if !lit {
                     return Vec::new();
                 }
-                let channels = if channels == 3 { [0, 2] } else { [0, 0] };
-                channels
+                traced
                     .into_iter()
                     .filter_map(|c| {
                         let path = trace_through(

@@ -152,24 +152,11 @@ pub fn run(scenes: &[BenchScene], opts: &Options) -> Result<Vec<Row>> {
                     "skylight-spacing" => finest
                         .reconfigure(move |f| {
                             f.sky.iter_mut().for_each(|s| s.sky_light_spacing = n);
-                            f.terrain
-                                .iter_mut()
-                                .filter_map(|t| t.ripples.as_mut())
-                                .for_each(|r| r.lod = super::RippleLod::Full)
+                            super::RippleLod::Full.apply(f)
                         })
                         .with_context(|| format!("desert bench: sky_light_spacing {n}"))?,
-                    "mesh-ripples-blend" => finest.reconfigure(move |f| {
-                        f.terrain
-                            .iter_mut()
-                            .filter_map(|t| t.ripples.as_mut())
-                            .for_each(|r| r.lod = super::RippleLod::Blend)
-                    })?,
-                    _ => finest.reconfigure(move |f| {
-                        f.terrain
-                            .iter_mut()
-                            .filter_map(|t| t.ripples.as_mut())
-                            .for_each(|r| r.lod = super::RippleLod::Full)
-                    })?,
+                    "mesh-ripples-blend" => finest.reconfigure(move |f| super::RippleLod::Blend.apply(f))?,
+                    _ => finest.reconfigure(move |f| super::RippleLod::Full.apply(f))?,
                 };
                 let timed = time_renders(&d, backend, repeats, &[])?;
                 let img = &timed.last.image;

@@ -135,6 +135,12 @@ impl<'de> serde::Deserialize<'de> for RippleLod {
 }
 
 impl RippleLod {
+    /// Sets every terrain's ripples in `file` to this level of detail (a
+    /// `SceneData::reconfigure` edit).
+    pub fn apply(self, file: &mut crate::scene::SceneFile) {
+        file.terrain.iter_mut().filter_map(|t| t.ripples.as_mut()).for_each(|r| r.lod = self);
+    }
+
     /// `RippleRecord::lod`'s value.
     fn code(self) -> u32 {
         use slicelight_shaders::desert::ripples::{LOD_BLEND, LOD_FULL, LOD_TRIANGLE};

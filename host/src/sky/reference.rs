@@ -397,8 +397,13 @@ pub fn sky_light_grid(p: &SkyParams) -> Vec<(DVec3, DVec3)> {
 /// 72x48 ran on one core).
 pub fn prepare(data: &crate::scene::SceneData) {
     if data.sky.enabled && data.sky.light {
-        data.sky.reference_grid.get_or_init(|| sky_light_grid(&data.sky.params));
+        grid(data);
     }
+}
+
+/// The scene's skylight grid, computed the first time it is asked for.
+fn grid(data: &crate::scene::SceneData) -> &[(DVec3, DVec3)] {
+    data.sky.reference_grid.get_or_init(|| sky_light_grid(&data.sky.params))
 }
 
 /// The sky's light reflected by a diffuse surface of `albedo` at `point`
@@ -409,7 +414,7 @@ pub fn sky_light(data: &crate::scene::SceneData, point: DVec3, normal: DVec3, al
     if !data.sky.enabled || !data.sky.light {
         return DVec3::ZERO;
     }
-    let grid = data.sky.reference_grid.get_or_init(|| sky_light_grid(&data.sky.params));
+    let grid = grid(data);
     let scale = point.abs().max_element().max(1.0);
     let solid_angle = 4.0 * std::f64::consts::PI / grid.len() as f64;
     let mut e = DVec3::ZERO;

@@ -4,7 +4,7 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use glam::Vec4;
-use image::{ImageFormat, Rgb32FImage, RgbImage};
+use image::{ImageFormat, RgbImage};
 use std::io::Write;
 use std::path::Path;
 
@@ -88,13 +88,7 @@ pub fn encode(
     let mut bytes = std::io::Cursor::new(Vec::new());
     match format {
         Format::Png => tone_map(pixels, width, height, exposure).write_to(&mut bytes, ImageFormat::Png)?,
-        Format::Exr => {
-            let img = Rgb32FImage::from_fn(width, height, |x, y| {
-                let p = pixels[(y * width + x) as usize];
-                image::Rgb([p.x, p.y, p.z])
-            });
-            img.write_to(&mut bytes, ImageFormat::OpenExr)?
-        }
+        Format::Exr => return layered_exr(pixels, &[], width, height),
     }
     Ok(bytes.into_inner())
 }
@@ -248,21 +242,31 @@ pub fn write_all(files: &[(&Path, &[u8])]) -> Result<()> {
 }
 
 fn layered_exr(pixels: &[Vec4], layers: &[(&str, &[Vec4])], width: u32, height: u32) -> Result<Vec<u8>> {
-    use exr::prelude::*;
-    let channel = |name: String, img: &[Vec4], c: usize| {
-        AnyChannel::new(name.as_str(), FlatSamples::F32(img.iter().map(|p| p[c]).collect()))
-    };
-    let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    let channel = |img: &[Vec4], c: usize| img.iter().map(|p| p[c]).collect::<Vec<f32>>();
+    let mut channels = Vec::new();
     for (c, name) in ["R", "G", "B"].iter().enumerate() {
-        channels.push(channel(name.to_string(), pixels, c));
+        channels.push((name.to_string(), channel(pixels, c)));
         for (layer, img) in layers {
-            channels.push(channel(format!("{layer}.{name}"), img, c));
+            channels.push((format!("{layer}.{name}"), channel(img, c)));
         }
     }
+    exr_bytes(width, height, channels)
+}
+
+/// An EXR file of `channels` (a name and `width x height` values each, rows
+/// from the top): RLE-compressed tiles of 64x64, written in increasing
+/// order, so the same pixels give the same bytes on every run. (The
+/// encoder's default order is "unspecified": its parallel compression then
+/// wrote the tiles in the order they finished, and the same terrain came
+/// out as different files on four runs in six.)
+pub fn exr_bytes(width: u32, height: u32, channels: Vec<(String, Vec<f32>)>) -> Result<Vec<u8>> {
+    use exr::prelude::*;
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> =
+        channels.into_iter().map(|(name, values)| AnyChannel::new(name.as_str(), FlatSamples::F32(values))).collect();
     let layer = Layer::new(
         (width as usize, height as usize),
         LayerAttributes::named("slicelight"),
-        Encoding::FAST_LOSSLESS,
+        Encoding { line_order: LineOrder::Increasing, ..Encoding::FAST_LOSSLESS },
         AnyChannels::sort(channels),
     );
     let mut bytes = std::io::Cursor::new(Vec::new());
@@ -384,5 +388,21 @@ mod write_tests {
         let other = dir.path().join("b.exr");
         write_all(&[(ok.as_path(), b"new"), (other.as_path(), b"two")]).unwrap();
         assert_eq!((std::fs::read(&ok).unwrap(), std::fs::read(&other).unwrap()), (b"new".to_vec(), b"two".to_vec()));
+    }
+
+    #[test]
+    fn the_same_pixels_give_the_same_exr_bytes() {
+        // 64 tiles of varied content (RLE's work differs from tile to tile,
+        // so a parallel encoder finishes them out of order), written 8
+        // times; and read back as written.
+        let (w, h) = (512u32, 512u32);
+        let values: Vec<f32> = (0..w * h).map(|i| ((i * 2_654_435_761) >> 20) as f32 * (i % 7) as f32).collect();
+        let channels = || ["R", "G", "B"].map(|c| (c.to_string(), values.clone())).to_vec();
+        let first = exr_bytes(w, h, channels()).unwrap();
+        for run in 1..8 {
+            assert!(exr_bytes(w, h, channels()).unwrap() == first, "run {run} wrote other bytes");
+        }
+        let back = image::load_from_memory(&first).unwrap().to_rgb32f();
+        assert!(back.pixels().zip(&values).all(|(p, &v)| p.0 == [v; 3]));
     }
 }

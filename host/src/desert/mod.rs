@@ -613,23 +613,24 @@ pub fn write_fields(setup: &Setup, path: &Path) -> Result<Vec<(PathBuf, String)>
             let ext = path.extension().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
             path.with_file_name(format!("{stem}_{t}.{ext}"))
         };
-        let mut bytes = std::io::Cursor::new(Vec::new());
         let periodic = if f.periodic { ", periodic = true" } else { "" };
-        let (image, note) = if png {
+        let encoded = if png {
             let top = f.heights.iter().fold(0.0f32, |m, &h| m.max(h));
             let scale = if top > 0.0 { top } else { 1.0 };
             let grey: Vec<u16> =
                 f.heights.iter().map(|&h| (h.max(0.0) / scale * 65535.0).round().min(65535.0) as u16).collect();
             let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(f.nx, f.nz, grey).expect("nx * nz values");
-            (image::DynamicImage::ImageLuma16(img), format!(" (heights = {{ file, scale = {scale}{periodic} }})"))
+            let mut bytes = std::io::Cursor::new(Vec::new());
+            image::DynamicImage::ImageLuma16(img)
+                .write_to(&mut bytes, image::ImageFormat::Png)
+                .map(|()| (bytes.into_inner(), format!(" (heights = {{ file, scale = {scale}{periodic} }})")))
+                .map_err(|e| anyhow!("{e}"))
         } else {
-            let pixels: Vec<f32> = f.heights.iter().flat_map(|&h| [h, h, h]).collect();
-            let img = image::Rgb32FImage::from_raw(f.nx, f.nz, pixels).expect("nx * nz * 3 values");
-            (image::DynamicImage::ImageRgb32F(img), format!(" (heights = {{ file{periodic} }})"))
+            let rgb = ["R", "G", "B"].map(|c| (c.to_string(), f.heights.clone())).to_vec();
+            crate::output::exr_bytes(f.nx, f.nz, rgb).map(|b| (b, format!(" (heights = {{ file{periodic} }})")))
         };
-        let format = if png { image::ImageFormat::Png } else { image::ImageFormat::OpenExr };
-        image.write_to(&mut bytes, format).map_err(|e| anyhow!("{}: cannot encode the heights: {e}", out.display()))?;
-        crate::output::write_atomically(&out, bytes.get_ref())?;
+        let (bytes, note) = encoded.map_err(|e| anyhow!("{}: cannot encode the heights: {e}", out.display()))?;
+        crate::output::write_atomically(&out, &bytes)?;
         written.push((out, note));
     }
     Ok(written)

@@ -82,7 +82,18 @@ pub fn hash(mut x: u32) -> u32 {
 
 /// The random 32 bits of `(cell, step, seed, stream)`.
 pub fn random(cell: u32, step: u32, seed: u32, stream: u32) -> u32 {
-    hash(cell ^ hash(step ^ hash(seed ^ hash(stream))))
+    keyed(cell, stream_key(step, seed, stream))
+}
+
+/// The part of `random` that does not depend on the cell: a loop over
+/// cells computes it once (`keyed`), three hashes fewer per number.
+pub fn stream_key(step: u32, seed: u32, stream: u32) -> u32 {
+    hash(step ^ hash(seed ^ hash(stream)))
+}
+
+/// `random(cell, step, seed, stream)` from its `stream_key(step, seed, stream)`.
+pub fn keyed(cell: u32, key: u32) -> u32 {
+    hash(cell ^ key)
 }
 
 /// The wind's whole-cell shift at `step` for `v` (1/256 cells per step):

@@ -236,6 +236,21 @@ fn exr(w: u32, h: u32, value: impl Fn(u32, u32) -> f32) -> Vec<u8> {
     bytes.into_inner()
 }
 
+/// Ripple lattices as fine as the format allows (2048 texels on a 16 m
+/// tile) load: the jump's growth is per slab, and a fine lattice has thin
+/// slabs (its growth per metre was once held below 1000, which 512
+/// texels and up on 16 m passed).
+#[test]
+fn the_finest_ripple_lattice_loads() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.toml");
+    let ripples = "ripples = { size = 16.0, cells = 2048, steps = 1 }";
+    let text = terrain_scene("procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }", ripples);
+    std::fs::write(&path, text).unwrap();
+    let data = slicelight::scene::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+    assert_eq!(data.desert.ripple_records.len(), 1);
+}
+
 #[test]
 fn bad_terrains_name_the_field() {
     let nan = exr(4, 4, |x, y| if (x, y) == (2, 1) { f32::NAN } else { 1.0 });
@@ -281,6 +296,18 @@ fn bad_terrains_name_the_field() {
             "terrain[0].dunes.deposit[0]: expected a probability",
         ),
         ("dunes = { cells = [32, 16], steps = 1 }", "", &[], "terrain[0].dunes.cells: expected square cells"),
+        (
+            "dunes = { cells = [32, 32], steps = 1, slab = 0.1, jump_growth = 2561.0 }",
+            "",
+            &[],
+            "terrain[0].dunes.jump_growth: expected cells per metre in [0, 2560] (256 cells per slab of 0.1 m)",
+        ),
+        (
+            "procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }",
+            "ripples = { size = 4.0, jump_growth = 300.0 }",
+            &[],
+            "terrain[0].ripples.jump_growth: expected texels per slab in [0, 256]",
+        ),
         (
             "procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }",
             "heights = { file = \"h.exr\" }",

@@ -259,8 +259,14 @@ pub fn configure(field: &str, s: &Settings, min: [f32; 2], size: [f32; 2], time:
         bail!(invalid(&f("jump"), &format!("a length in [0, {MAX_JUMP}] cells"), jump));
     }
     let growth = s.jump_growth.unwrap_or(0.0);
-    if !(growth.is_finite() && (0.0..=1000.0).contains(&growth)) {
-        bail!(invalid(&f("jump_growth"), "cells per metre in [0, 1000]", growth));
+    // The kernel's growth is fixed-point cells per slab, at most 256: the
+    // bound scales with the slab (fine ripple lattices have thin slabs).
+    if !(growth.is_finite() && growth >= 0.0 && growth * slab <= 256.0) {
+        bail!(invalid(
+            &f("jump_growth"),
+            &format!("cells per metre in [0, {}] (256 cells per slab of {slab} m)", 256.0 / slab),
+            growth
+        ));
     }
     let hops = s.hops.unwrap_or(3);
     if !(1..=8).contains(&hops) {

@@ -376,6 +376,10 @@ fn ripple_texture(
     if !(strength.is_finite() && (0.0..=100.0).contains(&strength)) {
         bail!(invalid(&format!("{field}.strength"), "a factor in [0, 100]", strength));
     }
+    let growth = r.jump_growth.unwrap_or(1.0);
+    if !(growth.is_finite() && (0.0..=256.0).contains(&growth)) {
+        bail!(invalid(&format!("{field}.jump_growth"), "texels per slab in [0, 256]", growth));
+    }
     let dx = size / n as f32;
     let settings = dunes::Settings {
         cells: [n, n],
@@ -389,7 +393,7 @@ fn ripple_texture(
         threshold_speed: None,
         erosion: None,
         jump: Some(1.0),
-        jump_growth: Some(r.jump_growth.unwrap_or(1.0) / (dx * 0.02)),
+        jump_growth: Some(growth / (dx * 0.02)),
         hops: Some(1),
         deposit: None,
         repose_deg: None,

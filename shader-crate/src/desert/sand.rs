@@ -377,18 +377,24 @@ impl ShadowRow {
         let drop = p.shadow_drop as i64;
         let g: Vec<i64> =
             row[nx - reach..].iter().chain(row).enumerate().map(|(j, c)| 256 * c.x as i64 + j as i64 * drop).collect();
-        let mut prefix = g.clone();
         let mut suffix = g.clone();
         for block in (0..len).step_by(reach) {
-            let end = (block + reach).min(len);
-            for j in block + 1..end {
-                prefix[j] = prefix[j].max(prefix[j - 1]);
-            }
-            for j in (block..end - 1).rev() {
+            for j in (block..(block + reach).min(len) - 1).rev() {
                 suffix[j] = suffix[j].max(suffix[j + 1]);
             }
         }
-        Self::Mask((0..nx).map(|x| suffix[x].max(prefix[x + reach - 1]) > g[x + reach]).collect())
+        // The prefix maxima as the windows' last position `x + reach - 1`
+        // moves right, starting again at each block's first position.
+        let mut prefix = g[..reach - 1].iter().fold(i64::MIN, |m, &v| m.max(v));
+        let mut in_block = reach - 1;
+        let mut mask = Vec::with_capacity(nx);
+        for x in 0..nx {
+            let last = g[x + reach - 1];
+            prefix = if in_block == 0 { last } else { prefix.max(last) };
+            in_block = if in_block + 1 == reach { 0 } else { in_block + 1 };
+            mask.push(suffix[x].max(prefix) > g[x + reach]);
+        }
+        Self::Mask(mask)
     }
 }
 
@@ -646,10 +652,20 @@ pub fn relax_rows(z0: u32, step: u32, p: &SandParams, state: &[UVec2], rule: Rel
             out_row.copy_from_slice(mid);
             continue;
         }
-        for (x, c) in out_row.iter_mut().enumerate() {
-            let xp = if x + 1 == nx { 0 } else { x + 1 };
-            let xm = if x == 0 { nx - 1 } else { x - 1 };
-            *c = received(mid[x], [mid[xp].y, mid[xm].y, up[x].y, down[x].y]);
+        // The row's two ends wrap; inside, each cell's row neighbours are
+        // the window of three around it.
+        let at = |x: usize, xp: usize, xm: usize| received(mid[x], [mid[xp].y, mid[xm].y, up[x].y, down[x].y]);
+        if nx < 3 {
+            for (x, c) in out_row.iter_mut().enumerate() {
+                *c = at(x, (x + 1) % nx, (x + nx - 1) % nx);
+            }
+            continue;
+        }
+        out_row[0] = at(0, 1, nx - 1);
+        out_row[nx - 1] = at(nx - 1, 0, nx - 2);
+        let inside = out_row[1..nx - 1].iter_mut().zip(mid.windows(3)).zip(up[1..].iter().zip(&down[1..]));
+        for ((c, w), (u, d)) in inside {
+            *c = received(w[1], [w[2].y, w[0].y, u.y, d.y]);
         }
     }
 }

@@ -239,7 +239,7 @@ fn exr(w: u32, h: u32, value: impl Fn(u32, u32) -> f32) -> Vec<u8> {
 /// Ripple lattices as fine as the format allows (2048 texels on a 16 m
 /// tile) load: the jump's growth is per slab, and a fine lattice has thin
 /// slabs (its growth per metre was once held below 1000, which 512
-/// texels and up on 16 m passed).
+/// texels and up on 16 m exceed).
 #[test]
 fn the_finest_ripple_lattice_loads() {
     let dir = tempfile::tempdir().unwrap();

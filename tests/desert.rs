@@ -236,19 +236,21 @@ fn exr(w: u32, h: u32, value: impl Fn(u32, u32) -> f32) -> Vec<u8> {
     bytes.into_inner()
 }
 
-/// Ripple lattices as fine as the format allows (2048 texels on a 16 m
+/// Ripples with the documented defaults (`size = 4`, `cells = 256`: texels
+/// of 1/64 m) and as fine as the format allows (2048 texels on a 16 m
 /// tile) load: the jump's growth is per slab, and a fine lattice has thin
-/// slabs (its growth per metre was once held below 1000, which 512
-/// texels and up on 16 m exceed).
+/// slabs. Its growth per metre was once held below 1000, which both
+/// exceed (3200 and 6400): `ripples = {}` failed.
 #[test]
-fn the_finest_ripple_lattice_loads() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("scene.toml");
-    let ripples = "ripples = { size = 16.0, cells = 2048, steps = 1 }";
-    let text = terrain_scene("procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }", ripples);
-    std::fs::write(&path, text).unwrap();
-    let data = slicelight::scene::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
-    assert_eq!(data.desert.ripple_records.len(), 1);
+fn ripples_load_at_the_defaults_and_the_finest_lattice() {
+    for ripples in ["ripples = { steps = 1 }", "ripples = { size = 16.0, cells = 2048, steps = 1 }"] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.toml");
+        let text = terrain_scene("procedural = { cells = [8, 8], amplitude = 1.0, wavelength = 4.0 }", ripples);
+        std::fs::write(&path, text).unwrap();
+        let data = slicelight::scene::load(&path).unwrap_or_else(|e| panic!("{ripples}: {e:#}"));
+        assert_eq!(data.desert.ripple_records.len(), 1, "{ripples}");
+    }
 }
 
 #[test]

@@ -66,6 +66,24 @@ fn assert_rejected(run: &Run, needles: &[&str]) {
     }
 }
 
+/// A scene whose every pass is skipped (a spotlight in clear air reaching
+/// nothing) renders black at its size, with the warning that says why. It
+/// panicked (no pass drew a layer, and the image had no pixels) until
+/// 2026-12-07.
+#[test]
+fn a_scene_with_nothing_to_draw_renders_black() {
+    let scene = GOOD.split("[medium]").next().unwrap().to_string()
+        + "[[spotlight]]\nposition = [0.0, 3.0, 0.0]\ndirection = [0.0, -1.0, 0.0]\ncutoff_deg = 40.0\nintensity = [10.0, 10.0, 10.0]\n";
+    let run = render(&scene);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(run.stderr.contains("reaches nothing"), "{}", run.stderr);
+    let png = image::open(run.out("out.png")).unwrap().to_rgb8();
+    assert_eq!((png.width(), png.height()), (48, 32));
+    assert!(png.pixels().all(|p| p.0 == [0, 0, 0]));
+    let exr = image::open(run.out("out.exr")).unwrap().to_rgb32f();
+    assert_eq!((exr.width(), exr.height()), (48, 32));
+}
+
 #[test]
 fn good_scene_writes_png_exr_and_stats() {
     let run = render(GOOD);

@@ -614,7 +614,7 @@ impl Work<'_> {
             let layer = self.result.remove(pass.radiance_layer().expect("a layer")).expect("inserted above");
             named.push((pass.name(), layer));
         }
-        let image = mean_image(&mut named, self.samples.len() as u32);
+        let image = mean_image(&mut named, self.samples.len() as u32, pixels);
         let stats = RenderStats {
             backend: backend.name(),
             device: backend.device(),
@@ -632,13 +632,14 @@ impl Work<'_> {
 }
 
 /// Turns per-layer sums over `samples` sub-pixel samples into their means
-/// (in place, alpha cleared) and returns the image: the sum of the layers
-/// (the box filter over the samples). A render's own last step, and the
-/// viewer's, so that a view accumulated sample by sample is the same image,
-/// bit for bit, as a render of all its samples at once.
-pub fn mean_image(layers: &mut [(&'static str, Buffer)], samples: u32) -> Vec<Vec4> {
+/// (in place, alpha cleared) and returns the image of `pixels` pixels: the
+/// sum of the layers (the box filter over the samples; black where no
+/// pass draws, as in a scene whose every pass is skipped). A render's own
+/// last step, and the viewer's, so that a view accumulated sample by
+/// sample is the same image, bit for bit, as a render of all its samples
+/// at once.
+pub fn mean_image(layers: &mut [(&'static str, Buffer)], samples: u32, pixels: usize) -> Vec<Vec4> {
     let inv = 1.0 / samples.max(1) as f32;
-    let pixels = layers.first().map_or(0, |(_, b)| b.as_slice::<Vec4>().len());
     for (_, layer) in layers.iter_mut() {
         layer.as_mut_slice::<Vec4>().par_chunks_mut(PIXEL_CHUNK).for_each(|chunk| {
             for s in chunk {

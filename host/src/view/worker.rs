@@ -220,7 +220,7 @@ pub fn build(base: &SceneData, view: &ViewState) -> Result<SceneData> {
 /// arithmetic as a render's: `render::mean_image`).
 fn mean(acc: &Accumulation) -> (Vec<Vec4>, Vec<(&'static str, Buffer)>) {
     let mut layers = acc.sums.clone();
-    (render::mean_image(&mut layers, acc.taken), layers)
+    (render::mean_image(&mut layers, acc.taken, acc.data.pixel_count() as usize), layers)
 }
 
 /// Writes the current image to `paths` (PNG tone-mapped, EXR linear with a

@@ -80,16 +80,12 @@ pub fn encode(
     height: u32,
     exposure: f32,
 ) -> Result<Vec<u8>> {
-    if format_of(path)? == Format::Exr && !layers.is_empty() {
+    if format_of(path)? == Format::Exr {
         return layered_exr(pixels, layers, width, height)
             .with_context(|| format!("{}: cannot encode", path.display()));
     }
-    let format = format_of(path)?;
     let mut bytes = std::io::Cursor::new(Vec::new());
-    match format {
-        Format::Png => tone_map(pixels, width, height, exposure).write_to(&mut bytes, ImageFormat::Png)?,
-        Format::Exr => return layered_exr(pixels, &[], width, height),
-    }
+    tone_map(pixels, width, height, exposure).write_to(&mut bytes, ImageFormat::Png)?;
     Ok(bytes.into_inner())
 }
 

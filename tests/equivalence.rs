@@ -579,7 +579,7 @@ fn add_an_ulp(f: &mut slicelight::smoke::Fluid, step: u32) {
     for (k, field) in [&mut f.u, &mut f.v, &mut f.w, &mut f.temperature, &mut f.smoke].into_iter().enumerate() {
         for (i, x) in field.iter_mut().enumerate() {
             if *x != 0.0 && x.is_finite() {
-                let up = slicelight::shaders::volumes::automaton::random(i as u32, step, k as u32, 3) & 1 == 0;
+                let up = slicelight::shaders::random::random(i as u32, step, k as u32, 3) & 1 == 0;
                 *x = f32::from_bits(if up { x.to_bits() + 1 } else { x.to_bits() - 1 });
             }
         }

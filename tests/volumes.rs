@@ -619,7 +619,8 @@ fn automaton_is_deterministic() {
 /// wind of one cell a step shifting the result along x.
 #[test]
 fn automaton_step_follows_the_growth_rules() {
-    use slicelight::shaders::volumes::automaton::{automaton_cell, random, ACT, CLD, HUM};
+    use slicelight::shaders::random::random;
+    use slicelight::shaders::volumes::automaton::{automaton_cell, ACT, CLD, HUM};
     let data = automaton_scene("cells = [12, 7, 9], steps = 1, ellipsoids = []");
     let mut p = data.volumes.automaton.params;
     let zero = vec![glam::UVec4::ZERO; p.cells as usize];

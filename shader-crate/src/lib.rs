@@ -40,6 +40,7 @@ pub mod glass;
 pub mod light;
 pub mod optics;
 pub mod phase;
+pub mod random;
 pub mod scatter;
 pub mod types;
 

@@ -569,7 +569,7 @@ fn procedural(field: &str, p: &Procedural) -> Result<Field> {
     if !(1..=12).contains(&p.octaves) {
         bail!(invalid(&format!("{field}.octaves"), "1 to 12 octaves", p.octaves));
     }
-    use slicelight_shaders::volumes::automaton::random;
+    use slicelight_shaders::random::random;
     let lattice = |o: u32, i: i64, k: i64| {
         let cell = (i as u32).wrapping_mul(0x9e37_79b9) ^ (k as u32);
         random(cell, o, p.seed, 300) as f32 / u32::MAX as f32

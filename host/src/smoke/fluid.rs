@@ -5,8 +5,8 @@
 
 use glam::{UVec3, Vec3};
 use indicatif::ProgressBar;
+use slicelight_shaders::random::random;
 use slicelight_shaders::smoke::*;
-use slicelight_shaders::volumes::automaton::random;
 
 use crate::cpu::{for_each_invocation, for_each_invocation2};
 

@@ -38,11 +38,11 @@
 //!    phase would do, but then each receiver recomputes its four
 //!    neighbours' choices (20 reads) where it now reads four numbers.
 //!
-//! Random numbers: the counter-based hash of (cell, step, seed, stream) the
-//! cloud automaton uses; probabilities are thresholds on its 32 bits.
+//! Random numbers: the counter-based hash of (cell, step, seed, stream)
+//! (`crate::random`); probabilities are thresholds on its 32 bits.
 
 use crate::glam::{UVec2, UVec3};
-use crate::volumes::automaton::{keyed, random, stream_key};
+use crate::random::{keyed, random, stream_key};
 use spirv_std::spirv;
 
 /// The automaton's parameter block (the host fills it from the scene's
@@ -502,10 +502,15 @@ fn relax_choice(p: &SandParams, state: &[UVec2], x: u32, z: u32, step: u32, rule
         return 0;
     }
     let index = z * p.nx + x;
-    let n = neighbours(p, x, z);
-    let heights = [state[n[0] as usize].x, state[n[1] as usize].x, state[n[2] as usize].x, state[n[3] as usize].x];
-    let best = steepest(state[index as usize].x, heights, rule.threshold);
+    let best = steepest(state[index as usize].x, neighbour_heights(p, state, x, z), rule.threshold);
     sends(index, best, rule, &StepKeys { step, seed: p.seed })
+}
+
+/// The heights of the 4-neighbours of `(x, z)` (`neighbours`' order).
+#[inline(always)]
+fn neighbour_heights(p: &SandParams, state: &[UVec2], x: u32, z: u32) -> [u32; 4] {
+    let n = neighbours(p, x, z);
+    [state[n[0] as usize].x, state[n[1] as usize].x, state[n[2] as usize].x, state[n[3] as usize].x]
 }
 
 /// Phase 3a, a round's choice: cell `index` with `y` the direction it
@@ -602,13 +607,16 @@ pub fn relax_rows(z0: u32, step: u32, p: &SandParams, state: &[UVec2], rule: Rel
     // it and its two neighbour rows, none of its cells sends (avalanches
     // on ripples: most rows). Not for creep, whose threshold of one slab
     // next to no row clears.
-    let rows = if rule.probability == u32::MAX { out.len() / nx } else { 0 };
-    let extent: Vec<(u32, u32)> = (0..rows as i32 + 4)
-        .map(|r| {
-            let row = row_of(wrap(z0 as i32 + r - 2, p.nz));
-            row.iter().fold((u32::MAX, 0), |(lo, hi), c| (lo.min(c.x), hi.max(c.x)))
-        })
-        .collect();
+    let extent: Vec<(u32, u32)> = if rule.probability == u32::MAX {
+        (0..(out.len() / nx) as i32 + 4)
+            .map(|r| {
+                let row = row_of(wrap(z0 as i32 + r - 2, p.nz));
+                row.iter().fold((u32::MAX, 0), |(lo, hi), c| (lo.min(c.x), hi.max(c.x)))
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     // Row `z0 + z` (z from -1) chosen into its slot.
     let choose = |ring: &mut [UVec2], sending: &mut [bool; 3], z: i32| {
         let gz = wrap(z0 as i32 + z, p.nz);
@@ -619,11 +627,11 @@ pub fn relax_rows(z0: u32, step: u32, p: &SandParams, state: &[UVec2], rule: Rel
             *c = UVec2::new(s.x, 0);
         }
         let r = (z + 2) as usize;
-        let flat = |r: usize| {
+        let flat = || {
             let lowest = extent[r - 1].0.min(extent[r].0).min(extent[r + 1].0);
             extent[r].1 <= lowest.saturating_add(rule.threshold)
         };
-        if rows > 0 && flat(r) {
+        if !extent.is_empty() && flat() {
             sending[((z + 1) % 3) as usize] = false;
             return;
         }
@@ -631,8 +639,7 @@ pub fn relax_rows(z0: u32, step: u32, p: &SandParams, state: &[UVec2], rule: Rel
         for x in (first..nx).step_by(2) {
             let index = gz * p.nx + x as u32;
             let heights = if x == 0 || x + 1 == nx {
-                let n = neighbours(p, x as u32, gz);
-                [state[n[0] as usize].x, state[n[1] as usize].x, state[n[2] as usize].x, state[n[3] as usize].x]
+                neighbour_heights(p, state, x as u32, gz)
             } else {
                 [row[x + 1].x, row[x - 1].x, up[x].x, down[x].x]
             };

@@ -24,12 +24,12 @@
 //!
 //! Every function here is one invocation's work: one face, one cell, one
 //! coarse cell. Random numbers come from the counter-based hash of
-//! (element, step, seed, stream) the cloud automaton uses, so both backends
-//! draw the same ones. Units: metres, seconds, kelvin; positions inside the
+//! (element, step, seed, stream) (`crate::random`), so both backends draw
+//! the same ones. Units: metres, seconds, kelvin; positions inside the
 //! grid in cells (`x / h` from the box's lower corner).
 
 use crate::glam::{UVec3, Vec3};
-use crate::volumes::automaton::random;
+use crate::random::random;
 
 pub mod kernels;
 

@@ -297,12 +297,30 @@ impl Shade for Scan {
 #[inline(always)]
 fn saltation_offset_at<K: Keys, S: Shade>(x: u32, z: u32, keys: &K, shade: &S, p: &SandParams, state: &[UVec2]) -> u32 {
     let index = z * p.nx + x;
-    let (x, z) = (x as i32, z as i32);
-    let own = state[index as usize].x;
-    if own == 0 || keyed(index, keys.key(STREAM_ERODE)) >= p.erode || shade.shadowed(p, state, x, z) {
+    if !erodes(index, state[index as usize].x, keys, p) {
         return 0;
     }
-    let l = jump_length(p, own);
+    jump_from(x, z, keys, shade, p, state)
+}
+
+/// Whether a cell `own` slabs high draws a slab to erode (`erode / 2^32`);
+/// both tests made, no branch (a row's loop compacts the sources with it).
+#[inline(always)]
+fn erodes<K: Keys>(index: u32, own: u32, keys: &K, p: &SandParams) -> bool {
+    (own != 0) & (keyed(index, keys.key(STREAM_ERODE)) < p.erode)
+}
+
+/// The offset downwind where the slab of an eroding cell `(x, z)` lands
+/// (0: none, the cell is in the wind shadow or the jump goes around the
+/// lattice onto itself).
+#[inline(always)]
+fn jump_from<K: Keys, S: Shade>(x: u32, z: u32, keys: &K, shade: &S, p: &SandParams, state: &[UVec2]) -> u32 {
+    let index = z * p.nx + x;
+    let (x, z) = (x as i32, z as i32);
+    if shade.shadowed(p, state, x, z) {
+        return 0;
+    }
+    let l = jump_length(p, state[index as usize].x);
     let mut d = 0;
     let mut hop = 0;
     loop {
@@ -318,8 +336,9 @@ fn saltation_offset_at<K: Keys, S: Shade>(x: u32, z: u32, keys: &K, shade: &S, p
             break;
         }
     }
-    // A jump around the whole lattice back onto itself moves nothing.
-    if d % p.nx == 0 {
+    // A jump around the whole lattice back onto itself moves nothing
+    // (`wrap`: no division).
+    if wrap(d as i32, p.nx) == 0 {
         0
     } else {
         d
@@ -441,12 +460,25 @@ pub fn saltation_row(z: u32, step: u32, p: &SandParams, state: &[UVec2], row: &m
     }
     let keys = SaltationKeys::new(step, p.seed);
     let shade = ShadowRow::new(p, state, z);
-    for x in 0..p.nx {
-        let d = saltation_offset_at(x, z, &keys, &shade, p, state);
-        if d != 0 {
-            // A source holds a slab (`own > 0`): no wrap below zero.
-            row[x as usize].x -= 1;
-            row[((x + d) % p.nx) as usize].x += 1;
+    // The sources first, a block of the row at a time, by a loop with no
+    // branch (whether a cell erodes is a coin toss, which a branch
+    // mispredicts), then each source's jump.
+    const BLOCK: u32 = 256;
+    let mut sources = [0u32; BLOCK as usize];
+    for x0 in (0..p.nx).step_by(BLOCK as usize) {
+        let mut n = 0;
+        for x in x0..(x0 + BLOCK).min(p.nx) {
+            sources[n] = x;
+            let index = z * p.nx + x;
+            n += erodes(index, state[index as usize].x, &keys, p) as usize;
+        }
+        for &x in &sources[..n] {
+            let d = jump_from(x, z, &keys, &shade, p, state);
+            if d != 0 {
+                // A source holds a slab (`own > 0`): no wrap below zero.
+                row[x as usize].x -= 1;
+                row[wrap((x + d) as i32, p.nx) as usize].x += 1;
+            }
         }
     }
 }
@@ -487,10 +519,18 @@ fn steepest(h: u32, n: [u32; 4], threshold: u32) -> u32 {
 /// and the cell's random number (`keys`: the step's) says no.
 #[inline(always)]
 fn sends<K: Keys>(index: u32, best: u32, rule: Relax, keys: &K) -> u32 {
-    if best != 0 && rule.probability != u32::MAX && keyed(index, keys.key(rule.stream)) >= rule.probability {
-        return 0;
+    if rule.probability == u32::MAX {
+        return best;
     }
-    best
+    // The draw made whether or not there is a drop, and the answer
+    // selected: on creep whether a cell has a drop is a coin toss, which a
+    // CPU's branch mispredicted.
+    let stays = keyed(index, keys.key(rule.stream)) >= rule.probability;
+    if stays {
+        0
+    } else {
+        best
+    }
 }
 
 /// The direction cell `(x, z)` sends a slab to under `rule` (0: none): its
@@ -822,8 +862,10 @@ mod tests {
     #[test]
     fn the_row_scatter_is_the_gather() {
         // Rows of 16 and 6 cells (jumps of up to 9 cells wrap around the
-        // short one more than once), a tall bed so that shadows form too.
-        for (nx, nz) in [(16, 8), (6, 4), (1, 6)] {
+        // short one more than once), and of 600 (the row's sources are
+        // found in blocks of 256 cells: two whole and one part), a tall
+        // bed so that shadows form too.
+        for (nx, nz) in [(16, 8), (6, 4), (1, 6), (600, 4)] {
             let mut p = params(nx, nz);
             p.mean_sand = 12;
             p.shadow_drop = 128;

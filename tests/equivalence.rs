@@ -134,6 +134,7 @@ fn scenes() -> Vec<CheckedScene> {
         ("sea_shore", Sea, || sky("sea_shore", 180, 120)),
         ("sea_pier", Sea, || sky("sea_pier", 180, 120)),
         ("sea_diver", Sea, || sky("sea_diver", 180, 120)),
+        ("sea_under_pier", Sea, || sky("sea_under_pier", 180, 120)),
         ("under a shore, a sphere in the water", Sea, under_a_shore),
         ("caustics_ball", Caustics, || traced("caustics_ball", 160, 120)),
         ("caustics_fog_ball", Caustics, || traced("caustics_fog_ball", 160, 120)),

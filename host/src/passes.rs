@@ -70,14 +70,15 @@ pub static PASSES: std::sync::LazyLock<Vec<&'static dyn Pass>> = std::sync::Lazy
     whole.chain(all.filter(|p| p.dispatch() == Dispatch::PerPixel)).collect()
 });
 
-/// Whether a pass that runs for `scene` reads `resource`, leaving out the
-/// passes named in `besides` (a pass that declares a read it makes only
-/// in some modes, which its caller checks itself). A pass whose only work
-/// is an input of others runs when this holds: what no running pass reads
-/// is not computed.
-pub fn read_by_a_running_pass(scene: &SceneData, resource: &Resource, besides: &[&str]) -> bool {
+/// Whether a pass that runs for `scene` reads `resource` (and looks at it
+/// for this scene: `Pass::unused_reads`). A pass whose only work is an
+/// input of others runs when this holds: what no running pass reads is
+/// not computed.
+pub fn read_by_a_running_pass(scene: &SceneData, resource: &Resource) -> bool {
     PASSES.iter().any(|p| {
-        !besides.contains(&p.name()) && p.reads().iter().any(|r| r.binding == resource.binding) && p.plan(scene).runs
+        p.reads().iter().any(|r| r.binding == resource.binding)
+            && !p.unused_reads(scene).iter().any(|r| r.binding == resource.binding)
+            && p.plan(scene).runs
     })
 }
 
@@ -212,6 +213,12 @@ pub trait Pass: Sync {
     }
     /// Resources its kernel only reads.
     fn reads(&self) -> &'static [&'static Resource];
+    /// Of `reads`, those its kernel binds but does not look at for this
+    /// scene (the shadow maps where surfaces take shadow rays): a pass
+    /// that writes them need not run for it (`read_by_a_running_pass`).
+    fn unused_reads(&self, _scene: &SceneData) -> &'static [&'static Resource] {
+        &[]
+    }
     /// Resources its kernel writes.
     fn writes(&self) -> &'static [&'static Resource];
     fn dispatch(&self) -> Dispatch;

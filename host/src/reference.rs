@@ -261,9 +261,14 @@ pub(crate) fn falloff(light: &GpuLight, distance: f64) -> f64 {
 pub fn supports(data: &SceneData) -> anyhow::Result<()> {
     let p = &data.sea.params;
     if data.sea.enabled && p.underwater != 0 {
-        if data.has_geometry() {
+        // Objects wholly above the water: seen through Snell's window and
+        // shading the water's light (`sea_radiance_under`).
+        let lowest = crate::scene::geometry::bounds(&data.spheres, &data.triangles).map_or(f32::INFINITY, |b| b.0.y);
+        if lowest <= p.level {
             anyhow::bail!(
-                "reference: objects seen from under the water are not in the reference (its sea is the water alone)"
+                "reference: objects under the water seen from below are not in the reference (objects wholly above \
+                 the surface are): an object reaches down to y = {lowest} m, the water's level is {} m",
+                p.level
             );
         }
         if p.bottom_nx >= 2 {
@@ -511,13 +516,18 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
 }
 
 /// The sea seen by an eye under it along the view ray `(o, d)`, f64, over
-/// a flat bottom, without objects (`supports`): orders 1 and 2 gathered
-/// along the ray by quadrature (`SeaReference::order1_segment`,
-/// `order2_segment`), and at its end, attenuated, the bottom lit by the
-/// refracted sun, or the surface from below at the scene's normal (the
-/// wave map's at the point, or up): the sky and sun through it (the sky's
-/// reference, `(1 - R) n^2`) and the water below reflected (`R` times the
-/// sea's quadrature toward the surface, as an eye above the water sees it).
+/// a flat bottom, with objects only above the water (`supports`): orders 1
+/// and 2 gathered along the ray by quadrature (`SeaReference::order1_segment`,
+/// `order2_segment`; order 1 point by point where the waves focus the sun
+/// or objects shade it, `order1_focused`), and at its end, attenuated, the
+/// bottom lit by the refracted sun, or the surface from below at the
+/// scene's normal (the wave map's at the point, or up): through it (`(1 -
+/// R) n^2`) the object the refracted ray meets, lit by the lights and the
+/// sky (`direct`, `sky::reference::sky_light`), or the sky and sun (the
+/// sky's reference), and the water below reflected (`R` times the sea's
+/// quadrature toward the surface, as an eye above the water sees it).
+/// Order 2, the bottom and the reflected water keep the unshaded beam, as
+/// the method's do.
 pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let p = &data.sea.params;
     let z_e = (p.level as f64 - o.y).max(0.0);
@@ -541,14 +551,19 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let above = DVec3::new(o.x, p.level as f64, o.z);
     // Order 1 through the waves' focusing where the renderer builds shafts
     // (photon traced, read per point of a fine quadrature), else the flat beam.
-    let mut along = match shaft_reference(data) {
-        Some(shafts) => {
-            let step = p.wave_size as f64 / p.wave_resolution as f64 / 4.0;
-            sea.order1_focused(o, p.level as f64, d, length, step, &|x: DVec3| {
-                shafts.at(x.x, p.level as f64 - x.y, x.z)
-            })
-        }
-        None => sea.order1_segment(z_e, d, length),
+    let shafts = shaft_reference(data);
+    let mut along = if shafts.is_some() || data.has_geometry() {
+        // Shadows: 1 cm steps; the shafts: a quarter of a wave texel.
+        let step = match shafts {
+            Some(_) => p.wave_size as f64 / p.wave_resolution as f64 / 4.0,
+            None => 0.01,
+        };
+        sea.order1_focused(o, p.level as f64, d, length, step, &|x: DVec3| {
+            let focus = shafts.as_ref().map_or(DVec3::ONE, |s| s.at(x.x, p.level as f64 - x.y, x.z));
+            focus * sun_in_water_visible(data, x)
+        })
+    } else {
+        sea.order1_segment(z_e, d, length)
     };
     if data.sea.second_order {
         along += sea.order2_segment(z_e, d, length);
@@ -577,9 +592,23 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         let (cos_t, _) = optics::transmitted_cosine(cos_i, n);
         let out = (d * n + (-normal) * (n * cos_i - cos_t)).normalize();
         let out = DVec3::new(out.x, out.y.abs(), out.z).normalize();
-        let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE);
-        let without_sun = sky.sky_without_sun(out);
-        let air = without_sun + (sky.radiance(out) - without_sun) * clouds_at(end);
+        let eps = crate::caustics::reference::epsilon(end);
+        let object = nearest(data, end, out, eps, f64::INFINITY)
+            .filter(|hit| data.materials[hit.material as usize].kind != MATERIAL_GLASS);
+        let air = match object {
+            // An object above the water, lit as one seen directly.
+            Some(hit) => {
+                let at = end + out * hit.t;
+                let normal = if hit.normal.dot(out) > 0.0 { -hit.normal } else { hit.normal };
+                let sky_light = crate::sky::reference::sky_light(data, at, normal, hit.albedo);
+                (direct(data, end, out, &hit) + sky_light) * (-d3(data.common.sigma_t) * hit.t).exp()
+            }
+            None => {
+                let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE);
+                let without_sun = sky.sky_without_sun(out);
+                without_sun + (sky.radiance(out) - without_sun) * clouds_at(end)
+            }
+        };
         light += air * ((1.0 - r) * n * n) * att;
     }
     let mut up = -(d - normal * (2.0 * d.dot(normal)));
@@ -591,6 +620,25 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         below += sea.order2(up);
     }
     light + below * r * att * clouds_at(end)
+}
+
+/// 1 where the refracted sun reaches the point `x` in the water, 0 where
+/// an object is in the way: up the refracted beam to the surface, then
+/// toward the sun in the air (the method's `under::sun_visibility`).
+fn sun_in_water_visible(data: &SceneData, x: DVec3) -> f64 {
+    let p = &data.sea.params;
+    let up = -p.sun_in_water.xyz().as_dvec3().normalize();
+    let t_s = (p.level as f64 - x.y).max(0.0) / up.y.max(1e-12);
+    let eps = crate::caustics::reference::epsilon(x);
+    if t_s > eps && nearest(data, x, up, eps, t_s).is_some() {
+        return 0.0;
+    }
+    let sun = p.sun_direction.xyz().as_dvec3().normalize();
+    let at = x + up * t_s;
+    if sun.y > 0.0 && nearest(data, at, sun, crate::caustics::reference::epsilon(at), f64::INFINITY).is_some() {
+        return 0.0;
+    }
+    1.0
 }
 
 /// The scene's waves' caustic for the reference (`CausticReference`),

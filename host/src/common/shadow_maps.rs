@@ -43,10 +43,8 @@ impl Pass for ShadowMaps {
             Plan::skip("no lights")
         } else if !scene.has_geometry() {
             Plan::skip("no geometry to cast shadows")
-        } else if scene.common.surface_shadows != slicelight_shaders::types::SHADOWS_MAP
-            // The surface pass reads the maps only with `SHADOWS_MAP`, checked here.
-            && !read_by_a_running_pass(scene, &SHADOW_MAPS, &[super::surface::Surface.name()])
-        {
+        } else if !read_by_a_running_pass(scene, &SHADOW_MAPS) {
+            // (Surfaces read the maps only with `SHADOWS_MAP`: `unused_reads`.)
             Plan::skip("surfaces use shadow rays and no running pass reads the maps")
         } else {
             let sizes: Vec<String> = scene

@@ -83,6 +83,13 @@ impl Pass for Surface {
             crate::desert::RIPPLE_NORMALS
         ]
     }
+    fn unused_reads(&self, scene: &SceneData) -> &'static [&'static Resource] {
+        if scene.common.surface_shadows == slicelight_shaders::types::SHADOWS_MAP {
+            &[]
+        } else {
+            resources![SHADOW_MAPS]
+        }
+    }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![GBUFFER, SURFACE_RADIANCE]
     }

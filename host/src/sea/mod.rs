@@ -21,7 +21,7 @@ use serde::Deserialize;
 use slicelight_shaders::optics;
 use slicelight_shaders::scatter::CpuAtomics;
 use slicelight_shaders::sea::caustics::{caustic_triangle, caustic_triangles, shaft_map_len, shaft_mip_texel};
-use slicelight_shaders::sea::under::Sunlit;
+use slicelight_shaders::sea::under::{Above, Sunlit};
 use slicelight_shaders::sea::{
     accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, layer_params, map_coords, order1_pixel,
     order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
@@ -1410,8 +1410,25 @@ impl Pass for SeaReflection {
             LIGHTS,
             crate::volumes::LIGHT_GRIDS,
             crate::volumes::OPTICAL_DEPTHS,
-            SEA_SURFACE
+            SEA_SURFACE,
+            SPHERES,
+            TRIANGLES,
+            BVH_NODES,
+            MATERIALS,
+            LIGHT_MAPS,
+            SHADOW_MAPS,
+            crate::sky::SKY_IRRADIANCE
         ]
+    }
+    fn unused_reads(&self, scene: &SceneData) -> &'static [&'static Resource] {
+        // Objects are seen only through Snell's window from under the
+        // water, lit as the surface pass lights them.
+        let maps = scene.common.surface_shadows == slicelight_shaders::types::SHADOWS_MAP;
+        if scene.sea.params.underwater != 0 && scene.has_geometry() && maps {
+            &[]
+        } else {
+            resources![SHADOW_MAPS]
+        }
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_REFLECTION]
@@ -1427,7 +1444,11 @@ impl Pass for SeaReflection {
             return skip;
         }
         if scene.sea.params.underwater != 0 {
-            return Plan::run("the sky and the sun through Snell's window (Fresnel from below), attenuated", 0);
+            let objects = if scene.has_geometry() { ", or the objects above the water seen through it" } else { "" };
+            return Plan::run(
+                format!("the sky and the sun through Snell's window (Fresnel from below){objects}, attenuated"),
+                0,
+            );
         }
         Plan::run("the sky and the sun reflected at the surface (Fresnel), the sun through the volumes' shadow", 0)
     }
@@ -1441,12 +1462,19 @@ impl Pass for SeaReflection {
             let surface = frame.get::<Vec4>(&SEA_SURFACE);
             let lit = crate::common::light_inputs(scene, frame);
             let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
+            let above = Above {
+                geometry: scene.geometry(),
+                materials: &scene.materials,
+                lights: &scene.lights,
+                inputs: crate::common::light_inputs(scene, frame),
+                irradiance: frame.get::<Vec4>(&crate::sky::SKY_IRRADIANCE),
+            };
             for_each_invocation(out, common.band_start, progress, |i, v| {
                 let k = (i - common.band_start) as usize;
                 let texel = gbuffer.get(k).unwrap_or(&blank);
                 let seen = surface.get(k).copied().unwrap_or(Vec4::ZERO);
                 let waves = &scene.sea.waves;
-                *v = reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds);
+                *v = reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds, &above);
             });
         });
     }

@@ -862,7 +862,7 @@ impl Pass for Density {
         if let Some(skip) = skip_without_volumes(scene) {
             return skip;
         }
-        if !read_by_a_running_pass(scene, &DENSITY, &[]) {
+        if !read_by_a_running_pass(scene, &DENSITY) {
             return Plan::skip("no running pass reads the density grids (the volumes are splatted)");
         }
         let v = &scene.volumes;
@@ -921,7 +921,7 @@ impl Pass for OpticalDepth {
         if let Some(skip) = skip_without_volumes(scene) {
             return skip;
         }
-        if !read_by_a_running_pass(scene, &OPTICAL_DEPTHS, &[]) {
+        if !read_by_a_running_pass(scene, &OPTICAL_DEPTHS) {
             return Plan::skip("no running pass reads the transmittance volumes (the volumes are splatted)");
         }
         let v = &scene.volumes;

@@ -923,9 +923,11 @@ pub fn view_in_water(dir: Vec3, normal: Vec3, n: f32) -> Vec3 {
 
 /// Per-pixel kernel, `sea.reflection`: the sky and the sun reflected at the
 /// surface, `R (L_sky + L_sun)` along the reflected ray. For an eye under
-/// water, the sky and the sun through Snell's window,
-/// `e^(-c l) (1 - R) n^2 (L_sky + L_sun)` along the ray refracted out
-/// (`under::through_window`; `surface`: the sample's `sea.surface` value).
+/// water, what lies beyond Snell's window, `e^(-c l) (1 - R) n^2 L_air`
+/// along the ray refracted out (`under::through_window`; `surface`: the
+/// sample's `sea.surface` value): an object above the water where that ray
+/// meets one (`under::object_through_window`, `above`), else the sky and
+/// the sun.
 #[allow(clippy::too_many_arguments)]
 pub fn reflection_pixel(
     index: u32,
@@ -938,6 +940,7 @@ pub fn reflection_pixel(
     texel: &GBufferTexel,
     surface: Vec4,
     clouds: &CloudShadow,
+    above: &under::Above,
 ) -> Vec4 {
     if p.underwater != 0 {
         let v = under::decode(index, common, p, surface);
@@ -949,8 +952,12 @@ pub fn reflection_pixel(
             return Vec4::ZERO;
         }
         let point = v.end_point();
-        let light =
-            sky_radiance(sky, transmittance, sky_view, out) + sun_disk(sky, transmittance, out) * clouds.at(p, point);
+        let (seen, object) = under::object_through_window(common, sky, transmittance, sky_view, above, point, out);
+        let light = if seen {
+            object
+        } else {
+            sky_radiance(sky, transmittance, sky_view, out) + sun_disk(sky, transmittance, out) * clouds.at(p, point)
+        };
         return (light * factor * under::attenuation(p, &v)).extend(0.0);
     }
     // Waves read the slope rule alone (`sea_hit`); a flat sea, the
@@ -1416,12 +1423,26 @@ pub fn reflection_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 5)] materials: &[GpuMaterial],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 6)] light_map: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 7)] shadow: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 62)] irradiance: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 23)] radiance: &mut [Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
         let clouds = CloudShadow { lights, grids, depths };
+        let above = under::Above {
+            geometry: crate::scene_geometry(common, spheres, triangles, nodes),
+            materials,
+            lights,
+            inputs: crate::common::surface::LightInputs { light_map, shadow, grids, depths },
+            irradiance,
+        };
         radiance[index as usize] = reflection_pixel(
             common.band_start + index,
             common,
@@ -1433,6 +1454,7 @@ pub fn reflection_kernel(
             &gbuffer[index as usize],
             surface[index as usize],
             &clouds,
+            &above,
         );
     }
 }

@@ -466,15 +466,27 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let (sky, r) = if p.waves == slicelight_shaders::sea::WAVES_NORMAL_MAP {
         let slope = glam::DVec2::new(-normal.x / normal.y, -normal.z / normal.y);
         let rough = p.roughness.truncate().as_dvec3();
-        let (light, r) =
-            crate::sea::reference::rough_reflection(&sky_reference, &data.sky.params, d, slope, rough, n, clouds);
+        let objects = |w: DVec3| object_in_air(data, hit, w);
+        let shade = clouds * sun_over_water(data, hit);
+        let (light, r) = crate::sea::reference::rough_reflection(
+            &sky_reference,
+            &data.sky.params,
+            d,
+            slope,
+            rough,
+            n,
+            shade,
+            &objects,
+        );
         (light / r.max(1e-300), r)
     } else {
         let r = optics::reflectance(cos_i, 1.0 / n);
         let reflected = d + normal * (2.0 * cos_i);
         let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
         let without_sun = sky_reference.sky_without_sun(reflected);
-        (without_sun + (sky_reference.radiance(reflected) - without_sun) * clouds, r)
+        let mirrored = object_in_air(data, hit, reflected)
+            .unwrap_or_else(|| without_sun + (sky_reference.radiance(reflected) - without_sun) * clouds);
+        (mirrored, r)
     };
     // Snell: the refracted ray, reversed, is the direction light leaves the water toward the eye.
     let eta = 1.0 / n;
@@ -592,23 +604,11 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         let (cos_t, _) = optics::transmitted_cosine(cos_i, n);
         let out = (d * n + (-normal) * (n * cos_i - cos_t)).normalize();
         let out = DVec3::new(out.x, out.y.abs(), out.z).normalize();
-        let eps = crate::caustics::reference::epsilon(end);
-        let object = nearest(data, end, out, eps, f64::INFINITY)
-            .filter(|hit| data.materials[hit.material as usize].kind != MATERIAL_GLASS);
-        let air = match object {
-            // An object above the water, lit as one seen directly.
-            Some(hit) => {
-                let at = end + out * hit.t;
-                let normal = if hit.normal.dot(out) > 0.0 { -hit.normal } else { hit.normal };
-                let sky_light = crate::sky::reference::sky_light(data, at, normal, hit.albedo);
-                (direct(data, end, out, &hit) + sky_light) * (-d3(data.common.sigma_t) * hit.t).exp()
-            }
-            None => {
-                let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE);
-                let without_sun = sky.sky_without_sun(out);
-                without_sun + (sky.radiance(out) - without_sun) * clouds_at(end)
-            }
-        };
+        let air = object_in_air(data, end, out).unwrap_or_else(|| {
+            let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE);
+            let without_sun = sky.sky_without_sun(out);
+            without_sun + (sky.radiance(out) - without_sun) * clouds_at(end)
+        });
         light += air * ((1.0 - r) * n * n) * att;
     }
     let mut up = -(d - normal * (2.0 * d.dot(normal)));
@@ -620,6 +620,32 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         below += sea.order2(up);
     }
     light + below * r * att * clouds_at(end)
+}
+
+/// The light of the object (not glass) that the ray from the water's
+/// surface at `from` along `dir` meets in the air, lit as one seen directly
+/// (`direct` and the sky's light, the `[medium]` on the way); `None` where
+/// it meets nothing or glass.
+pub fn object_in_air(data: &SceneData, from: DVec3, dir: DVec3) -> Option<DVec3> {
+    let eps = crate::caustics::reference::epsilon(from);
+    let hit = nearest(data, from, dir, eps, f64::INFINITY)
+        .filter(|hit| data.materials[hit.material as usize].kind != MATERIAL_GLASS)?;
+    let at = from + dir * hit.t;
+    let normal = if hit.normal.dot(dir) > 0.0 { -hit.normal } else { hit.normal };
+    let sky_light = crate::sky::reference::sky_light(data, at, normal, hit.albedo);
+    Some((direct(data, from, dir, &hit) + sky_light) * (-d3(data.common.sigma_t) * hit.t).exp())
+}
+
+/// 1 where no object hides the sun from the point `x` of the water's
+/// surface, else 0 (its glint there).
+pub fn sun_over_water(data: &SceneData, x: DVec3) -> f64 {
+    let sun = data.sea.params.sun_direction.xyz().as_dvec3().normalize();
+    let eps = crate::caustics::reference::epsilon(x);
+    if sun.y > 0.0 && nearest(data, x, sun, eps, f64::INFINITY).is_some() {
+        0.0
+    } else {
+        1.0
+    }
 }
 
 /// 1 where the refracted sun reaches the point `x` in the water, 0 where

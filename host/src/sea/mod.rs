@@ -20,8 +20,9 @@ use rayon::prelude::*;
 use serde::Deserialize;
 use slicelight_shaders::optics;
 use slicelight_shaders::scatter::CpuAtomics;
+use slicelight_shaders::sea::air::Above;
 use slicelight_shaders::sea::caustics::{caustic_triangle, caustic_triangles, shaft_map_len, shaft_mip_texel};
-use slicelight_shaders::sea::under::{Above, Sunlit};
+use slicelight_shaders::sea::under::Sunlit;
 use slicelight_shaders::sea::{
     accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, layer_params, map_coords, order1_pixel,
     order2_pixel, plane_reach, radiance_map_len, radiance_map_texel, reflection_pixel, scattering_map_lookup,
@@ -1421,10 +1422,10 @@ impl Pass for SeaReflection {
         ]
     }
     fn unused_reads(&self, scene: &SceneData) -> &'static [&'static Resource] {
-        // Objects are seen only through Snell's window from under the
-        // water, lit as the surface pass lights them.
+        // Objects mirrored by the surface or seen through Snell's window,
+        // lit as the surface pass lights them.
         let maps = scene.common.surface_shadows == slicelight_shaders::types::SHADOWS_MAP;
-        if scene.sea.params.underwater != 0 && scene.has_geometry() && maps {
+        if scene.has_geometry() && maps {
             &[]
         } else {
             resources![SHADOW_MAPS]
@@ -1450,7 +1451,13 @@ impl Pass for SeaReflection {
                 0,
             );
         }
-        Plan::run("the sky and the sun reflected at the surface (Fresnel), the sun through the volumes' shadow", 0)
+        let objects = if scene.has_geometry() { ", and the objects over it" } else { "" };
+        Plan::run(
+            format!(
+                "the sky and the sun reflected at the surface (Fresnel){objects}, the sun through the volumes' shadow"
+            ),
+            0,
+        )
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, sky) = (&scene.sea.params, &scene.sky.params);
@@ -1463,10 +1470,14 @@ impl Pass for SeaReflection {
             let lit = crate::common::light_inputs(scene, frame);
             let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
             let above = Above {
+                common,
                 geometry: scene.geometry(),
                 materials: &scene.materials,
                 lights: &scene.lights,
                 inputs: crate::common::light_inputs(scene, frame),
+                sky,
+                transmittance,
+                sky_view,
                 irradiance: frame.get::<Vec4>(&crate::sky::SKY_IRRADIANCE),
             };
             for_each_invocation(out, common.band_start, progress, |i, v| {

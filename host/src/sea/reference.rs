@@ -545,7 +545,10 @@ pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
 /// is mirrored by the facet whose normal is the half vector, of density
 /// `p(s_h)` per unit slope, `1/(4 (v.h) h_y^3)` per unit of solid angle.
 /// `sun_shade` multiplies the sun's light (the volumes' shadow at the
-/// point). Returns the reflected radiance and the mean reflectance.
+/// point, and 0 where an object hides the sun from it). Where `objects`
+/// gives an object's light along a reflected direction, that light takes
+/// the sky's place there (the scene's objects mirrored). Returns the
+/// reflected radiance and the mean reflectance.
 #[allow(clippy::too_many_arguments)]
 pub fn rough_reflection(
     sky: &crate::sky::reference::SkyReference,
@@ -555,6 +558,7 @@ pub fn rough_reflection(
     cov: DVec3,
     n: f64,
     sun_shade: DVec3,
+    objects: &dyn Fn(DVec3) -> Option<DVec3>,
 ) -> (DVec3, f64) {
     use glam::DVec2;
     use slicelight_shaders::optics::reflectance;
@@ -596,7 +600,7 @@ pub fn rough_reflection(
         let reflected = d + normal * (2.0 * cos);
         let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
         let r = fresnel(cos);
-        light += sky.sky_without_sun(reflected) * (w * r);
+        light += objects(reflected).unwrap_or_else(|| sky.sky_without_sun(reflected)) * (w * r);
         r_mean += w * r;
     };
     facet(DVec3::Y, 1.0 - facing.min(1.0));

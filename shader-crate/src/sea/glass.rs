@@ -67,7 +67,7 @@ pub fn sea_along(s: &SeaInputs, from: Vec3, dir: Vec3) -> Vec3 {
     if !v.hit {
         return Vec3::ZERO;
     }
-    let reflected = reflection_seen(p, s.sky, s.transmittance, s.sky_view, &v, &s.clouds);
+    let reflected = reflection_seen(p, s.sky, s.transmittance, s.sky_view, &v, &s.clouds, &super::air::NoObjects);
     let first = order1_seen(p, &v, s.bottom, &s.sunlit, &s.clouds);
     let mut second = Vec3::ZERO;
     if p.second_order != 0 {

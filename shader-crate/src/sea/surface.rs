@@ -424,6 +424,30 @@ impl SlopeRule {
     }
 }
 
+/// Gauss-Hermite's 3-point rule for the standard normal: the nodes `0`
+/// and `+-sqrt(3)` and their weights (2/3, 1/6 each).
+pub const ACROSS_NODES: [(f32, f32); 3] = [(-1.732_050_8, 1.0 / 6.0), (0.0, 2.0 / 3.0), (1.732_050_8, 1.0 / 6.0)];
+
+impl SlopeRule {
+    /// The unit normal of facing node `k` (`0..ALONG_NODES`) with its slope
+    /// across the view moved `z` conditional standard deviations (`l22`)
+    /// from the conditional mean the node takes (a mirrored object, unlike
+    /// the sky, is not smooth across: `sea::reflection_seen` follows each
+    /// node at the three `ACROSS_NODES`). Up where no facet faces the eye.
+    pub fn across(&self, k: u32, z: f32) -> Vec3 {
+        if self.facing() <= 0.0 {
+            return Vec3::Y;
+        }
+        let (x, _) = gauss_legendre8(k);
+        let (lo, hi) = (self.mean_range.z, self.mean_range.w);
+        let along = lo + (hi - lo) * 0.5 * (1.0 + x);
+        let (l11, l21, l22) = (self.factor_facing.x, self.factor_facing.y, self.factor_facing.z);
+        let frame = self.mean_range.xy() + Vec2::new(l11 * along, l21 * along + l22 * z);
+        let slope = self.axes.xy() * frame.x + self.axes.zw() * frame.y;
+        Vec3::new(-slope.x, 1.0, -slope.y).normalize()
+    }
+}
+
 /// The density of the Gaussian of `s` at the slope `at` (per unit slope area).
 pub fn slope_density(s: &Slopes, at: Vec2) -> f32 {
     let c = s.cov();

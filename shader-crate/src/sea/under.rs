@@ -49,15 +49,11 @@ use super::{
     MapCoords, SeaParams, DEEP, WAVES_NORMAL_MAP,
 };
 use crate::camera::{camera_ray, in_image};
-use crate::common::surface::{direct_radiance, LightInputs};
-use crate::geometry::{occluded, trace_nearest, Geometry, NO_HIT};
+use crate::geometry::{occluded, Geometry};
 use crate::glam::{Vec2, Vec3, Vec4, Vec4Swizzles};
-use crate::glass::{is_glass, surface_epsilon};
 use crate::optics::{reflect, reflectance, refract};
 use crate::phase::henyey_greenstein;
-use crate::sky::light::{irradiance_lookup, sky_visibility};
-use crate::sky::SkyParams;
-use crate::types::{CommonParams, GBufferTexel, GpuLight, GpuMaterial, NO_OBJECT};
+use crate::types::{CommonParams, GBufferTexel, NO_OBJECT};
 use core::f32::consts::{FRAC_1_PI, PI};
 
 /// Where an underwater view ray ends (`UnderView::end`).
@@ -574,59 +570,6 @@ pub fn through_window(p: &SeaParams, v: &UnderView) -> (Vec3, f32) {
     // A steep facet may send the ray out below the horizon: it leaves the wave toward the sky.
     let out = Vec3::new(out.x, out.y.abs(), out.z).normalize();
     (out, (1.0 - v.reflectance) * n * n)
-}
-
-/// What lights the objects above the water that an eye under it sees
-/// through Snell's window (`object_through_window`): the scene's geometry
-/// and materials, its lights and what their terms read, and the sky's
-/// irradiance table (read where the sky lights surfaces).
-pub struct Above<'a> {
-    pub geometry: Geometry<'a>,
-    pub materials: &'a [GpuMaterial],
-    pub lights: &'a [GpuLight],
-    pub inputs: LightInputs<'a>,
-    pub irradiance: &'a [Vec4],
-}
-
-/// The object above the water that the ray leaving the surface at `point`
-/// along `out` (the view refracted out through Snell's window) meets, and
-/// its light in air toward the surface (rgb, W/(m^2 sr)), as the surface
-/// and skylight passes light what the eye sees directly: every light
-/// (`direct_radiance`: cone, light map, shadows, the volumes' shadows, the
-/// `[medium]` on the way), and under a sky that lights surfaces the sky's
-/// light `rho/pi E(n) V` (the irradiance table, `sky_visibility`'s rays
-/// from the point itself). Not found where the ray meets nothing or glass
-/// (the sky shows there, as without objects). The `[medium]` attenuates the
-/// way from the surface to the object; the air adds no aerial perspective
-/// there (metres, not kilometres).
-#[allow(clippy::too_many_arguments)]
-pub fn object_through_window(
-    common: &CommonParams,
-    sky: &SkyParams,
-    transmittance: &[Vec4],
-    sky_view: &[Vec4],
-    above: &Above,
-    point: Vec3,
-    out: Vec3,
-) -> (bool, Vec3) {
-    if above.geometry.is_empty() {
-        return (false, Vec3::ZERO);
-    }
-    let hit = trace_nearest(point, out, surface_epsilon(point), NO_HIT, &above.geometry);
-    if hit.distance == NO_HIT || is_glass(above.materials, &hit) {
-        return (false, Vec3::ZERO);
-    }
-    let q = point + out * hit.distance;
-    let normal = if hit.normal.dot(out) > 0.0 { -hit.normal } else { hit.normal };
-    let albedo = above.materials[hit.material as usize].albedo;
-    let mut light = direct_radiance(common, above.lights, &above.geometry, &above.inputs, q, normal, albedo).xyz();
-    if sky.lights_surfaces != 0 {
-        let seen = sky_visibility(sky, transmittance, sky_view, &above.geometry, q, normal);
-        light += albedo.xyz() * FRAC_1_PI * irradiance_lookup(sky, above.irradiance, normal) * seen;
-    }
-    // The `[medium]` between the surface and the object, as between an eye
-    // and what it sees.
-    (true, light * crate::light::transmittance(common.sigma_t, hit.distance).xyz())
 }
 
 /// The factor `sea.water` applies to the objects' own light (rgb; w:

@@ -1003,10 +1003,10 @@ pub fn reflection_seen<O: air::Objects>(
     // shadow at the point (`CloudShadow`).
     let n = p.extinction.w;
     let shade = clouds.at(p, v.point);
-    let across = objects.any();
     // Rays are traced only where the cone around the reflected rays may
-    // meet an object (most of the sea's pixels mirror only the sky).
-    let trace = across && {
+    // meet an object (most of the sea's pixels mirror only the sky, as
+    // without objects).
+    let trace = objects.any() && {
         let mut axis = reflected_skyward(v.dir, Vec3::Y);
         let mut k = 0;
         while k < surface::ALONG_NODES {
@@ -1039,8 +1039,8 @@ pub fn reflection_seen<O: air::Objects>(
         let mut sky_light = Vec3::ZERO;
         // Nodes of weight 1e-3 or less take the sky: the rule's tails (at
         // most 0.9 % of the weight in all; half the rays on `sea_pier`).
-        let trace = trace && facet.weight > 1e-3;
-        if across && k + 1 < surface::SLOPE_NODES {
+        let traced = trace && facet.weight > 1e-3;
+        if trace && k + 1 < surface::SLOPE_NODES {
             // Objects: each facing node at three slopes across the view
             // (`SlopeRule::across`), each reflected ray traced (a mirrored
             // object, unlike the sky, is not smooth across: with the node's
@@ -1054,12 +1054,12 @@ pub fn reflection_seen<O: air::Objects>(
             let narrow = r_low.dot(r_high) >= objects.cos_pixel();
             let middle = reflected_skyward(v.dir, v.rule.across(k, 0.0));
             let (seen_middle, object_middle) =
-                if trace && narrow { objects.seen(v.point, middle) } else { (false, Vec3::ZERO) };
+                if traced && narrow { objects.seen(v.point, middle) } else { (false, Vec3::ZERO) };
             let mut j = 0;
             while j < 3 {
                 let (z, w) = surface::ACROSS_NODES[j];
                 let r = reflected_skyward(v.dir, v.rule.across(k, z));
-                let (seen, object) = if !trace {
+                let (seen, object) = if !traced {
                     (false, Vec3::ZERO)
                 } else if narrow {
                     (seen_middle, object_middle)
@@ -1070,7 +1070,7 @@ pub fn reflection_seen<O: air::Objects>(
                 j += 1;
             }
         } else {
-            let (seen, object) = if trace { objects.seen(v.point, reflected) } else { (false, Vec3::ZERO) };
+            let (seen, object) = if traced { objects.seen(v.point, reflected) } else { (false, Vec3::ZERO) };
             sky_light = if seen { object } else { sky_radiance(sky, transmittance, sky_view, reflected) };
             if k + 1 == surface::SLOPE_NODES && !seen {
                 sky_light += sun_disk(sky, transmittance, reflected) * shade;

@@ -655,7 +655,82 @@ fn piles_are_laid_where_the_scene_puts_them() {
     let path = dir.path().join("scene.toml");
     std::fs::write(&path, &toml).unwrap();
     let data = slicelight::scene::load(&path).unwrap();
+    // (Then the skirt's, of the sand's albedo: the field's edge stands a
+    // centimetre or two above the base where a slab crossed it.)
     let albedos: Vec<[f32; 3]> = data.materials.iter().map(|m| m.albedo.truncate().to_array()).collect();
-    assert_eq!(albedos.len(), 2, "{albedos:?}");
+    assert!(albedos.len() == 2 || (albedos.len() == 3 && albedos[2] == albedos[0]), "{albedos:?}");
     assert_eq!(albedos[1], [0.1, 0.2, 0.3]);
+}
+
+/// A terrain's edge stands where its rectangle ends, through its hills: a
+/// low view past the edge used to run under the mesh and meet the ground
+/// in the mesh's shadow (a dark band along the field's foot). The skirt
+/// walls the edge down to under the base: rays aimed at points of the
+/// wall (below the edge's top, above the ground) from a low camera beyond
+/// the field's near edge meet the terrain's material at the edge's plane.
+/// The walls' tops are the mesh's own edge nodes (no crack), and a field
+/// level with its base has none.
+#[test]
+fn a_terrains_edge_is_walled_down_to_its_base() {
+    let text = |amplitude: f32| {
+        format!(
+            "[camera]\nposition = [0.0, 1.0, 0.0]\nlook_at = [0.0, 1.0, -100.0]\nvfov_deg = 40.0\nresolution = [16, 8]\n\
+             [[terrain]]\nmin = [-50.0, -150.0]\nsize = [100.0, 100.0]\nalbedo = [0.8, 0.6, 0.4]\n\
+             procedural = {{ cells = [32, 32], amplitude = {amplitude}, wavelength = 8.0, seed = 3 }}\n\
+             [[object]]\ntype = \"quad\"\ncenter = [0.0, -0.05, 0.0]\nu = [4000.0, 0.0, 0.0]\n\
+             v = [0.0, 0.0, 4000.0]\nalbedo = [0.3, 0.3, 0.3]\n"
+        )
+    };
+    let terrain_of = |amplitude: f32| -> slicelight::desert::Terrain {
+        let t = text(amplitude);
+        let body = &t[t.find("[[terrain]]").unwrap() + 11..t.find("[[object]]").unwrap()];
+        toml::from_str(body).unwrap()
+    };
+    let data = common::scene_from_str(&text(12.0));
+    let terrain = &terrain_of(12.0);
+    let field = &data.desert.fields[0];
+    let skirt = slicelight::desert::skirt(terrain, field);
+    let mesh = slicelight::desert::mesh(terrain, field);
+    assert!(!skirt.indices.is_empty(), "a hilly field's edge stands above its base");
+    let foot = terrain.elevation - slicelight::desert::SKIRT_DEPTH;
+    for quad in skirt.positions.chunks(4) {
+        for top in &quad[..2] {
+            assert!(mesh.positions.contains(top), "a wall's top {top} is not a node of the mesh's edge");
+        }
+        assert!(quad[2].y == foot && quad[3].y == foot, "a wall's foot: {:?}", &quad[2..]);
+    }
+    // Rays toward points halfway up the near edge (z = -50), across it.
+    let geometry = data.geometry();
+    let eye = glam::Vec3::new(0.0, 1.0, 0.0);
+    let mut walled = 0;
+    for j in 0..64 {
+        let x = -45.0 + 90.0 * j as f32 / 63.0;
+        let edge_height = skirt
+            .positions
+            .chunks(4)
+            .filter(|q| q[0].z == -50.0 && q[1].z == -50.0 && (q[0].x - x) * (q[1].x - x) <= 0.0)
+            .map(|q| q[0].y + (q[1].y - q[0].y) * (x - q[0].x) / (q[1].x - q[0].x))
+            .next();
+        let Some(h) = edge_height else { continue };
+        if h < 1.0 {
+            continue;
+        }
+        let target = glam::Vec3::new(x, 0.5 * h, -50.0);
+        let dir = (target - eye).normalize();
+        let hit =
+            slicelight_shaders::geometry::trace_nearest(eye, dir, 0.0, slicelight_shaders::geometry::NO_HIT, &geometry);
+        assert!(hit.distance != slicelight_shaders::geometry::NO_HIT, "x = {x}: the ray meets nothing");
+        let at = eye + dir * hit.distance;
+        let albedo = data.materials[hit.material as usize].albedo;
+        assert!(
+            (at.z + 50.0).abs() < 1e-3 && albedo.x == 0.8,
+            "x = {x}: the ray toward the edge's wall meets {at} (albedo {albedo}), not the wall at z = -50"
+        );
+        walled += 1;
+    }
+    println!("{walled} rays toward the edge's wall meet it");
+    assert!(walled > 10, "{walled} rays toward the edge's wall");
+    // A field level with its base has no wall.
+    let flat = common::scene_from_str(&text(0.0));
+    assert!(slicelight::desert::skirt(&terrain_of(0.0), &flat.desert.fields[0]).indices.is_empty());
 }

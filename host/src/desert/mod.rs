@@ -471,15 +471,11 @@ pub fn sand_and_bare(terrain: &Terrain, mesh: IndexedMesh) -> (IndexedMesh, Opti
 }
 
 pub fn mesh(terrain: &Terrain, field: &Field) -> IndexedMesh {
-    let [mx, mz] = terrain.mesh.unwrap_or_else(|| field.quads().map(|q| q.min(512)));
-    let (x0, z0) = (terrain.min[0] as f64, terrain.min[1] as f64);
-    let (sx, sz) = (terrain.size[0] as f64, terrain.size[1] as f64);
+    let [mx, mz] = mesh_quads(terrain, field);
     let mut mesh = IndexedMesh::default();
     for k in 0..=mz {
         for i in 0..=mx {
-            let (u, v) = (i as f64 / mx as f64, k as f64 / mz as f64);
-            let y = terrain.elevation + field.sample(u, v);
-            mesh.positions.push(Vec3::new((x0 + u * sx) as f32, y, (z0 + v * sz) as f32));
+            mesh.positions.push(mesh_node(terrain, field, [mx, mz], i, k));
         }
     }
     let row = mx + 1;
@@ -504,6 +500,60 @@ pub fn mesh(terrain: &Terrain, field: &Field) -> IndexedMesh {
         *n = n.normalize_or(Vec3::Y);
     }
     mesh
+}
+
+/// The terrain's mesh of quadrilaterals: `mesh`, or the field's own
+/// resolution up to 512 each way.
+fn mesh_quads(terrain: &Terrain, field: &Field) -> [u32; 2] {
+    terrain.mesh.unwrap_or_else(|| field.quads().map(|q| q.min(512)))
+}
+
+/// Node `(i, k)` of the terrain's mesh of `quads` quadrilaterals (m).
+fn mesh_node(terrain: &Terrain, field: &Field, quads: [u32; 2], i: u32, k: u32) -> Vec3 {
+    let (u, v) = (i as f64 / quads[0] as f64, k as f64 / quads[1] as f64);
+    let y = terrain.elevation + field.sample(u, v);
+    let (x, z) =
+        (terrain.min[0] as f64 + u * terrain.size[0] as f64, terrain.min[1] as f64 + v * terrain.size[1] as f64);
+    Vec3::new(x as f32, y, z as f32)
+}
+
+/// How far below the terrain's base its skirt reaches (m): past a ground
+/// laid a few centimetres under the base, as the desert scenes lay theirs.
+pub const SKIRT_DEPTH: f32 = 0.1;
+
+/// The terrain's skirt: walls from the mesh's edge straight down to
+/// `SKIRT_DEPTH` under its base (`elevation`), wherever the edge stands
+/// more than a millimetre above the base. A field's edge is wherever its rectangle ends (a
+/// periodic dune field's edge cuts through dunes): without the walls a low
+/// view past the edge meets the ground under the mesh, in the mesh's
+/// shadow, a dark band along the field's foot. (Terrain renderers hang
+/// such skirts on their tiles for the same reason.)
+pub fn skirt(terrain: &Terrain, field: &Field) -> IndexedMesh {
+    let [mx, mz] = mesh_quads(terrain, field);
+    let node = |i: u32, k: u32| mesh_node(terrain, field, [mx, mz], i, k);
+    // The edge once around, corner to corner.
+    let edge: Vec<Vec3> = (0..mx)
+        .map(|i| node(i, 0))
+        .chain((0..mz).map(|k| node(mx, k)))
+        .chain((1..=mx).rev().map(|i| node(i, mz)))
+        .chain((1..=mz).rev().map(|k| node(0, k)))
+        .collect();
+    let foot = terrain.elevation - SKIRT_DEPTH;
+    let mut wall = IndexedMesh::default();
+    for (j, &a) in edge.iter().enumerate() {
+        let b = edge[(j + 1) % edge.len()];
+        // (A millimetre is no wall: a field's bare edge may round above 0.)
+        if a.y <= terrain.elevation + 1e-3 && b.y <= terrain.elevation + 1e-3 {
+            continue;
+        }
+        let first = wall.positions.len() as u32;
+        wall.positions.extend([a, b, Vec3::new(b.x, foot, b.z), Vec3::new(a.x, foot, a.z)]);
+        let out = (b - a).cross(Vec3::Y).normalize_or(Vec3::X);
+        wall.normals.extend([out; 4]);
+        wall.indices.push([first, first + 1, first + 2]);
+        wall.indices.push([first, first + 2, first + 3]);
+    }
+    wall
 }
 
 fn read_heights(field: &str, base: &Path, h: &HeightsFile) -> Result<Field> {

@@ -554,6 +554,10 @@ pub fn build(file: &SceneFile, base: &Path) -> Result<SceneData> {
         if let Some((ground, albedo)) = bare {
             geometry::push_diffuse(&mut objects, &ground, Vec3::from(albedo).extend(0.0), 0);
         }
+        let skirt = crate::desert::skirt(t, f);
+        if !skirt.indices.is_empty() {
+            geometry::push_diffuse(&mut objects, &skirt, Vec3::from(t.albedo).extend(0.0), 0);
+        }
     }
     let bounds = geometry::bounds(&objects.spheres, &objects.triangles);
     // The lights cover the geometry and the volumes' boxes (a directional

@@ -315,14 +315,8 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         let mut radiance = DVec3::ZERO;
         let (q, r, mirrored) = crate::caustics::reference::glass_reflection(data, o, d, &hit);
         let mut sky = open_sky(data, q, mirrored) * r;
-        let eps = crate::caustics::reference::epsilon(q);
-        if let Some(seen) = nearest(data, q, mirrored, eps, f64::INFINITY) {
-            if data.materials[seen.material as usize].kind != MATERIAL_GLASS {
-                let at = q + mirrored * seen.t;
-                let normal = if seen.normal.dot(mirrored) > 0.0 { -seen.normal } else { seen.normal };
-                let sky_light = crate::sky::reference::sky_light(data, at, normal, seen.albedo);
-                radiance += (direct(data, q, mirrored, &seen) + sky_light) * (-sigma_t * seen.t).exp() * r;
-            }
+        if let Some(seen) = object_in_air(data, q, mirrored) {
+            radiance += seen * r;
         }
         for c in 0..3 {
             match crate::caustics::reference::through_glass(data, o, d, &hit, c) {
@@ -622,10 +616,10 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     light + below * r * att * clouds_at(end)
 }
 
-/// The light of the object (not glass) that the ray from the water's
-/// surface at `from` along `dir` meets in the air, lit as one seen directly
-/// (`direct` and the sky's light, the `[medium]` on the way); `None` where
-/// it meets nothing or glass.
+/// The light of the object (not glass) that the ray from `from` along
+/// `dir` meets (from the water's surface into the air, from glass by
+/// reflection), lit as one seen directly (`direct` and the sky's light,
+/// the `[medium]` on the way); `None` where it meets nothing or glass.
 pub fn object_in_air(data: &SceneData, from: DVec3, dir: DVec3) -> Option<DVec3> {
     let eps = crate::caustics::reference::epsilon(from);
     let hit = nearest(data, from, dir, eps, f64::INFINITY)
@@ -659,12 +653,7 @@ fn sun_in_water_visible(data: &SceneData, x: DVec3) -> f64 {
     if t_s > eps && nearest(data, x, up, eps, t_s).is_some() {
         return 0.0;
     }
-    let sun = p.sun_direction.xyz().as_dvec3().normalize();
-    let at = x + up * t_s;
-    if sun.y > 0.0 && nearest(data, at, sun, crate::caustics::reference::epsilon(at), f64::INFINITY).is_some() {
-        return 0.0;
-    }
-    1.0
+    sun_over_water(data, x + up * t_s)
 }
 
 /// The scene's waves' caustic for the reference (`CausticReference`),

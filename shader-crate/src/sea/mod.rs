@@ -1035,10 +1035,9 @@ pub fn reflection_seen<O: air::Objects>(
     let mut k = 0;
     while k < surface::SLOPE_NODES {
         let facet = v.rule.node(k);
-        let reflected = reflected_skyward(v.dir, facet.normal);
         let mut sky_light = Vec3::ZERO;
         // Nodes of weight 1e-3 or less take the sky: the rule's tails (at
-        // most 0.9 % of the weight in all; half the rays on `sea_pier`).
+        // most 0.9 % of the weight in all, nine nodes).
         let traced = trace && facet.weight > 1e-3;
         if trace && k + 1 < surface::SLOPE_NODES {
             // Objects: each facing node at three slopes across the view
@@ -1070,6 +1069,7 @@ pub fn reflection_seen<O: air::Objects>(
                 j += 1;
             }
         } else {
+            let reflected = reflected_skyward(v.dir, facet.normal);
             let (seen, object) = if traced { objects.seen(v.point, reflected) } else { (false, Vec3::ZERO) };
             sky_light = if seen { object } else { sky_radiance(sky, transmittance, sky_view, reflected) };
             if k + 1 == surface::SLOPE_NODES && !seen {

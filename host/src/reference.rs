@@ -146,10 +146,14 @@ pub(crate) fn nearest(data: &SceneData, o: DVec3, d: DVec3, t_min: f64, t_max: f
 
 /// Whether the segment from `p` toward the light is free of geometry.
 pub(crate) fn sees_light(data: &SceneData, p: DVec3, to_light: DVec3, distance: f64) -> bool {
-    // Start and stop a hair off the endpoints, relative to the scene's scale,
-    // so that the surface the point lies on does not shadow itself.
-    let eps = 1e-7 * (1.0 + p.length()).max(distance);
-    nearest(data, p, to_light, eps, distance - eps).is_none()
+    // Start a hair off the point, relative to its magnitude, so that the
+    // surface it lies on does not shadow itself; stop a hair short of the
+    // light, relative to its distance. (The start does not grow with the
+    // distance: a sun's entry plane can be 400 km off, where 1e-7 of it
+    // would skip 4 cm of the ray.)
+    let start = 1e-7 * (1.0 + p.length());
+    let end = distance - 1e-7 * (1.0 + p.length()).max(distance);
+    nearest(data, p, to_light, start, end).is_none()
 }
 
 /// Light map and cone profile, evaluated directly from the light's definition.

@@ -107,14 +107,20 @@ pub fn volume_transmittance(inputs: &LightInputs, light: &GpuLight, l: usize, p:
 
 /// 1 if the segment from the surface point `p` (unit `normal`, facing the
 /// light) toward the light is free of geometry, else 0. The ray starts at
-/// `p` itself and counts hits from `1e-5` of the scene's scale at `p` on,
-/// divided by the cosine of incidence (where f32 rounding of `p` could meet
-/// its own surface again), to a hair short of the light (or of a
+/// `p` itself and counts hits from `1e-5` of `p`'s magnitude (at least 1 m)
+/// on, divided by the cosine of incidence (where f32 rounding of `p` could
+/// meet its own surface again), to a hair short of the light (or of a
 /// directional light's entry plane). An origin moved off the surface along
 /// the normal instead would move every shadow's outline by that much: 57 µm
 /// in Fig. 6, where the sphere's outline passes 3 µm from a pixel centre.
+///
+/// The light's distance takes no part in where hits start: a sun's entry
+/// plane lies at the scene's bounds, 400 km off in a scene with a ground
+/// to the horizon, and `1e-5` of that skipped the first 4 m / cos of every
+/// shadow ray: no object shadowed the ground it stood on (`desert_garden`,
+/// 4.1 % RMS against the reference, 0.56 % without).
 pub fn shadow_ray_visibility(geometry: &Geometry, p: Vec3, normal: Vec3, to_light: Vec3, distance: f32) -> f32 {
-    let scale = p.abs().max_element().max(distance).max(1.0);
+    let scale = p.abs().max_element().max(1.0);
     let t_min = 1e-5 * scale / normal.dot(to_light).max(1e-3);
     if occluded(p, to_light, t_min, distance * (1.0 - 1e-5), geometry) {
         0.0
@@ -488,5 +494,40 @@ mod tests {
             }
         }
         assert!(checked > 120, "{checked}");
+    }
+
+    #[test]
+    fn a_far_sun_still_casts_near_shadows() {
+        // A sun whose entry plane is 400 km off (the bounds of a scene with
+        // a ground to the horizon), a ground triangle as wide at y = 0 and
+        // a 2 cm ball 10 cm above it: the point under the ball, toward the
+        // sun, is in its shadow; points on the wide ground beside it see
+        // the sun (the ground does not shadow itself). With hits counted
+        // from 1e-5 of the entry plane's distance (4 m), the ball was
+        // skipped.
+        let far = 4.0e5f32;
+        let to_sun = Vec3::new(0.3, 1.0, 0.2).normalize();
+        let ball = to_sun * 0.1;
+        let spheres = [GpuSphere { center_radius: ball.extend(0.02), ..Default::default() }];
+        let triangles = [GpuTriangle {
+            v0: Vec4::new(-far, 0.0, -far, 1.0),
+            v1: Vec4::new(far, 0.0, -far, 1.0),
+            v2: Vec4::new(0.0, 0.0, far, 1.0),
+            ..Default::default()
+        }];
+        let nodes = [GpuBvhNode {
+            bounds_min: Vec4::new(-far, -1.0, -far, 0.0),
+            bounds_max: Vec4::new(far, 1.0, far, 0.0),
+            first: 0,
+            count: 1,
+            skip: 1,
+            right: 0,
+        }];
+        let geometry =
+            Geometry { spheres: &spheres, sphere_count: 1, triangles: &triangles, nodes: &nodes, node_count: 1 };
+        assert_eq!(shadow_ray_visibility(&geometry, Vec3::ZERO, Vec3::Y, to_sun, far), 0.0);
+        for p in [Vec3::new(0.5, 0.0, 0.0), Vec3::new(-3.0, 0.0, 7.0), Vec3::new(1000.0, 0.0, -2000.0)] {
+            assert_eq!(shadow_ray_visibility(&geometry, p, Vec3::Y, to_sun, far), 1.0, "{p}");
+        }
     }
 }

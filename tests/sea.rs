@@ -229,7 +229,7 @@ fn stress_image_sizes() {
         let seen = slicelight_shaders::sea::surface_pixel(i, &big.common, p, waves, &[0.0], &blank);
         assert!(seen.is_finite() && seen.w >= 0.0, "pixel ({x}, {y}): surface {seen}");
         for v in [
-            slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &sunlit, &clouds),
+            slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &[], &sunlit, &clouds),
             slicelight_shaders::sea::bottom_pixel(
                 i,
                 &big.common,
@@ -246,7 +246,8 @@ fn stress_image_sizes() {
         }
         // The lower half of the image looks down at the sea.
         if y > n / 2 + 8 {
-            let v = slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &sunlit, &clouds);
+            let v =
+                slicelight_shaders::sea::order1_pixel(i, &big.common, p, seen, &big.sea.bottom, &[], &sunlit, &clouds);
             assert!(v.max_element() > 0.0, "pixel ({x}, {y}) misses the sea");
         }
     }

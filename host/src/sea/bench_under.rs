@@ -12,7 +12,8 @@
 //! to the reference's peak. Waves are read at each sample's point on both
 //! sides (the footprint filter off), so that the two see the same normal.
 //! Times are medians over repeats: the whole render, `sea.order2`, and the
-//! shafts' passes (`sea.caustics`, `sea.shafts`, `sea.order1`).
+//! shafts' passes (`sea.caustics`, `sea.shafts`, `sea.shaft_samples`,
+//! `sea.order1`). The shafts' sample stride is swept too.
 
 use anyhow::{Context, Result};
 use glam::DVec3;
@@ -33,6 +34,7 @@ struct Config {
     polar: u32,
     shaft_planes: u32,
     shaft_steps: u32,
+    shaft_stride: u32,
 }
 
 struct Row {
@@ -55,17 +57,22 @@ fn sweep(data: &SceneData, quick: bool) -> Vec<Config> {
         polar: p.polar,
         shaft_planes: p.shaft_planes,
         shaft_steps: p.shaft_steps,
+        shaft_stride: p.shaft_stride,
     };
     let planes: &[u32] = if quick { &[2, 4, 8, 16] } else { &[2, 3, 4, 6, 8, 12, 16, 24] };
     let polar: &[u32] = if quick { &[2, 6, 12] } else { &[2, 4, 6, 8, 12, 16] };
     let shafts: &[u32] = if quick { &[0, 4, 12, 24] } else { &[0, 2, 4, 8, 12, 24, 48] };
     let steps: &[u32] = if quick { &[4, 8, 16, 32] } else { &[2, 4, 6, 8, 12, 16, 24, 32, 64] };
+    let strides: &[u32] = if quick { &[1, 2, 4] } else { &[1, 2, 3, 4, 6, 8] };
     let mut v = vec![base];
     v.extend(planes.iter().map(|&n| Config { series: "planes", planes: n, ..base }));
     v.extend(polar.iter().map(|&k| Config { series: "directions", polar: k, ..base }));
     if p.shaft_planes > 0 {
         v.extend(shafts.iter().map(|&k| Config { series: "shafts", shaft_planes: k, ..base }));
         v.extend(steps.iter().map(|&k| Config { series: "shaft steps", shaft_steps: k, ..base }));
+    }
+    if p.shaft_planes > 0 || !data.geometry().is_empty() {
+        v.extend(strides.iter().map(|&k| Config { series: "shaft stride", shaft_stride: k, ..base }));
     }
     v
 }
@@ -83,6 +90,7 @@ fn configure(data: &SceneData, c: Option<&Config>) -> Result<SceneData> {
                     s.shaft_planes = c.shaft_planes;
                     s.shaft_steps = c.shaft_steps;
                 }
+                s.shaft_stride = c.shaft_stride;
             }
             if let super::Waves::Spectrum(w) = &mut s.waves {
                 w.filter = false;
@@ -107,11 +115,13 @@ pub fn run(
     for BenchScene { path, name, data } in scenes.iter().copied() {
         crate::reference::supports(data).with_context(|| format!("{}", path.display()))?;
         let unfiltered = configure(data, None)?;
-        let w = data.width();
-        let pixels: Vec<u32> = (0..data.height())
-            .step_by(stride as usize)
-            .flat_map(|y| (0..w).step_by(stride as usize).map(move |x| y * w + x))
-            .collect();
+        let (w, h) = (data.width(), data.height());
+        // Every `stride`-th pixel each way, the k-th one moved on by k mod 4
+        // pixels: the lattice meets every offset from the shafts' samples
+        // (`shaft_stride` 2 or 4), not only the samples themselves.
+        let along =
+            |n: u32| (0..n).step_by(stride as usize).enumerate().map(|(k, v)| v + k as u32 % 4).filter(move |&v| v < n);
+        let pixels: Vec<u32> = along(h).flat_map(|y| along(w).map(move |x| y * w + x)).collect();
         let t = std::time::Instant::now();
         let reference: Vec<DVec3> =
             pixels.par_iter().map(|&i| crate::reference::surface_pixel(&unfiltered, i % w, i / w)).collect();
@@ -121,7 +131,7 @@ pub fn run(
                 let d = configure(data, Some(&c))?;
                 let order2: Vec<&'static dyn crate::passes::Pass> = vec![&super::SeaOrder2];
                 let shafts: Vec<&'static dyn crate::passes::Pass> =
-                    vec![&super::SeaCaustics, &super::SeaShafts, &super::SeaOrder1];
+                    vec![&super::SeaCaustics, &super::SeaShafts, &super::SeaShaftSamples, &super::SeaOrder1];
                 let timed = time_renders(&d, backend, repeats, &[&order2, &shafts])?;
                 let at: Vec<DVec3> =
                     pixels.iter().map(|&i| timed.last.image[i as usize].truncate().as_dvec3()).collect();
@@ -138,13 +148,14 @@ pub fn run(
                     rms_relative: diff.rms_relative,
                 };
                 eprintln!(
-                    "{name:>14} {:>4} {:<10} n_z={:<3} n_d={:<5} shaft planes={:<3} steps={:<3} {:>8.4} s (order 2 {:.4} s, shafts {:.4} s)  8-bit rms {:.3}%  max {:.3}%",
+                    "{name:>14} {:>4} {:<12} n_z={:<3} n_d={:<5} shaft planes={:<3} steps={:<3} stride={} {:>8.4} s (order 2 {:.4} s, shafts {:.4} s)  8-bit rms {:.3}%  max {:.3}%",
                     row.backend,
                     c.series,
                     c.planes,
                     3 * c.polar * c.polar,
                     c.shaft_planes,
                     c.shaft_steps,
+                    c.shaft_stride,
                     row.seconds,
                     row.order2_seconds,
                     row.shafts_seconds,
@@ -161,17 +172,18 @@ pub fn run(
     pairs.dedup();
     for (scene, backend) in &pairs {
         let path = out_dir.join(format!("sea_under_time_vs_error_{scene}_{backend}.png"));
-        let series: Vec<(String, Vec<(f64, f64)>)> = ["planes", "directions", "shafts", "shaft steps", "auto"]
-            .iter()
-            .map(|s| {
-                let points = rows
-                    .iter()
-                    .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *s)
-                    .map(|r| (r.seconds, r.rms_8bit))
-                    .collect();
-                (s.to_string(), points)
-            })
-            .collect();
+        let series: Vec<(String, Vec<(f64, f64)>)> =
+            ["planes", "directions", "shafts", "shaft steps", "shaft stride", "auto"]
+                .iter()
+                .map(|s| {
+                    let points = rows
+                        .iter()
+                        .filter(|r| &r.scene == scene && r.backend == *backend && r.config.series == *s)
+                        .map(|r| (r.seconds, r.rms_8bit))
+                        .collect();
+                    (s.to_string(), points)
+                })
+                .collect();
         let caption = format!("{scene} ({backend}): under water, time against error");
         let labels = crate::bench::LogLogPlot {
             caption: &caption,
@@ -194,6 +206,7 @@ struct Record<'a> {
     directions: u32,
     shaft_planes: u32,
     shaft_steps: u32,
+    shaft_stride: u32,
     median_seconds: f64,
     order2_median_seconds: f64,
     shafts_median_seconds: f64,
@@ -213,6 +226,7 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
             directions: 3 * r.config.polar * r.config.polar,
             shaft_planes: r.config.shaft_planes,
             shaft_steps: r.config.shaft_steps,
+            shaft_stride: r.config.shaft_stride,
             median_seconds: r.seconds,
             order2_median_seconds: r.order2_seconds,
             shafts_median_seconds: r.shafts_seconds,

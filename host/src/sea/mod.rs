@@ -49,6 +49,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &SeaSurface,
     &SeaWater,
     &SeaReflection,
+    &SeaShaftSamples,
     &SeaOrder1,
     &SeaOrder2,
     &SeaBottom,
@@ -102,6 +103,15 @@ pub static SEA_SURFACE: Resource =
     Resource { binding: 68, name: "sea surface", kind: ResourceKind::PerPixel { blank: no_radiance } };
 pub static SEA_REFLECTION: Resource =
     Resource { binding: 23, name: "sea reflection", kind: ResourceKind::PerPixel { blank: no_radiance } };
+/// `sea.shaft_samples`, two `Vec4`s a pixel: the shafts' ratio to the flat
+/// beam (rgb) and the length gathered over (w), and the shade signature
+/// (xy), at every `shaft_stride`-th pixel; w = -1 elsewhere
+/// (`slicelight_shaders::sea::under::shaft_sample`).
+pub static SEA_SHAFT_SAMPLES: Resource =
+    Resource { binding: 88, name: "sea shaft samples", kind: ResourceKind::PerPixel { blank: no_shaft_sample } };
+fn no_shaft_sample() -> Vec<u8> {
+    bytemuck::cast_slice(&[Vec4::new(0.0, 0.0, 0.0, -1.0), Vec4::ZERO]).to_vec()
+}
 pub static SEA_ORDER1: Resource =
     Resource { binding: 24, name: "sea order 1", kind: ResourceKind::PerPixel { blank: no_radiance } };
 pub static SEA_ORDER2: Resource =
@@ -169,6 +179,11 @@ pub struct Settings {
     /// Intervals along each view ray the shafts are gathered over.
     #[serde(default = "shaft_steps")]
     pub shaft_steps: u32,
+    /// Under the water, the shafts (and objects' shadows in the water) are
+    /// gathered along every `shaft_stride`-th pixel's ray each way and
+    /// interpolated between rays alike in length; 1: every pixel.
+    #[serde(default = "shaft_stride")]
+    pub shaft_stride: u32,
     /// Sampling planes `n_z`; none: chosen by the 1/255 rule.
     pub planes: Option<u32>,
     /// Sampling directions `n_d` (three sets of `k^2`, `k` even: 12, 48, 108,
@@ -190,6 +205,12 @@ fn shaft_planes() -> u32 {
 fn shaft_steps() -> u32 {
     SHAFT_STEPS
 }
+fn shaft_stride() -> u32 {
+    SHAFT_STRIDE
+}
+/// The default stride of the shafts' samples under the water (docs/sea.md,
+/// "Caustic light shafts": the bench's time against error).
+pub const SHAFT_STRIDE: u32 = 2;
 /// The default intervals of the shafts along a view ray (docs/sea.md,
 /// "Caustic light shafts": the bench's time against error).
 pub const SHAFT_STEPS: u32 = 16;
@@ -623,7 +644,7 @@ pub fn configure(
         shaft_level: 0,
         shaft_steps: 0,
         second_order: (s.second_order) as u32,
-        pad2: 0,
+        shaft_stride: 1,
         pad3: 0,
     };
     if underwater {
@@ -665,8 +686,12 @@ fn shafts_of(s: &Settings, params: &mut SeaParams, objects_below: bool) -> Resul
             bail!(invalid("sea.shaft_depth_m", "a depth in m in (0, 1e4]", d));
         }
     }
+    if !(1..=8).contains(&s.shaft_stride) {
+        bail!(invalid("sea.shaft_stride", "a stride in pixels in 1..=8", s.shaft_stride));
+    }
     // The intervals also carry the objects' shadows without shafts.
     params.shaft_steps = s.shaft_steps;
+    params.shaft_stride = s.shaft_stride;
     let needed = params.underwater != 0 || objects_below || params.bottom_nx >= 2;
     if !(s.shafts && needed && params.waves == WAVES_NORMAL_MAP) {
         return Ok(());
@@ -1514,6 +1539,7 @@ fn run_term(
             accumulated: frame.get::<Vec4>(&SEA_ACCUMULATED_MAP),
             correction: frame.get::<Vec4>(&SEA_BOTTOM_CORRECTION),
             caustic: frame.get::<u32>(&SEA_CAUSTICS),
+            samples: frame.get::<Vec4>(&SEA_SHAFT_SAMPLES),
             // The shaft maps (empty where `sea.shafts` did not run) and the
             // objects that shade the sun, once per band.
             sunlit: Sunlit { shafts: frame.get::<Vec4>(&SEA_SHAFTS), geometry: scene.geometry() },
@@ -1534,8 +1560,75 @@ struct TermInputs<'a> {
     accumulated: &'a [Vec4],
     correction: &'a [Vec4],
     caustic: &'a [u32],
+    samples: &'a [Vec4],
     sunlit: Sunlit<'a>,
     clouds: CloudShadow<'a>,
+}
+
+pub struct SeaShaftSamples;
+
+impl Pass for SeaShaftSamples {
+    fn name(&self) -> &'static str {
+        "sea.shaft_samples"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::shaft_samples_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![
+            COMMON,
+            SEA_PARAMS,
+            SEA_SURFACE,
+            SEA_SHAFTS,
+            crate::passes::SPHERES,
+            crate::passes::TRIANGLES,
+            crate::passes::BVH_NODES
+        ]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_SHAFT_SAMPLES]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::PerPixel
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_sea(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        if p.underwater == 0 {
+            return Plan::skip("the eye is above the water");
+        }
+        if scene.sea.params.scattering.truncate().max_element() <= 0.0 {
+            return Plan::skip("the water does not scatter (scattering = 0)");
+        }
+        if !slicelight_shaders::sea::under::shafts_sampled(p, &scene.geometry()) {
+            let why = if p.shaft_stride <= 1 {
+                "shaft_stride = 1: gathered at every pixel"
+            } else {
+                "no shafts and no objects: the flat beam's closed form at every pixel"
+            };
+            return Plan::skip(why);
+        }
+        let s = p.shaft_stride;
+        let what = if p.shaft_planes > 0 { "the shafts" } else { "the objects' shadows in the water" };
+        Plan::run(format!("{what} gathered every {s} pixels each way, interpolated between rays alike in length"), 0)
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        frame.write_all::<[Vec4; 2]>(&SEA_SHAFT_SAMPLES, common.band_pixels as usize, |frame, values| {
+            let sunlit = Sunlit { shafts: frame.get::<Vec4>(&SEA_SHAFTS), geometry: scene.geometry() };
+            let surface = frame.get::<Vec4>(&SEA_SURFACE);
+            for_each_invocation(values, common.band_start, progress, |i, v| {
+                let seen = surface.get((i - common.band_start) as usize).copied().unwrap_or(Vec4::ZERO);
+                let (ratio, shade) = slicelight_shaders::sea::under::shaft_sample(i, common, p, seen, &sunlit);
+                *v = [ratio, shade];
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        compare_layer("sea shaft samples", &SEA_SHAFT_SAMPLES, gpu, cpu)
+    }
 }
 
 pub struct SeaOrder1;
@@ -1554,6 +1647,7 @@ impl Pass for SeaOrder1 {
             SEA_SURFACE,
             SEA_BOTTOM_GRID,
             SEA_SHAFTS,
+            SEA_SHAFT_SAMPLES,
             crate::passes::SPHERES,
             crate::passes::TRIANGLES,
             crate::passes::BVH_NODES,
@@ -1587,7 +1681,7 @@ impl Pass for SeaOrder1 {
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let (p, bottom) = (&scene.sea.params, &scene.sea.bottom[..]);
         run_term(scene, common, frame, progress, &SEA_ORDER1, |i, t, x| {
-            order1_pixel(i, common, p, t, bottom, &x.sunlit, &x.clouds)
+            order1_pixel(i, common, p, t, bottom, x.samples, &x.sunlit, &x.clouds)
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

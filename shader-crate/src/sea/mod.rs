@@ -159,7 +159,9 @@ pub struct SeaParams {
     /// 1 when second-order scattering is on (the accumulated map is
     /// built): `glass::sea_along` reads order 2 only then.
     pub second_order: u32,
-    pub pad2: u32,
+    /// `under::order1_shafts` is gathered every `shaft_stride` pixels each
+    /// way (`sea.shaft_samples`) and interpolated between (1: every pixel).
+    pub shaft_stride: u32,
     pub pad3: u32,
 }
 
@@ -1114,12 +1116,14 @@ impl CloudShadow<'_> {
 /// the surface. Under water, eq. 5 along the view ray
 /// (`under::order1_segment`) and, where the ray meets the surface, the
 /// single scattering the surface reflects toward the eye, attenuated.
+#[allow(clippy::too_many_arguments)]
 pub fn order1_pixel(
     index: u32,
     common: &CommonParams,
     p: &SeaParams,
     surface: Vec4,
     bottom: &[f32],
+    samples: &[Vec4],
     sunlit: &under::Sunlit,
     clouds: &CloudShadow,
 ) -> Vec4 {
@@ -1130,8 +1134,12 @@ pub fn order1_pixel(
             return Vec4::ZERO;
         }
         let above = Vec3::new(v.origin.x, p.level, v.origin.z);
-        let mut light =
-            under::order1_shafts(p, sunlit, v.origin, v.dir, p.camera_depth, v.length, c1) * clouds.at(p, above);
+        let along = if under::shafts_sampled(p, &sunlit.geometry) {
+            under::order1_upsampled(p, common, index, samples, sunlit, &v)
+        } else {
+            under::order1_shafts(p, sunlit, v.origin, v.dir, p.camera_depth, v.length, c1)
+        };
+        let mut light = along * clouds.at(p, above);
         if v.end == under::END_SURFACE {
             let (depth, _) = under::reflected_bottom(p, bottom, &v);
             let up = order1_radiance(p, v.up, depth, c1) * clouds.at(p, v.end_point());
@@ -1549,6 +1557,7 @@ pub fn order1_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 88)] samples: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 24)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
@@ -1565,9 +1574,37 @@ pub fn order1_kernel(
             &params[0],
             surface[index as usize],
             bottom,
+            samples,
             &sunlit,
             &clouds,
         );
+    }
+}
+
+/// `sea.shaft_samples`: the shafts' ratio and the shade signature at
+/// every `shaft_stride`-th pixel (`under::shaft_sample`), two values a pixel.
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn shaft_samples_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 68)] surface: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 78)] shafts: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 2)] spheres: &[crate::types::GpuSphere],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 3)] triangles: &[crate::types::GpuTriangle],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 4)] nodes: &[crate::types::GpuBvhNode],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 88)] samples: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let common = &common[0];
+    if index < common.band_pixels {
+        let sunlit = under::Sunlit { shafts, geometry: crate::scene_geometry(common, spheres, triangles, nodes) };
+        let (ratio, shade) =
+            under::shaft_sample(common.band_start + index, common, &params[0], surface[index as usize], &sunlit);
+        samples[2 * index as usize] = ratio;
+        samples[2 * index as usize + 1] = shade;
     }
 }
 

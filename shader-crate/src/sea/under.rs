@@ -307,6 +307,140 @@ pub fn order1_shafts(p: &SeaParams, sunlit: &Sunlit, origin: Vec3, dir: Vec3, z_
     sum
 }
 
+/// Whether `order1_shafts` is sampled every `shaft_stride` pixels and
+/// interpolated between (`shaft_sample`, `order1_upsampled`): under water,
+/// where it does more than the closed form (shafts or objects' shadows).
+pub fn shafts_sampled(p: &SeaParams, geometry: &Geometry) -> bool {
+    p.underwater != 0 && p.shaft_stride > 1 && !(p.shaft_planes == 0 && geometry.is_empty())
+}
+
+/// Relative difference of two samples' lengths (`shaft_sample`'s w) within
+/// which one stands for the other: the ratio is a weighted mean over the
+/// ray, and rays 10 % apart in length past an object's edge or the
+/// surface's horizon are left to be gathered whole.
+pub const SHAFT_SAMPLE_LENGTH_TOLERANCE: f32 = 0.1;
+
+/// How far along the view ray `order1_shafts` looks before the flat tail
+/// (m): the ray's length up to `SHAFT_REACH` optical lengths.
+fn shaft_reach_length(p: &SeaParams, length: f32) -> f32 {
+    let c = p.order1_extinction.xyz();
+    let c_min = c.x.min(c.y).min(c.z);
+    let reach = if c_min > 0.0 { SHAFT_REACH / c_min } else { 1e6 };
+    length.min(reach)
+}
+
+/// Whether the sun reaches two points of the view ray, at 0.5 and 0.94 of
+/// the length `order1_shafts` gathers over (`shaft_reach_length`): the
+/// objects' shadows a pixel's ray crosses, told cheaply. Where it looks
+/// along the sun's beam past an object (a raft against the sun), its
+/// whole ray is in the shadow and its neighbours' are not, though all end
+/// at the surface alike: the two visibilities tell them apart. (1, 1)
+/// without objects, at no cost.
+pub fn shade_signature(p: &SeaParams, geometry: &Geometry, origin: Vec3, dir: Vec3, length: f32) -> Vec2 {
+    let l = shaft_reach_length(p, length);
+    Vec2::new(
+        sun_visibility(p, geometry, origin + dir * (0.5 * l)),
+        sun_visibility(p, geometry, origin + dir * (0.94 * l)),
+    )
+}
+
+/// No sample (`shaft_sample`'s first value's w).
+const NO_SAMPLE: Vec4 = Vec4::new(0.0, 0.0, 0.0, -1.0);
+
+/// The per-pixel values of `sea.shaft_samples`: at every `shaft_stride`-th
+/// pixel each way (`x` and `y` multiples of it), first the ratio of the
+/// view ray's order 1 with the shafts and the objects' shadows
+/// (`order1_shafts`) to the flat beam's closed form (`order1_segment`),
+/// rgb (dimensionless), and w the length it was gathered over (m, up to
+/// `SHAFT_REACH` optical lengths); second its `shade_signature` (xy).
+/// Elsewhere, and where the ray sees no water, w = -1.
+pub fn shaft_sample(index: u32, common: &CommonParams, p: &SeaParams, surface: Vec4, sunlit: &Sunlit) -> (Vec4, Vec4) {
+    let s = p.shaft_stride.max(1);
+    let (x, y) = (index % common.width, index / common.width);
+    if x % s != 0 || y % s != 0 {
+        return (NO_SAMPLE, Vec4::ZERO);
+    }
+    let v = decode(index, common, p, surface);
+    if v.end == END_NONE {
+        return (NO_SAMPLE, Vec4::ZERO);
+    }
+    let c1 = p.order1_extinction.xyz();
+    let full = order1_shafts(p, sunlit, v.origin, v.dir, p.camera_depth, v.length, c1);
+    let flat = order1_segment(p, v.dir, p.camera_depth, v.length, c1);
+    let signature = shade_signature(p, &sunlit.geometry, v.origin, v.dir, v.length);
+    (ratio(full, flat).extend(shaft_reach_length(p, v.length)), signature.extend(0.0).extend(0.0))
+}
+
+/// `full / flat` per channel, 1 where the flat beam sends nothing.
+fn ratio(full: Vec3, flat: Vec3) -> Vec3 {
+    Vec3::new(ratio1(full.x, flat.x), ratio1(full.y, flat.y), ratio1(full.z, flat.z))
+}
+
+fn ratio1(a: f32, b: f32) -> f32 {
+    if b > 1e-30 {
+        a / b
+    } else {
+        1.0
+    }
+}
+
+/// Order 1 along the view ray of `v` (pixel `index`'s sample) from
+/// `sea.shaft_samples`' ratios: the flat beam's closed form
+/// (`order1_segment`) times the ratio bilinear between the four samples
+/// around the pixel (`samples`, this band's, two values a pixel), when
+/// all four it weighs were gathered over lengths within
+/// `SHAFT_SAMPLE_LENGTH_TOLERANCE` of its own and share its
+/// `shade_signature`; otherwise (an object's silhouette, its shadow's
+/// edge seen along the beam, the surface's horizon, the image's or the
+/// band's last rows and columns) `order1_shafts` itself. W/(m^2 sr), rgb.
+pub fn order1_upsampled(
+    p: &SeaParams,
+    common: &CommonParams,
+    index: u32,
+    samples: &[Vec4],
+    sunlit: &Sunlit,
+    v: &UnderView,
+) -> Vec3 {
+    let c1 = p.order1_extinction.xyz();
+    let s = p.shaft_stride.max(1);
+    let (x, y) = (index % common.width, index / common.width);
+    let (x0, y0) = (x - x % s, y - y % s);
+    let (fx, fy) = ((x - x0) as f32 / s as f32, (y - y0) as f32 / s as f32);
+    let own = shaft_reach_length(p, v.length);
+    let signature = shade_signature(p, &sunlit.geometry, v.origin, v.dir, v.length);
+    let mut sum = Vec3::ZERO;
+    let mut all = true;
+    let mut corner = 0;
+    while corner < 4 {
+        let (dx, dy) = (corner & 1, corner >> 1);
+        let w = if dx == 1 { fx } else { 1.0 - fx } * if dy == 1 { fy } else { 1.0 - fy };
+        if w > 0.0 {
+            let (cx, cy) = (x0 + dx * s, y0 + dy * s);
+            let at = cy * common.width + cx;
+            let inside = cx < common.width && at >= common.band_start && at - common.band_start < common.band_pixels;
+            let (sample, shade) = if inside {
+                let k = 2 * (at - common.band_start) as usize;
+                (samples[k], samples[k + 1])
+            } else {
+                (NO_SAMPLE, Vec4::ZERO)
+            };
+            let alike = sample.w >= 0.0
+                && (sample.w - own).abs() <= SHAFT_SAMPLE_LENGTH_TOLERANCE * own
+                && shade.x == signature.x
+                && shade.y == signature.y;
+            if !alike {
+                all = false;
+            }
+            sum += sample.xyz() * w;
+        }
+        corner += 1;
+    }
+    if all {
+        return order1_segment(p, v.dir, p.camera_depth, v.length, c1) * sum;
+    }
+    order1_shafts(p, sunlit, v.origin, v.dir, p.camera_depth, v.length, c1)
+}
+
 /// What lights the water with shafts: the shaft maps and the objects that
 /// shade the sun (`order1_shafts`).
 pub struct Sunlit<'a> {

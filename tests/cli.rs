@@ -130,6 +130,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.surface",
         "sea.water",
         "sea.reflection",
+        "sea.shaft_samples",
         "sea.order1",
         "sea.order2",
         "sea.bottom",

@@ -230,6 +230,11 @@ impl GpuContext {
 
     /// Pixels per band: the whole image if every per-pixel buffer fits in
     /// one binding, else as many whole rows as fit.
+    /// Whether the device is Vulkan on the CPU (lavapipe, SwiftShader).
+    pub fn runs_on_the_cpu(&self) -> bool {
+        self.adapter.device_type == wgpu::DeviceType::Cpu
+    }
+
     pub fn band_pixels(&self, data: &SceneData) -> u32 {
         let widest = PASSES
             .iter()

@@ -44,7 +44,8 @@ struct ViewArgs {
     /// The scene file (TOML; see scenes/README.md); edits to it show as they are saved.
     scene: PathBuf,
     /// gpu: a Vulkan device (an error without one); cpu: the same kernel
-    /// functions on every core; auto: a device if there is one.
+    /// functions on every core; auto: a device if there is one that is not
+    /// itself the CPU (lavapipe: the CPU backend is faster).
     #[arg(long, value_enum, default_value = "auto")]
     backend: BackendChoice,
     /// Sub-pixel samples per pixel a still view accumulates (the positions
@@ -95,7 +96,8 @@ struct RenderArgs {
     #[arg(short, long = "output", required = true)]
     output: Vec<PathBuf>,
     /// gpu: a Vulkan device (an error without one); cpu: the same kernel
-    /// functions on every core; auto: a device if there is one.
+    /// functions on every core; auto: a device if there is one that is not
+    /// itself the CPU (lavapipe: the CPU backend is faster).
     #[arg(long, value_enum, default_value = "auto")]
     backend: BackendChoice,
     /// Write the device, the pass plan and each pass's time as JSON.

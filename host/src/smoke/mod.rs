@@ -398,7 +398,7 @@ pub fn stepping_device() -> Result<Option<&'static crate::gpu::GpuContext>> {
         // `auto` on a device that is itself the CPU (lavapipe): the CPU
         // steps faster (smoke_chimney's 160 steps: 7 s against 23 s on the
         // 2-core development machine), so the fluid stays there.
-        (Ok(d), BackendChoice::Auto) if d.adapter.device_type == wgpu::DeviceType::Cpu => Ok(None),
+        (Ok(d), BackendChoice::Auto) if d.runs_on_the_cpu() => Ok(None),
         (Ok(d), _) => Ok(Some(d)),
         (Err(e), BackendChoice::Gpu) => bail!("stepping the fluid on the GPU: {e}"),
         (Err(_), _) => Ok(None),

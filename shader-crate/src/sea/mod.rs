@@ -1141,8 +1141,9 @@ pub fn order1_pixel(
         };
         let mut light = along * clouds.at(p, above);
         if v.end == under::END_SURFACE {
-            let (depth, _) = under::reflected_bottom(p, bottom, &v);
-            let up = order1_radiance(p, v.up, depth, c1) * clouds.at(p, v.end_point());
+            // The water below, mirrored: down to the bottom or to an object
+            // in the water the reflected ray meets first (`order1_seen`).
+            let up = order1_seen(p, &mirrored(&v), bottom, sunlit, clouds);
             light += up * v.reflectance * under::attenuation(p, &v);
         }
         return light.extend(0.0);
@@ -1152,6 +1153,16 @@ pub fn order1_pixel(
         return Vec4::ZERO;
     }
     order1_seen(p, &v, bottom, sunlit, clouds).extend(0.0)
+}
+
+/// What an eye under the water sees mirrored where its view ray `v` meets
+/// the surface from below (`under::END_SURFACE`): the light arriving at
+/// that point from below along `v.up`, as an eye above the water is sent
+/// it (`order1_seen`, `bottom_seen`: the bottom, or an object in the water
+/// the reflected ray meets first), with `transmission` 1 (the caller takes
+/// `R` and the attenuation to the eye).
+pub fn mirrored(v: &under::UnderView) -> SeaView {
+    SeaView { hit: true, view: v.up, transmission: 1.0, point: v.end_point(), dir: -v.up, ..Default::default() }
 }
 
 /// Order 1 (eq. 5 to the bottom, or to an object under the surface) seen
@@ -1363,12 +1374,11 @@ pub fn bottom_pixel(
                 * bottom_focus(p, caustic, sunlit.shafts, q)
                 * under::sun_visibility(p, geometry, q)
         } else if v.end == under::END_SURFACE {
-            let (depth, cos_gamma) = under::reflected_bottom(p, bottom, &v);
-            let q = v.end_point() - v.up * (depth / v.up.y);
-            bottom_radiance(p, v.up, depth, cos_gamma)
-                * v.reflectance
-                * bottom_focus(p, caustic, sunlit.shafts, q)
-                * under::sun_visibility(p, geometry, q)
+            // The bottom mirrored, or an object in the water the reflected
+            // ray meets before it (`bottom_seen`, with the cloud shadow at
+            // the surface point).
+            let seen = bottom_seen(p, &mirrored(&v), bottom, caustic, sunlit, materials, clouds);
+            return (seen * v.reflectance * under::attenuation(p, &v)).extend(0.0);
         } else {
             return Vec4::ZERO;
         };

@@ -228,13 +228,13 @@ impl GpuContext {
         self.band_limit_bytes = bytes.min(self.max_binding_bytes);
     }
 
-    /// Pixels per band: the whole image if every per-pixel buffer fits in
-    /// one binding, else as many whole rows as fit.
     /// Whether the device is Vulkan on the CPU (lavapipe, SwiftShader).
     pub fn runs_on_the_cpu(&self) -> bool {
         self.adapter.device_type == wgpu::DeviceType::Cpu
     }
 
+    /// Pixels per band: the whole image if every per-pixel buffer fits in
+    /// one binding, else as many whole rows as fit.
     pub fn band_pixels(&self, data: &SceneData) -> u32 {
         let widest = PASSES
             .iter()

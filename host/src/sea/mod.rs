@@ -1523,16 +1523,17 @@ impl Pass for SeaReflection {
 
 /// A per-pixel sea term whose kernel reads `sea.surface`'s value for the
 /// pixel, the sea's parameters, and optionally the accumulated map and the depth
-/// table's correction (empty where their passes did not run).
-fn run_term(
+/// table's correction (empty where their passes did not run); `T` a pixel
+/// in `out` (a `Vec4`, or `sea.shaft_samples`' two).
+fn run_term<T: bytemuck::Pod + Send>(
     scene: &SceneData,
     common: &CommonParams,
     frame: &mut Frame,
     progress: &ProgressBar,
     out: &Resource,
-    term: impl Fn(u32, Vec4, &TermInputs) -> Vec4 + Sync,
+    term: impl Fn(u32, Vec4, &TermInputs) -> T + Sync,
 ) {
-    frame.write_all::<Vec4>(out, common.band_pixels as usize, |frame, values| {
+    frame.write_all::<T>(out, common.band_pixels as usize, |frame, values| {
         let lit = crate::common::light_inputs(scene, frame);
         let inputs = TermInputs {
             maps: frame.get::<Vec4>(&SEA_SCATTERING_MAPS),
@@ -1599,7 +1600,7 @@ impl Pass for SeaShaftSamples {
         if p.underwater == 0 {
             return Plan::skip("the eye is above the water");
         }
-        if scene.sea.params.scattering.truncate().max_element() <= 0.0 {
+        if p.scattering.truncate().max_element() <= 0.0 {
             return Plan::skip("the water does not scatter (scattering = 0)");
         }
         if !slicelight_shaders::sea::under::shafts_sampled(p, &scene.geometry()) {
@@ -1616,14 +1617,9 @@ impl Pass for SeaShaftSamples {
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
         let p = &scene.sea.params;
-        frame.write_all::<[Vec4; 2]>(&SEA_SHAFT_SAMPLES, common.band_pixels as usize, |frame, values| {
-            let sunlit = Sunlit { shafts: frame.get::<Vec4>(&SEA_SHAFTS), geometry: scene.geometry() };
-            let surface = frame.get::<Vec4>(&SEA_SURFACE);
-            for_each_invocation(values, common.band_start, progress, |i, v| {
-                let seen = surface.get((i - common.band_start) as usize).copied().unwrap_or(Vec4::ZERO);
-                let (ratio, shade) = slicelight_shaders::sea::under::shaft_sample(i, common, p, seen, &sunlit);
-                *v = [ratio, shade];
-            });
+        run_term(scene, common, frame, progress, &SEA_SHAFT_SAMPLES, |i, t, x| {
+            let (ratio, shade) = slicelight_shaders::sea::under::shaft_sample(i, common, p, t, &x.sunlit);
+            [ratio, shade]
         });
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {

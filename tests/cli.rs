@@ -122,6 +122,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.radiance_map",
         "sea.scattering_maps",
         "sea.accumulated_map",
+        "sea.caustic_rays",
         "sea.caustics",
         "sea.shafts",
         "sea.table_samples",

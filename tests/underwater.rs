@@ -256,7 +256,10 @@ fn wave_caustics_conserve_the_light_and_match_a_photon_tracer() {
     let p = &data.sea.params;
     assert!(p.caustics != 0, "the caustic map is built");
     let mut frame = slicelight::passes::Frame::default();
-    slicelight::sea::SeaCaustics.run_cpu(&data, &data.common, &mut frame, &indicatif::ProgressBar::hidden());
+    let hidden = indicatif::ProgressBar::hidden();
+    slicelight::sea::SeaCausticRays.run_cpu(&data, &data.common, &mut frame, &hidden);
+    slicelight::sea::SeaCausticRays.run_cpu(&data, &data.common, &mut frame, &hidden);
+    slicelight::sea::SeaCaustics.run_cpu(&data, &data.common, &mut frame, &hidden);
     let words = frame.get::<u32>(&slicelight::sea::SEA_CAUSTICS).to_vec();
     assert_eq!(words[0], 0, "no cross-section rejected");
     let n = p.wave_resolution;
@@ -367,7 +370,10 @@ fn a_million_triangle_wave_surface_keeps_its_light() {
     let (bottom_map, _) = slicelight_shaders::sea::caustics::caustic_map(p, 0);
     assert!(2 * bottom_map.resolution * bottom_map.resolution >= 1_000_000);
     let mut frame = slicelight::passes::Frame::default();
-    slicelight::sea::SeaCaustics.run_cpu(&data, &data.common, &mut frame, &indicatif::ProgressBar::hidden());
+    let hidden = indicatif::ProgressBar::hidden();
+    slicelight::sea::SeaCausticRays.run_cpu(&data, &data.common, &mut frame, &hidden);
+    slicelight::sea::SeaCausticRays.run_cpu(&data, &data.common, &mut frame, &hidden);
+    slicelight::sea::SeaCaustics.run_cpu(&data, &data.common, &mut frame, &hidden);
     let words = frame.get::<u32>(&slicelight::sea::SEA_CAUSTICS).to_vec();
     assert_eq!(words[0], 0, "no cross-section rejected");
     let n = p.wave_resolution;
@@ -392,7 +398,7 @@ fn mesh_flux(
     waves: &[glam::Vec4],
     map: &slicelight_shaders::sea::caustics::CausticMap,
 ) -> f64 {
-    let factor = |i: u32, j: u32| slicelight_shaders::sea::caustics::refracted_at(p, waves, map, i, j).1 as f64;
+    let factor = |i: u32, j: u32| slicelight_shaders::sea::caustics::refracted_at(p, waves, map, i, j).1.x as f64;
     let n = map.resolution;
     let mut flux = 0.0;
     for j in 0..n {
@@ -507,6 +513,7 @@ fn shafts_order1_along_rays_matches_the_reference() {
     let mut frame = slicelight::passes::Frame::default();
     let hidden = indicatif::ProgressBar::hidden();
     use slicelight::passes::Pass;
+    slicelight::sea::SeaCausticRays.run_cpu(&data, &data.common, &mut frame, &hidden);
     slicelight::sea::SeaCaustics.run_cpu(&data, &data.common, &mut frame, &hidden);
     slicelight::sea::SeaShafts.run_cpu(&data, &data.common, &mut frame, &hidden);
     let shafts = frame.get::<glam::Vec4>(&slicelight::sea::SEA_SHAFTS).to_vec();
@@ -640,6 +647,7 @@ fn shaft_planes_conserve_the_light_and_reduce_to_the_flat_beam() {
     assert_eq!((p.shaft_planes, p.shaft_level, caustics::shaft_resolution(p)), (12, 1, 128));
     let mut frame = slicelight::passes::Frame::default();
     let hidden = indicatif::ProgressBar::hidden();
+    slicelight::sea::SeaCausticRays.run_cpu(&data, &data.common, &mut frame, &hidden);
     slicelight::sea::SeaCaustics.run_cpu(&data, &data.common, &mut frame, &hidden);
     slicelight::sea::SeaShafts.run_cpu(&data, &data.common, &mut frame, &hidden);
     let words = frame.get::<u32>(&slicelight::sea::SEA_CAUSTICS).to_vec();

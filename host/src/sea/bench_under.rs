@@ -130,8 +130,13 @@ pub fn run(
             for c in sweep(&unfiltered, quick) {
                 let d = configure(data, Some(&c))?;
                 let order2: Vec<&'static dyn crate::passes::Pass> = vec![&super::SeaOrder2];
-                let shafts: Vec<&'static dyn crate::passes::Pass> =
-                    vec![&super::SeaCaustics, &super::SeaShafts, &super::SeaShaftSamples, &super::SeaOrder1];
+                let shafts: Vec<&'static dyn crate::passes::Pass> = vec![
+                    &super::SeaCausticRays,
+                    &super::SeaCaustics,
+                    &super::SeaShafts,
+                    &super::SeaShaftSamples,
+                    &super::SeaOrder1,
+                ];
                 let timed = time_renders(&d, backend, repeats, &[&order2, &shafts])?;
                 let at: Vec<DVec3> =
                     pixels.iter().map(|&i| timed.last.image[i as usize].truncate().as_dvec3()).collect();

@@ -21,7 +21,9 @@ use serde::Deserialize;
 use slicelight_shaders::optics;
 use slicelight_shaders::scatter::CpuAtomics;
 use slicelight_shaders::sea::air::Above;
-use slicelight_shaders::sea::caustics::{caustic_triangle, caustic_triangles, shaft_map_len, shaft_mip_texel};
+use slicelight_shaders::sea::caustics::{
+    caustic_points, caustic_ray, caustic_triangle, caustic_triangles, shaft_map_len, shaft_mip_texel,
+};
 use slicelight_shaders::sea::under::Sunlit;
 use slicelight_shaders::sea::{
     accumulate_planes, accumulated_map_texel, bottom_pixel, forward_fraction, layer_params, map_coords, order1_pixel,
@@ -41,6 +43,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &SeaRadianceMap,
     &SeaScatteringMaps,
     &SeaAccumulatedMap,
+    &SeaCausticRays,
     &SeaCaustics,
     &SeaShafts,
     &table::SeaTableSamples,
@@ -87,6 +90,10 @@ pub static SEA_ACCUMULATED_MAP: Resource = Resource {
 /// fixed-point words, rgb per texel of the wave tile.
 pub static SEA_CAUSTICS: Resource =
     Resource { binding: 77, name: "sea caustics", kind: ResourceKind::Frame(|s| s.sea.caustic_words() * 4) };
+/// The sun refracted at every grid point of the caustic maps' meshes
+/// (`sea.caustic_rays`): two `Vec4`s a point, where it lands and its flux.
+pub static SEA_CAUSTIC_RAYS: Resource =
+    Resource { binding: 89, name: "sea caustic rays", kind: ResourceKind::Frame(|s| s.sea.caustic_ray_bytes()) };
 /// The shaft planes' caustics and their mips (`sea.shafts`), rgb per texel.
 pub static SEA_SHAFTS: Resource =
     Resource { binding: 78, name: "sea shaft maps", kind: ResourceKind::Frame(|s| s.sea.shaft_texels() * 16) };
@@ -433,6 +440,15 @@ impl Setup {
     pub fn shaft_texels(&self) -> u64 {
         if self.enabled {
             shaft_map_len(&self.params) as u64
+        } else {
+            0
+        }
+    }
+    /// Bytes of the refracted rays the caustic maps are drawn from (0
+    /// without a map).
+    pub fn caustic_ray_bytes(&self) -> u64 {
+        if self.enabled && caustic_triangles(&self.params) > 0 {
+            caustic_points(&self.params) as u64 * 32
         } else {
             0
         }
@@ -1135,6 +1151,80 @@ impl Pass for SeaAccumulatedMap {
     }
 }
 
+/// Why the waves' caustic maps are not drawn, if they are not.
+fn skip_without_caustics(scene: &SceneData) -> Option<Plan> {
+    if let Some(skip) = skip_without_sea(scene) {
+        return Some(skip);
+    }
+    let p = &scene.sea.params;
+    if p.caustics == 0 && p.shaft_planes == 0 {
+        let why = if p.waves != WAVES_NORMAL_MAP {
+            "a flat sea (no waves to focus the light)"
+        } else if p.depth >= DEEP {
+            "no bottom"
+        } else if p.layers > 1 {
+            "a varying bottom (the caustic map is for a flat one)"
+        } else {
+            "caustics = false"
+        };
+        return Some(Plan::skip(why));
+    }
+    None
+}
+
+/// `sea.caustic_rays`: the sun refracted once at every grid point of the
+/// caustic maps' meshes (`slicelight_shaders::sea::caustics::caustic_ray`),
+/// which the six triangles around a point share.
+pub struct SeaCausticRays;
+
+impl Pass for SeaCausticRays {
+    fn name(&self) -> &'static str {
+        "sea.caustic_rays"
+    }
+    fn kernel(&self) -> &'static str {
+        "sea::wave_caustic_rays_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![SEA_PARAMS, SEA_WAVES]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![SEA_CAUSTIC_RAYS]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_caustics(scene) {
+            return skip;
+        }
+        let p = &scene.sea.params;
+        Plan::run(
+            format!("the sun refracted at the {} grid points of the caustic maps' meshes", caustic_points(p)),
+            caustic_points(p) as u64,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, _common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let p = &scene.sea.params;
+        frame.write_all::<[Vec4; 2]>(&SEA_CAUSTIC_RAYS, caustic_points(p) as usize, |_, out| {
+            for_each_invocation(out, 0, progress, |i, v| {
+                let (offset, flux) = caustic_ray(i, p, &scene.sea.waves);
+                *v = [offset, flux];
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // A refraction (sqrt) and three exps: Vulkan's precision, some ulps.
+        let (g, c) = (gpu.get::<Vec4>(&SEA_CAUSTIC_RAYS), cpu.get::<Vec4>(&SEA_CAUSTIC_RAYS));
+        compare_values(
+            "sea caustic rays",
+            &g.iter().flat_map(|v| v.to_array()).collect::<Vec<f32>>(),
+            &c.iter().flat_map(|v| v.to_array()).collect::<Vec<f32>>(),
+            1e-5,
+            0,
+        )
+    }
+}
+
 /// `sea.caustics`: the waves' caustic map on a flat bottom and on the
 /// shaft planes (`slicelight_shaders::sea::caustics`), rebuilt with the
 /// waves.
@@ -1148,7 +1238,7 @@ impl Pass for SeaCaustics {
         "sea::wave_caustics_kernel"
     }
     fn reads(&self) -> &'static [&'static Resource] {
-        resources![SEA_PARAMS, SEA_WAVES]
+        resources![SEA_PARAMS, SEA_CAUSTIC_RAYS]
     }
     fn writes(&self) -> &'static [&'static Resource] {
         resources![SEA_CAUSTICS]
@@ -1157,22 +1247,10 @@ impl Pass for SeaCaustics {
         Dispatch::Whole
     }
     fn plan(&self, scene: &SceneData) -> Plan {
-        if let Some(skip) = skip_without_sea(scene) {
+        if let Some(skip) = skip_without_caustics(scene) {
             return skip;
         }
         let p = &scene.sea.params;
-        if p.caustics == 0 && p.shaft_planes == 0 {
-            let why = if p.waves != WAVES_NORMAL_MAP {
-                "a flat sea (no waves to focus the light)"
-            } else if p.depth >= DEEP {
-                "no bottom"
-            } else if p.layers > 1 {
-                "a varying bottom (the caustic map is for a flat one)"
-            } else {
-                "caustics = false"
-            };
-            return Plan::skip(why);
-        }
         let n = p.wave_resolution;
         let mut what = Vec::new();
         if p.caustics != 0 {
@@ -1193,9 +1271,10 @@ impl Pass for SeaCaustics {
         let p = &scene.sea.params;
         let mut words = Buffer::zeroed::<u32>(scene.sea.caustic_words() as usize);
         {
+            let rays = frame.get::<Vec4>(&SEA_CAUSTIC_RAYS);
             let atomics = crate::cpu::as_atomics(words.as_mut_slice::<u32>());
             crate::cpu::for_each_index(caustic_triangles(p), progress, |i| {
-                caustic_triangle(i, p, &scene.sea.waves, &mut CpuAtomics(atomics));
+                caustic_triangle(i, p, rays, &mut CpuAtomics(atomics));
             });
         }
         frame.insert(&SEA_CAUSTICS, words);

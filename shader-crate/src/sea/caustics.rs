@@ -112,16 +112,18 @@ pub fn shaft_plane_depth(p: &SeaParams, k: u32) -> f32 {
     p.shaft_depth * k as f32 / (p.shaft_planes.max(2) - 1) as f32
 }
 
-/// The map invocation `index` draws into, and its triangle there.
-pub fn caustic_map(p: &SeaParams, index: u32) -> (CausticMap, u32) {
+/// The map texel `index` (over every map, as their texels are laid out)
+/// lies on, and the texel's index within it. A map's grid points are
+/// numbered as its texels.
+pub fn map_of_texel(p: &SeaParams, index: u32) -> (CausticMap, u32) {
     let bottom = bottom_map_texels(p);
-    if index < 2 * bottom {
+    if index < bottom {
         let map = CausticMap { level: 0, resolution: p.wave_resolution, depth: p.depth, sub: SUB, first_bin: 0 };
         return (map, index);
     }
     let m = shaft_resolution(p);
-    let rest = index - 2 * bottom;
-    let k = rest / (2 * m * m);
+    let rest = index - bottom;
+    let k = rest / (m * m);
     let map = CausticMap {
         level: p.shaft_level,
         resolution: m,
@@ -129,14 +131,27 @@ pub fn caustic_map(p: &SeaParams, index: u32) -> (CausticMap, u32) {
         sub: SHAFT_SUB,
         first_bin: 3 * (bottom + k * m * m),
     };
-    (map, rest % (2 * m * m))
+    (map, rest % (m * m))
 }
 
-/// The refracted sun at grid point `(i, j)` of `map`'s mesh: where its ray
-/// meets the map's plane (the map's texel coordinates, unwrapped), its
-/// relative flux factor `F` and the attenuation ratio per channel (see the
-/// module's text).
-pub fn refracted_at(p: &SeaParams, waves: &[Vec4], map: &CausticMap, i: u32, j: u32) -> (Vec2, f32, Vec3) {
+/// The map invocation `index` draws into, and its triangle there (two a
+/// texel, laid out as the texels).
+pub fn caustic_map(p: &SeaParams, index: u32) -> (CausticMap, u32) {
+    let (map, texel) = map_of_texel(p, index / 2);
+    (map, 2 * texel + index % 2)
+}
+
+/// Grid points of every map's mesh, one refracted ray each
+/// (`sea.caustic_rays`): as many as the maps' texels.
+pub fn caustic_points(p: &SeaParams) -> u32 {
+    caustic_texels(p)
+}
+
+/// The refracted sun at grid point `(i, j)` of `map`'s mesh: how far its
+/// ray lands from the point on the map's plane (texels) and its flux
+/// relative to the flat beam's, `F` times the attenuation ratio, per
+/// channel (see the module's text).
+pub fn refracted_at(p: &SeaParams, waves: &[Vec4], map: &CausticMap, i: u32, j: u32) -> (Vec2, Vec3) {
     let sun = p.sun_direction.xyz();
     let n_w = p.extinction.w;
     let normal = slope_normal(level_slope(p, waves, map.level, i, j));
@@ -151,16 +166,38 @@ pub fn refracted_at(p: &SeaParams, waves: &[Vec4], map: &CausticMap, i: u32, j: 
     };
     let d = map.depth;
     let texel = p.wave_size / map.resolution as f32;
-    let landed = Vec2::new(i as f32 + r.x * d / down / texel, j as f32 + r.z * d / down / texel);
+    let offset = Vec2::new(r.x * d / down / texel, r.z * d / down / texel);
     let c = p.extinction.xyz();
     let att = (-c * (d * (1.0 / down - 1.0 / p.sun_in_water.w))).exp();
-    (landed, factor, att)
+    (offset, att * factor)
+}
+
+/// Invocation `index` of `sea.caustic_rays`: grid point `index` (numbered
+/// as `map_of_texel`'s texels) refracts the sun once, for the six
+/// triangles around it (`caustic_triangle`): `(offset.x, offset.y, 0, 0)`
+/// and `(flux, 0)` of `refracted_at`.
+pub fn caustic_ray(index: u32, p: &SeaParams, waves: &[Vec4]) -> (Vec4, Vec4) {
+    let (map, t) = map_of_texel(p, index);
+    let n = map.resolution;
+    let (offset, flux) = refracted_at(p, waves, &map, t % n, t / n);
+    (Vec4::new(offset.x, offset.y, 0.0, 0.0), flux.extend(0.0))
+}
+
+/// Grid point `(i, j)` of `map` (`i, j <= n`: the tile repeats) from the
+/// rays `sea.caustic_rays` refracted: where it lands on the plane (texel
+/// coordinates, unwrapped) and its flux factor per channel.
+fn landed(rays: &[Vec4], map: &CausticMap, i: u32, j: u32) -> (Vec2, Vec3) {
+    let n = map.resolution;
+    let (wi, wj) = (if i == n { 0 } else { i }, if j == n { 0 } else { j });
+    let at = 2 * (map.first_bin / 3 + wj * n + wi) as usize;
+    let (o, f) = (rays[at], rays[at + 1]);
+    (Vec2::new(i as f32 + o.x, j as f32 + o.y), f.xyz())
 }
 
 /// Invocation `index`: triangle `t % 2` of grid cell `t / 2` (cells row by
 /// row) of the map `caustic_map` gives: its cross-section with the map's
 /// plane rasterised into the caustic words.
-pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, waves: &[Vec4], words: &mut A) {
+pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays: &[Vec4], words: &mut A) {
     let (map, t) = caustic_map(p, index);
     let n = map.resolution;
     let cell = t / 2;
@@ -169,12 +206,12 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, wave
     // (00, 10, 01) and (10, 11, 01).
     let (a, b, c) =
         if t & 1 == 0 { ((i, j), (i + 1, j), (i, j + 1)) } else { ((i + 1, j), (i + 1, j + 1), (i, j + 1)) };
-    let (pa, fa, ta) = refracted_at(p, waves, &map, a.0, a.1);
-    let (pb, fb, tb) = refracted_at(p, waves, &map, b.0, b.1);
-    let (pc, fc, tc) = refracted_at(p, waves, &map, c.0, c.1);
+    let (pa, fa) = landed(rays, &map, a.0, a.1);
+    let (pb, fb) = landed(rays, &map, b.0, b.1);
+    let (pc, fc) = landed(rays, &map, c.0, c.1);
     // The flux in texel^2 units: the horizontal area (half a texel^2) times
     // the relative factor and attenuation, the mean of the corners'.
-    let flux = (ta * fa + tb * fb + tc * fc) * (0.5 / 3.0);
+    let flux = (fa + fb + fc) * (0.5 / 3.0);
     if !(flux.x > 0.0 || flux.y > 0.0 || flux.z > 0.0) {
         return;
     }
@@ -190,10 +227,47 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, wave
         return;
     }
     let area2 = (pb.x - pa.x) * (pc.y - pa.y) - (pb.y - pa.y) * (pc.x - pa.x);
-    let sign = if area2 < 0.0 { -1.0 } else { 1.0 };
-    let sub = map.sub;
-    let step = 1.0 / sub as f32;
-    let first = -0.5 + 0.5 * step;
+    let t = Triangle { a: pa, b: pb, c: pc, sign: if area2 < 0.0 { -1.0 } else { 1.0 }, sub: map.sub };
+    let (w, h) = (i1 - i0 + 1.0, j1 - j0 + 1.0);
+    if w * h <= 4.0 {
+        // Most cross-sections span at most 2x2 texels: one walk, each
+        // texel's count kept (the same counts and shares as the two walks
+        // below, so the same sums).
+        let wide = w as u32;
+        let cells = (w * h) as u32;
+        let at = |c: u32| (i0 + (c % wide) as f32, j0 + (c / wide) as f32);
+        let (x, y) = at(0);
+        let c0 = covered(&t, x, y);
+        let (x, y) = at(1);
+        let c1 = if cells > 1 { covered(&t, x, y) } else { 0 };
+        let (x, y) = at(2);
+        let c2 = if cells > 2 { covered(&t, x, y) } else { 0 };
+        let (x, y) = at(3);
+        let c3 = if cells > 3 { covered(&t, x, y) } else { 0 };
+        let count = c0 + c1 + c2 + c3;
+        if count == 0 {
+            deposit_at_centroid(&map, words, &t, flux);
+            return;
+        }
+        let mut c = 0;
+        while c < cells {
+            let k = if c == 0 {
+                c0
+            } else if c == 1 {
+                c1
+            } else if c == 2 {
+                c2
+            } else {
+                c3
+            };
+            if k > 0 {
+                let (x, y) = at(c);
+                deposit(&map, words, x, y, flux * (k as f32 / count as f32));
+            }
+            c += 1;
+        }
+        return;
+    }
     // First the sub-samples covered in all, then each texel its share.
     let mut count = 0u32;
     let mut pass = 0;
@@ -202,18 +276,7 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, wave
         while y <= j1 {
             let mut x = i0;
             while x <= i1 {
-                let mut covered = 0u32;
-                let mut sy = 0;
-                while sy < sub {
-                    let mut sx = 0;
-                    while sx < sub {
-                        if inside(pa, pb, pc, sign, x + first + sx as f32 * step, y + first + sy as f32 * step) {
-                            covered += 1;
-                        }
-                        sx += 1;
-                    }
-                    sy += 1;
-                }
+                let covered = covered(&t, x, y);
                 if pass == 0 {
                     count += covered;
                 } else if covered > 0 {
@@ -224,14 +287,47 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, wave
             y += 1.0;
         }
         if count == 0 {
-            // Smaller than a sub-sample's spacing, or a focal line: all of
-            // it in the texel under the centroid.
-            let g = (pa + pb + pc) / 3.0;
-            deposit(&map, words, g.x.round(), g.y.round(), flux);
+            deposit_at_centroid(&map, words, &t, flux);
             return;
         }
         pass += 1;
     }
+}
+
+/// A cross-section on a map, texel coordinates, with its orientation
+/// (`sign`) and the sub-samples per texel each way.
+struct Triangle {
+    a: Vec2,
+    b: Vec2,
+    c: Vec2,
+    sign: f32,
+    sub: u32,
+}
+
+/// How many of texel `(x, y)`'s `sub^2` sub-samples lie in `t`.
+fn covered(t: &Triangle, x: f32, y: f32) -> u32 {
+    let step = 1.0 / t.sub as f32;
+    let first = -0.5 + 0.5 * step;
+    let mut n = 0u32;
+    let mut sy = 0;
+    while sy < t.sub {
+        let mut sx = 0;
+        while sx < t.sub {
+            if inside(t.a, t.b, t.c, t.sign, x + first + sx as f32 * step, y + first + sy as f32 * step) {
+                n += 1;
+            }
+            sx += 1;
+        }
+        sy += 1;
+    }
+    n
+}
+
+/// A cross-section that covers no sub-sample (smaller than their spacing,
+/// or a focal line): all of it in the texel under its centroid.
+fn deposit_at_centroid<A: AtomicWords + ?Sized>(map: &CausticMap, words: &mut A, t: &Triangle, flux: Vec3) {
+    let g = (t.a + t.b + t.c) / 3.0;
+    deposit(map, words, g.x.round(), g.y.round(), flux);
 }
 
 /// Whether `(x, y)` lies in the triangle `a b c` (`sign`: its orientation).

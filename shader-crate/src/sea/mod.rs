@@ -1701,13 +1701,32 @@ pub fn wave_caustics_kernel(
     #[spirv(global_invocation_id)] id: UVec3,
     #[spirv(num_workgroups)] groups: UVec3,
     #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
-    #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 89)] rays: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 77)] words: &mut [u32],
 ) {
     let index = crate::flat_index(id, groups);
     let p = &params[0];
     if index < caustics::caustic_triangles(p) {
-        caustics::caustic_triangle(index, p, waves, words);
+        caustics::caustic_triangle(index, p, rays, words);
+    }
+}
+
+/// The sun refracted once at every grid point of the caustic maps' meshes
+/// (`caustics::caustic_ray`), two values a point.
+#[spirv(compute(threads(64)))]
+pub fn wave_caustic_rays_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 19)] params: &[SeaParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 20)] waves: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 89)] rays: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let p = &params[0];
+    if index < caustics::caustic_points(p) {
+        let (offset, flux) = caustics::caustic_ray(index, p, waves);
+        rays[2 * index as usize] = offset;
+        rays[2 * index as usize + 1] = flux;
     }
 }
 

@@ -226,8 +226,7 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
         words.fetch_add(REJECTED_WORD, 1);
         return;
     }
-    let area2 = (pb.x - pa.x) * (pc.y - pa.y) - (pb.y - pa.y) * (pc.x - pa.x);
-    let t = Triangle { a: pa, b: pb, c: pc, sign: if area2 < 0.0 { -1.0 } else { 1.0 }, sub: map.sub };
+    let t = Triangle::new(pa, pb, pc, map.sub);
     let (w, h) = (i1 - i0 + 1.0, j1 - j0 + 1.0);
     if w * h <= 4.0 {
         // Most cross-sections span at most 2x2 texels: one walk, each
@@ -294,14 +293,31 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
     }
 }
 
-/// A cross-section on a map, texel coordinates, with its orientation
-/// (`sign`) and the sub-samples per texel each way.
+/// A cross-section on a map, texel coordinates: its corners, and its
+/// three edge functions `e_k(q) = ex_k (q.x - a.x) + ey_k (q.y - a.y) +
+/// c_k` (component `k` of each), oriented so that `q` lies in it where all
+/// three are at least 0; `sub` sub-samples per texel each way.
 struct Triangle {
     a: Vec2,
     b: Vec2,
     c: Vec2,
-    sign: f32,
+    ex: Vec3,
+    ey: Vec3,
+    c0: Vec3,
     sub: u32,
+}
+
+impl Triangle {
+    fn new(a: Vec2, b: Vec2, c: Vec2, sub: u32) -> Triangle {
+        let (ab, bc, ca) = (b - a, c - b, a - c);
+        // Edge k from corner k to the next: cross(edge, q - corner), each
+        // taken from `a` (e_2's constant is 0: its corner `c` is `a - ca`).
+        let ex = Vec3::new(-ab.y, -bc.y, -ca.y);
+        let ey = Vec3::new(ab.x, bc.x, ca.x);
+        let c0 = Vec3::new(0.0, bc.y * ab.x - bc.x * ab.y, 0.0);
+        let sign = if ab.x * (c.y - a.y) - ab.y * (c.x - a.x) < 0.0 { -1.0 } else { 1.0 };
+        Triangle { a, b, c, ex: ex * sign, ey: ey * sign, c0: c0 * sign, sub }
+    }
 }
 
 /// How many of texel `(x, y)`'s `sub^2` sub-samples lie in `t`.
@@ -311,9 +327,11 @@ fn covered(t: &Triangle, x: f32, y: f32) -> u32 {
     let mut n = 0u32;
     let mut sy = 0;
     while sy < t.sub {
+        let row = t.ey * (y + first + sy as f32 * step - t.a.y) + t.c0;
         let mut sx = 0;
         while sx < t.sub {
-            if inside(t.a, t.b, t.c, t.sign, x + first + sx as f32 * step, y + first + sy as f32 * step) {
+            let e = row + t.ex * (x + first + sx as f32 * step - t.a.x);
+            if e.x >= 0.0 && e.y >= 0.0 && e.z >= 0.0 {
                 n += 1;
             }
             sx += 1;
@@ -328,14 +346,6 @@ fn covered(t: &Triangle, x: f32, y: f32) -> u32 {
 fn deposit_at_centroid<A: AtomicWords + ?Sized>(map: &CausticMap, words: &mut A, t: &Triangle, flux: Vec3) {
     let g = (t.a + t.b + t.c) / 3.0;
     deposit(map, words, g.x.round(), g.y.round(), flux);
-}
-
-/// Whether `(x, y)` lies in the triangle `a b c` (`sign`: its orientation).
-fn inside(a: Vec2, b: Vec2, c: Vec2, sign: f32, x: f32, y: f32) -> bool {
-    let e0 = ((b.x - a.x) * (y - a.y) - (b.y - a.y) * (x - a.x)) * sign;
-    let e1 = ((c.x - b.x) * (y - b.y) - (c.y - b.y) * (x - b.x)) * sign;
-    let e2 = ((a.x - c.x) * (y - c.y) - (a.y - c.y) * (x - c.x)) * sign;
-    e0 >= 0.0 && e1 >= 0.0 && e2 >= 0.0
 }
 
 /// Adds `v` (rgb) to texel `(x, y)` of `map`, wrapped into the tile.

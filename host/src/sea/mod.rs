@@ -217,7 +217,7 @@ fn shaft_stride() -> u32 {
 }
 /// The default stride of the shafts' samples under the water (docs/sea.md,
 /// "Caustic light shafts": the bench's time against error).
-pub const SHAFT_STRIDE: u32 = 2;
+pub const SHAFT_STRIDE: u32 = 4;
 /// The default intervals of the shafts along a view ray (docs/sea.md,
 /// "Caustic light shafts": the bench's time against error).
 pub const SHAFT_STEPS: u32 = 16;

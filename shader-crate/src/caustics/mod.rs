@@ -1127,13 +1127,12 @@ fn cut_of(
     let (ax, az) = to_texel(point[0], volume.origin, volume.texel);
     let (bx, bz) = to_texel(point[1], volume.origin, volume.texel);
     let (cx, cz) = to_texel(point[2], volume.origin, volume.texel);
-    let area2 = (bx - ax) * (cz - az) - (bz - az) * (cx - ax);
     let third = 1.0 / 3.0;
     let [da, db, dc] = direction;
     let [ta, tb, tc] = distance;
     let drawn = steep(da) && steep(db) && steep(dc) && ta >= 0.0 && tb >= 0.0 && tc >= 0.0;
     Cut {
-        triangle: Triangle2 { ax, az, bx, bz, cx, cz, sign: if area2 < 0.0 { -1.0 } else { 1.0 } },
+        triangle: Triangle2::new(ax, az, bx, bz, cx, cz),
         direction: (da + db + dc).normalize(),
         centroid: (point[0] + point[1] + point[2]) * third,
         distance: (ta + tb + tc) * third,
@@ -1229,9 +1228,10 @@ fn draw_cross_section<A: AtomicWords + ?Sized>(
         let mut j = j0;
         while j <= j1 {
             let (lo, hi) = row_span(tri, j, wmax);
+            let rows = SubRows::new(tri, j);
             let mut i = lo;
             while i <= hi {
-                count += texel_coverage(tri, i, j);
+                count += rows.covered(tri, i);
                 i += 1.0;
             }
             j += 1.0;
@@ -1261,9 +1261,10 @@ fn draw_cross_section<A: AtomicWords + ?Sized>(
     let mut j = j0;
     while j <= j1 {
         let (lo, hi) = row_span(tri, j, wmax);
+        let rows = SubRows::new(tri, j);
         let mut i = lo;
         while i <= hi {
-            let covered = texel_coverage(tri, i, j);
+            let covered = rows.covered(tri, i);
             if covered > 0 {
                 let density = per_sample * (covered as f32 / SUBSAMPLES as f32);
                 deposit(words, params, plane_base + j as u32 * params.map_width + i as u32, density, slope_x, slope_z);
@@ -1320,8 +1321,9 @@ fn steep(d: Vec3) -> bool {
 /// Coverage samples per texel (a 4 x 4 grid).
 pub const SUBSAMPLES: u32 = 16;
 
-/// A cross-section in texel coordinates, `sign` orienting its edge
-/// functions to be non-negative inside.
+/// A cross-section in texel coordinates: its corners, and its three edge
+/// functions `e_k(x, z) = ex_k (x - ax) + ez_k (z - az) + c_k` (component
+/// `k` of each), oriented to be non-negative inside (`Triangle2::new`).
 pub struct Triangle2 {
     pub ax: f32,
     pub az: f32,
@@ -1329,40 +1331,79 @@ pub struct Triangle2 {
     pub bz: f32,
     pub cx: f32,
     pub cz: f32,
-    pub sign: f32,
+    ex: Vec3,
+    ez: Vec3,
+    c: Vec3,
 }
 
-fn inside(t: &Triangle2, px: f32, pz: f32) -> bool {
-    let e0 = (t.bx - t.ax) * (pz - t.az) - (t.bz - t.az) * (px - t.ax);
-    let e1 = (t.cx - t.bx) * (pz - t.bz) - (t.cz - t.bz) * (px - t.bx);
-    let e2 = (t.ax - t.cx) * (pz - t.cz) - (t.az - t.cz) * (px - t.cx);
-    t.sign * e0 >= 0.0 && t.sign * e1 >= 0.0 && t.sign * e2 >= 0.0
-}
-
-/// How many of texel `(i, j)`'s 4 x 4 sub-samples the triangle covers: 16
-/// at once when its four corners are inside (the triangle is convex).
-pub fn texel_coverage(t: &Triangle2, i: f32, j: f32) -> u32 {
-    if inside(t, i - 0.5, j - 0.5)
-        && inside(t, i + 0.5, j - 0.5)
-        && inside(t, i - 0.5, j + 0.5)
-        && inside(t, i + 0.5, j + 0.5)
-    {
-        return SUBSAMPLES;
+impl Triangle2 {
+    /// The cross-section with corners `a`, `b`, `c` (x, z).
+    pub fn new(ax: f32, az: f32, bx: f32, bz: f32, cx: f32, cz: f32) -> Triangle2 {
+        let (abx, abz, bcx, bcz, cax, caz) = (bx - ax, bz - az, cx - bx, cz - bz, ax - cx, az - cz);
+        // Edge k from corner k to the next: cross(edge, q - corner), each
+        // taken from `a` (e_2's constant is 0: its corner `c` is `a - ca`).
+        let area2 = abx * (cz - az) - abz * (cx - ax);
+        let sign = if area2 < 0.0 { -1.0 } else { 1.0 };
+        Triangle2 {
+            ax,
+            az,
+            bx,
+            bz,
+            cx,
+            cz,
+            ex: Vec3::new(-abz, -bcz, -caz) * sign,
+            ez: Vec3::new(abx, bcx, cax) * sign,
+            c: Vec3::new(0.0, bcz * abx - bcx * abz, 0.0) * sign,
+        }
     }
-    // Written out, not looped: every loop iteration counts toward
-    // lavapipe's limit (see `rasterize`).
-    sample_row(t, i, j - 0.375)
-        + sample_row(t, i, j - 0.125)
-        + sample_row(t, i, j + 0.125)
-        + sample_row(t, i, j + 0.375)
 }
 
-/// Of the four sub-samples of texel column `i` at height `pz`, those inside.
-fn sample_row(t: &Triangle2, i: f32, pz: f32) -> u32 {
-    inside(t, i - 0.375, pz) as u32
-        + inside(t, i - 0.125, pz) as u32
-        + inside(t, i + 0.125, pz) as u32
-        + inside(t, i + 0.375, pz) as u32
+/// The four sub-sample rows of a texel row `j` (`z = j - 3/8, j - 1/8,
+/// j + 1/8, j + 3/8`, one per component): on each, the interval of `x - ax`
+/// where all three edge functions are non-negative (empty: `lo > hi`).
+/// A texel's coverage is then how many of its four sub-sample columns
+/// fall in each (`covered`), not 16 tests of three edges.
+struct SubRows {
+    lo: Vec4,
+    hi: Vec4,
+}
+
+/// `[lo, hi]` (of `dx = x - ax`, per sub-sample row at `z - az`) narrowed
+/// to where the edge function `ez z + c + ex dx` is non-negative; a row
+/// that an edge parallel to the rows leaves wholly outside is made empty.
+fn edge_bounds(lo: Vec4, hi: Vec4, z: Vec4, ex: f32, ez: f32, c: f32) -> (Vec4, Vec4) {
+    let r = z * ez + Vec4::splat(c);
+    if ex > 0.0 {
+        (lo.max(-r / ex), hi)
+    } else if ex < 0.0 {
+        (lo, hi.min(-r / ex))
+    } else {
+        let none = Vec4::select(r.cmplt(Vec4::ZERO), Vec4::splat(-1e31), Vec4::splat(1e30));
+        (lo, hi.min(none))
+    }
+}
+
+impl SubRows {
+    fn new(t: &Triangle2, j: f32) -> SubRows {
+        let z = Vec4::new(j - 0.375, j - 0.125, j + 0.125, j + 0.375) - Vec4::splat(t.az);
+        let (lo, hi) = (Vec4::splat(-1e30), Vec4::splat(1e30));
+        let (lo, hi) = edge_bounds(lo, hi, z, t.ex.x, t.ez.x, t.c.x);
+        let (lo, hi) = edge_bounds(lo, hi, z, t.ex.y, t.ez.y, t.c.y);
+        let (lo, hi) = edge_bounds(lo, hi, z, t.ex.z, t.ez.z, t.c.z);
+        SubRows { lo, hi }
+    }
+
+    /// How many of texel column `i`'s 4 x 4 sub-samples (`x = i - 3/8, ...,
+    /// i + 3/8` on each row) lie in the cross-section.
+    fn covered(&self, t: &Triangle2, i: f32) -> u32 {
+        // Sample m (0..4) of a row is at dx = u - 3/8 + m/4: in [lo, hi]
+        // for m from ceil(4 (lo - u) + 3/2) to floor(4 (hi - u) + 3/2).
+        let u = Vec4::splat(i - t.ax);
+        let first = ((self.lo - u) * 4.0 + Vec4::splat(1.5)).ceil().max(Vec4::ZERO);
+        let last = ((self.hi - u) * 4.0 + Vec4::splat(1.5)).floor().min(Vec4::splat(3.0));
+        let n = (last - first + Vec4::ONE).max(Vec4::ZERO);
+        (n.x + n.y + n.z + n.w) as u32
+    }
 }
 
 /// Texel coordinates (centres at integers) of a point on a sample plane.
@@ -1469,17 +1510,6 @@ pub fn resolve_texel(index: u32, params: &CausticsParams, words: &[u32]) -> Vec4
     Vec4::new(read_bin(words, params, b), read_bin(words, params, b + 1), read_bin(words, params, b + 2), 0.0)
 }
 
-/// The resolved shaft maps at `p` (`resolve_texel`): each of the two planes
-/// around its height bilinear in its own square (`plane_rect`), the two
-/// interpolated linearly in height, as `caustic_irradiance` reads the
-/// receivers' maps; none off a map.
-pub fn shaft_light(texels: &[Vec4], params: &CausticsParams, p: Vec3) -> Vec4 {
-    let (k0, k1, w) = planes_around(params, p.y);
-    let below = resolved_at(texels, params, k0, p.x, p.z);
-    let above = if w > 0.0 { resolved_at(texels, params, k1, p.x, p.z) } else { Vec4::ZERO };
-    below * (1.0 - w) + above * w
-}
-
 /// Plane `k` of the resolved shaft maps at `(x, z)`, bilinear (texel
 /// centres at integers); zero off its map.
 fn resolved_at(texels: &[Vec4], params: &CausticsParams, k: u32, x: f32, z: f32) -> Vec4 {
@@ -1578,7 +1608,7 @@ fn clip_axis(o: f32, d: f32, lo: f32, hi: f32, (a, b): (f32, f32)) -> (f32, f32)
 /// the eye and its `1 / |w_y|`). About `params.shaft_steps` intervals
 /// over the view ray's spans between planes within their maps
 /// (`slab_span`), the maps read at each one's middle straight up and down
-/// (`shaft_light`; read along the mean ray, or following the planes'
+/// (the slab's two planes; read along the mean ray, or following the planes'
 /// squares, measured no nearer the reference), the eye's transmittance
 /// integrated exactly over each (`phi`): energy-conserving per interval.
 /// Light is read where the planes are (below the lowest and above the
@@ -1637,19 +1667,34 @@ pub fn caustic_shafts_pixel(
             let finest = 0.5 * texel.min(params.plane_spacing / d.y.abs().max(1e-6));
             let n = ((t1 - t0) / step.max(finest)).ceil().max(1.0);
             let dt = (t1 - t0) / n;
+            // Every point of the slab lies between planes k and k + 1, each
+            // read bilinear in its own square (`plane_rect`) and the two
+            // interpolated linearly in height, as `caustic_irradiance`
+            // reads the receivers' maps.
+            let y0 = params.map_origin.y + k as f32 * params.plane_spacing;
+            // int_a^(a + dt) e^(-sigma t) dt = e^(-sigma a) dt phi(sigma dt),
+            // per channel: e^(-sigma a) carried from one interval to the
+            // next by e^(-sigma dt), both taken at the slab's first lit
+            // interval (none for a slab in the dark).
+            let mut lit = false;
+            let (mut e, mut r, mut w_phi) = (Vec4::ZERO, Vec4::ZERO, Vec4::ZERO);
             let mut i = 0.0;
             while i < n {
                 let a = t0 + i * dt;
-                let scattered = shaft_light(texels, params, o + d * (a + 0.5 * dt));
-                if scattered.x > 0.0 || scattered.y > 0.0 || scattered.z > 0.0 {
-                    // int_a^(a + dt) e^(-sigma t) dt = dt e^(-sigma a) phi(sigma dt), per channel.
-                    let through = Vec4::new(
-                        (-sigma.x * a).exp() * phi(sigma.x * dt),
-                        (-sigma.y * a).exp() * phi(sigma.y * dt),
-                        (-sigma.z * a).exp() * phi(sigma.z * dt),
-                        0.0,
-                    );
-                    sum += scattered * through * dt;
+                let p = o + d * (a + 0.5 * dt);
+                let w = ((p.y - y0) / params.plane_spacing).clamp(0.0, 1.0);
+                let below = resolved_at(texels, params, k, p.x, p.z);
+                let above = if w > 0.0 { resolved_at(texels, params, k + 1, p.x, p.z) } else { Vec4::ZERO };
+                let scattered = below * (1.0 - w) + above * w;
+                if !lit && (scattered.x > 0.0 || scattered.y > 0.0 || scattered.z > 0.0) {
+                    lit = true;
+                    e = Vec4::new((-sigma.x * a).exp(), (-sigma.y * a).exp(), (-sigma.z * a).exp(), 0.0);
+                    r = Vec4::new((-sigma.x * dt).exp(), (-sigma.y * dt).exp(), (-sigma.z * dt).exp(), 0.0);
+                    w_phi = Vec4::new(phi(sigma.x * dt), phi(sigma.y * dt), phi(sigma.z * dt), 0.0) * dt;
+                }
+                if lit {
+                    sum += scattered * e * w_phi;
+                    e *= r;
                 }
                 i += 1.0;
             }

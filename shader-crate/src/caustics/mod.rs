@@ -1217,6 +1217,15 @@ fn draw_cross_section<A: AtomicWords + ?Sized>(
     slope_z: f32,
 ) {
     let (ax, az, bx, bz, cx, cz) = (tri.ax, tri.az, tri.bx, tri.bz, tri.cx, tri.cz);
+    // A corner that is not finite draws nothing (its edge functions would
+    // bound no sub-sample row: `SubRows` would count every sample). Each
+    // compared on its own: `max` passes a NaN over; and not `is_finite`,
+    // whose infinite literal the SPIR-V front end rejects.
+    let finite =
+        ax.abs() < 1e30 && az.abs() < 1e30 && bx.abs() < 1e30 && bz.abs() < 1e30 && cx.abs() < 1e30 && cz.abs() < 1e30;
+    if !finite {
+        return;
+    }
     let (wmax, hmax) = (params.map_width as f32 - 1.0, params.map_height as f32 - 1.0);
     let area2 = (bx - ax) * (cz - az) - (bz - az) * (cx - ax);
     // Rows whose squares [j - 1/2, j + 1/2] the cross-section's box meets;
@@ -1363,7 +1372,7 @@ impl Triangle2 {
 /// where all three edge functions are non-negative (empty: `lo > hi`).
 /// A texel's coverage is then how many of its four sub-sample columns
 /// fall in each (`covered`), not 16 tests of three edges.
-struct SubRows {
+pub struct SubRows {
     lo: Vec4,
     hi: Vec4,
 }
@@ -1384,7 +1393,7 @@ fn edge_bounds(lo: Vec4, hi: Vec4, z: Vec4, ex: f32, ez: f32, c: f32) -> (Vec4, 
 }
 
 impl SubRows {
-    fn new(t: &Triangle2, j: f32) -> SubRows {
+    pub fn new(t: &Triangle2, j: f32) -> SubRows {
         let z = Vec4::new(j - 0.375, j - 0.125, j + 0.125, j + 0.375) - Vec4::splat(t.az);
         let (lo, hi) = (Vec4::splat(-1e30), Vec4::splat(1e30));
         let (lo, hi) = edge_bounds(lo, hi, z, t.ex.x, t.ez.x, t.c.x);
@@ -1395,7 +1404,7 @@ impl SubRows {
 
     /// How many of texel column `i`'s 4 x 4 sub-samples (`x = i - 3/8, ...,
     /// i + 3/8` on each row) lie in the cross-section.
-    fn covered(&self, t: &Triangle2, i: f32) -> u32 {
+    pub fn covered(&self, t: &Triangle2, i: f32) -> u32 {
         // Sample m (0..4) of a row is at dx = u - 3/8 + m/4: in [lo, hi]
         // for m from ceil(4 (lo - u) + 3/2) to floor(4 (hi - u) + 3/2).
         let u = Vec4::splat(i - t.ax);
@@ -1943,5 +1952,86 @@ mod tests {
         // Negative channels beside a positive one read as 0; infinity as the largest finite step.
         assert_eq!(unpack_rgb(pack_rgb(Vec3::new(-1.0, 2.0, 0.0))), Vec3::new(0.0, 2.0, 0.0));
         assert!(unpack_rgb(pack_rgb(Vec3::new(f32::INFINITY, 0.0, 0.0))).x > 1e38);
+    }
+
+    /// `SubRows` counts a texel's covered sub-samples from each row's
+    /// interval; here against the 16 samples tested one by one in f64, on
+    /// triangles of every size and shape (slivers, texel-sized, rows
+    /// parallel to an edge). A sample within 1e-4 texels of an edge may go
+    /// either way (f32 rounding), so the f64 count is bracketed.
+    #[test]
+    fn sub_rows_count_the_samples_inside() {
+        let mut state = 11u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 40) as f64) / (1u64 << 24) as f64
+        };
+        let mut texels = 0;
+        for k in 0..4000 {
+            let scale = [0.3, 2.0, 12.0][k % 3];
+            let mut c: [f64; 6] = core::array::from_fn(|_| 20.0 + (next() - 0.5) * scale);
+            if k % 7 == 0 {
+                c[3] = c[1]; // an edge parallel to the rows
+            }
+            if k % 11 == 0 {
+                c[4] = c[0] + (c[2] - c[0]) * 0.5; // a sliver: c on the line through a and b
+                c[5] = c[1] + (c[3] - c[1]) * 0.5 + 1e-3;
+            }
+            let t = Triangle2::new(c[0] as f32, c[1] as f32, c[2] as f32, c[3] as f32, c[4] as f32, c[5] as f32);
+            let (a, b, cc) = ((t.ax as f64, t.az as f64), (t.bx as f64, t.bz as f64), (t.cx as f64, t.cz as f64));
+            let area2 = (b.0 - a.0) * (cc.1 - a.1) - (b.1 - a.1) * (cc.0 - a.0);
+            if area2 == 0.0 {
+                continue;
+            }
+            let sign = area2.signum();
+            // The signed distance (texels) of a point inside each edge; the least of the three.
+            let depth = |x: f64, z: f64| {
+                let e = |p: (f64, f64), q: (f64, f64)| {
+                    sign * ((q.0 - p.0) * (z - p.1) - (q.1 - p.1) * (x - p.0)) / (q.0 - p.0).hypot(q.1 - p.1)
+                };
+                e(a, b).min(e(b, cc)).min(e(cc, a))
+            };
+            for j in 12..29 {
+                let rows = SubRows::new(&t, j as f32);
+                for i in 12..29 {
+                    let (mut surely, mut maybe) = (0, 0);
+                    for sz in 0..4 {
+                        for sx in 0..4 {
+                            let d = depth(i as f64 - 0.375 + 0.25 * sx as f64, j as f64 - 0.375 + 0.25 * sz as f64);
+                            surely += (d > 1e-4) as u32;
+                            maybe += (d >= -1e-4) as u32;
+                        }
+                    }
+                    let n = rows.covered(&t, i as f32);
+                    assert!(
+                        surely <= n && n <= maybe,
+                        "triangle {k} {c:?}, texel ({i}, {j}): {n} not in [{surely}, {maybe}]"
+                    );
+                    texels += (maybe > 0) as u32;
+                }
+            }
+        }
+        assert!(texels > 10_000, "{texels} texels covered");
+    }
+
+    /// A cross-section with a corner that is not finite draws nothing (its
+    /// edge functions would bound no row, and every sample would count).
+    #[test]
+    fn a_cross_section_with_a_nan_corner_draws_nothing() {
+        let params = CausticsParams { map_width: 16, map_height: 16, scale: 1024.0, ..Default::default() };
+        let bins = 16 * 16 * MAP_BINS;
+        let words: Vec<core::sync::atomic::AtomicU32> =
+            (0..crate::scatter::words_for(bins)).map(|_| core::sync::atomic::AtomicU32::new(0)).collect();
+        let mut atomics = crate::scatter::CpuAtomics(&words);
+        let flux = Vec4::new(1.0, 1.0, 1.0, 0.0);
+        for bad in [f32::NAN, f32::INFINITY, 1e31] {
+            let t = Triangle2::new(2.0, 2.0, bad, 3.0, 4.0, 9.0);
+            draw_cross_section(&mut atomics, &params, 0, &t, flux, 1.0, 0.0, 0.0);
+        }
+        assert!(words.iter().all(|w| w.load(core::sync::atomic::Ordering::Relaxed) == 0));
+        // And a finite one does draw (the check above can fail).
+        let t = Triangle2::new(2.0, 2.0, 8.0, 3.0, 4.0, 9.0);
+        draw_cross_section(&mut atomics, &params, 0, &t, flux, 1.0, 0.0, 0.0);
+        assert!(words.iter().any(|w| w.load(core::sync::atomic::Ordering::Relaxed) != 0));
     }
 }

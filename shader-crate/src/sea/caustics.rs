@@ -35,6 +35,7 @@ use spirv_std::num_traits::Float;
 use super::surface::level_offset;
 use super::surface::{level_slope, slope_normal, top_level};
 use super::SeaParams;
+use crate::caustics::{SubRows, Triangle2};
 use crate::glam::{Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::optics::{refract, transmittance};
 use crate::scatter::{scatter_add, AtomicWords, REJECTED_WORD};
@@ -42,15 +43,14 @@ use crate::scatter::{scatter_add, AtomicWords, REJECTED_WORD};
 /// Fixed-point units per unit of the ratio times texel area (`scatter.rs`).
 pub const CAUSTIC_SCALE: f32 = 16_777_216.0;
 
-/// Sub-samples per texel each way: the bottom's map, and the shaft
-/// planes'. (2x2 on the shaft planes cost a third less but left 14 % RMS
-/// per texel against the photon tracer 0.7 m down, more than the
-/// caustic's contrast there, 10 %; 4x4 leaves 8 %.)
-const SUB: u32 = 4;
-const SHAFT_SUB: u32 = 4;
+// Sub-samples: 4x4 per texel on the bottom's map and the shaft planes'
+// (`caustics::SubRows`, which the glass caustics' maps use too). 2x2 on
+// the shaft planes cost a third less but left 14 % RMS per texel against
+// the photon tracer 0.7 m down, more than the caustic's contrast there,
+// 10 %; 4x4 leaves 8 %.
 
 /// Most texels a cross-section's box may span: two walks over it of
-/// `SUB^2` samples each stay within the 65 535 loop iterations in all
+/// 16 samples each stay within the 65 535 loop iterations in all
 /// that lavapipe allows an invocation.
 pub const MAX_TEXELS: f32 = 1024.0;
 
@@ -69,8 +69,6 @@ pub struct CausticMap {
     pub resolution: u32,
     /// The plane's depth below the mean level, m.
     pub depth: f32,
-    /// Sub-samples per texel each way.
-    pub sub: u32,
     /// Its first bin in the words.
     pub first_bin: u32,
 }
@@ -118,7 +116,7 @@ pub fn shaft_plane_depth(p: &SeaParams, k: u32) -> f32 {
 pub fn map_of_texel(p: &SeaParams, index: u32) -> (CausticMap, u32) {
     let bottom = bottom_map_texels(p);
     if index < bottom {
-        let map = CausticMap { level: 0, resolution: p.wave_resolution, depth: p.depth, sub: SUB, first_bin: 0 };
+        let map = CausticMap { level: 0, resolution: p.wave_resolution, depth: p.depth, first_bin: 0 };
         return (map, index);
     }
     let m = shaft_resolution(p);
@@ -128,7 +126,6 @@ pub fn map_of_texel(p: &SeaParams, index: u32) -> (CausticMap, u32) {
         level: p.shaft_level,
         resolution: m,
         depth: shaft_plane_depth(p, k),
-        sub: SHAFT_SUB,
         first_bin: 3 * (bottom + k * m * m),
     };
     (map, rest % (m * m))
@@ -226,7 +223,7 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
         words.fetch_add(REJECTED_WORD, 1);
         return;
     }
-    let t = Triangle::new(pa, pb, pc, map.sub);
+    let t = Triangle2::new(pa.x, pa.y, pb.x, pb.y, pc.x, pc.y);
     let (w, h) = (i1 - i0 + 1.0, j1 - j0 + 1.0);
     if w * h <= 4.0 {
         // Most cross-sections span at most 2x2 texels: one walk, each
@@ -234,15 +231,11 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
         // below, so the same sums).
         let wide = w as u32;
         let cells = (w * h) as u32;
-        let at = |c: u32| (i0 + (c % wide) as f32, j0 + (c / wide) as f32);
-        let (x, y) = at(0);
-        let c0 = covered(&t, x, y);
-        let (x, y) = at(1);
-        let c1 = if cells > 1 { covered(&t, x, y) } else { 0 };
-        let (x, y) = at(2);
-        let c2 = if cells > 2 { covered(&t, x, y) } else { 0 };
-        let (x, y) = at(3);
-        let c3 = if cells > 3 { covered(&t, x, y) } else { 0 };
+        let rows = (SubRows::new(&t, j0), SubRows::new(&t, j0 + 1.0));
+        let c0 = cell_coverage(&t, &rows, i0, j0, wide, 0);
+        let c1 = if cells > 1 { cell_coverage(&t, &rows, i0, j0, wide, 1) } else { 0 };
+        let c2 = if cells > 2 { cell_coverage(&t, &rows, i0, j0, wide, 2) } else { 0 };
+        let c3 = if cells > 3 { cell_coverage(&t, &rows, i0, j0, wide, 3) } else { 0 };
         let count = c0 + c1 + c2 + c3;
         if count == 0 {
             deposit_at_centroid(&map, words, &t, flux);
@@ -260,7 +253,7 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
                 c3
             };
             if k > 0 {
-                let (x, y) = at(c);
+                let (x, y) = (i0 + (c % wide) as f32, j0 + (c / wide) as f32);
                 deposit(&map, words, x, y, flux * (k as f32 / count as f32));
             }
             c += 1;
@@ -273,9 +266,10 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
     while pass < 2 {
         let mut y = j0;
         while y <= j1 {
+            let rows = SubRows::new(&t, y);
             let mut x = i0;
             while x <= i1 {
-                let covered = covered(&t, x, y);
+                let covered = rows.covered(&t, x);
                 if pass == 0 {
                     count += covered;
                 } else if covered > 0 {
@@ -293,59 +287,25 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
     }
 }
 
-/// A cross-section on a map, texel coordinates: its corners, and its
-/// three edge functions `e_k(q) = ex_k (q.x - a.x) + ey_k (q.y - a.y) +
-/// c_k` (component `k` of each), oriented so that `q` lies in it where all
-/// three are at least 0; `sub` sub-samples per texel each way.
-struct Triangle {
-    a: Vec2,
-    b: Vec2,
-    c: Vec2,
-    ex: Vec3,
-    ey: Vec3,
-    c0: Vec3,
-    sub: u32,
-}
-
-impl Triangle {
-    fn new(a: Vec2, b: Vec2, c: Vec2, sub: u32) -> Triangle {
-        let (ab, bc, ca) = (b - a, c - b, a - c);
-        // Edge k from corner k to the next: cross(edge, q - corner), each
-        // taken from `a` (e_2's constant is 0: its corner `c` is `a - ca`).
-        let ex = Vec3::new(-ab.y, -bc.y, -ca.y);
-        let ey = Vec3::new(ab.x, bc.x, ca.x);
-        let c0 = Vec3::new(0.0, bc.y * ab.x - bc.x * ab.y, 0.0);
-        let sign = if ab.x * (c.y - a.y) - ab.y * (c.x - a.x) < 0.0 { -1.0 } else { 1.0 };
-        Triangle { a, b, c, ex: ex * sign, ey: ey * sign, c0: c0 * sign, sub }
+/// Of a cross-section's box `wide` texels across from `(i0, j0)`, the
+/// sub-samples texel `c` (row by row) holds; `rows`: the box's first two
+/// texel rows' sub-sample rows (a box one texel wide may be four high).
+fn cell_coverage(t: &Triangle2, rows: &(SubRows, SubRows), i0: f32, j0: f32, wide: u32, c: u32) -> u32 {
+    let (x, dy) = (i0 + (c % wide) as f32, c / wide);
+    if dy == 0 {
+        rows.0.covered(t, x)
+    } else if dy == 1 {
+        rows.1.covered(t, x)
+    } else {
+        SubRows::new(t, j0 + dy as f32).covered(t, x)
     }
-}
-
-/// How many of texel `(x, y)`'s `sub^2` sub-samples lie in `t`.
-fn covered(t: &Triangle, x: f32, y: f32) -> u32 {
-    let step = 1.0 / t.sub as f32;
-    let first = -0.5 + 0.5 * step;
-    let mut n = 0u32;
-    let mut sy = 0;
-    while sy < t.sub {
-        let row = t.ey * (y + first + sy as f32 * step - t.a.y) + t.c0;
-        let mut sx = 0;
-        while sx < t.sub {
-            let e = row + t.ex * (x + first + sx as f32 * step - t.a.x);
-            if e.x >= 0.0 && e.y >= 0.0 && e.z >= 0.0 {
-                n += 1;
-            }
-            sx += 1;
-        }
-        sy += 1;
-    }
-    n
 }
 
 /// A cross-section that covers no sub-sample (smaller than their spacing,
 /// or a focal line): all of it in the texel under its centroid.
-fn deposit_at_centroid<A: AtomicWords + ?Sized>(map: &CausticMap, words: &mut A, t: &Triangle, flux: Vec3) {
-    let g = (t.a + t.b + t.c) / 3.0;
-    deposit(map, words, g.x.round(), g.y.round(), flux);
+fn deposit_at_centroid<A: AtomicWords + ?Sized>(map: &CausticMap, words: &mut A, t: &Triangle2, flux: Vec3) {
+    let (x, y) = ((t.ax + t.bx + t.cx) / 3.0, (t.az + t.bz + t.cz) / 3.0);
+    deposit(map, words, x.round(), y.round(), flux);
 }
 
 /// Adds `v` (rgb) to texel `(x, y)` of `map`, wrapped into the tile.

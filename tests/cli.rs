@@ -140,6 +140,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "cloud_automaton.smooth",
         "volume_density",
         "volume_light",
+        "volume_diffuse",
         "volume_splat_sort",
         "volume_splat_textures",
         "volume_splat_tiles",

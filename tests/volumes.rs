@@ -307,19 +307,20 @@ fn the_sorted_order_is_the_counted_one() {
     assert_eq!(order, &from_counts[..], "ranks counted {counted:?}");
 }
 
-/// The default, multiple scattering by delta-Eddington columns, against
-/// the Monte Carlo reference (all orders) on the cumulus at 24x18 pixel
-/// centres, beside the octaves and single scattering on the same pixels.
-/// Measured (docs/volumes.md): columns energy 0.987, 4.48 % RMS (8-bit);
-/// octaves 0.970, 5.70 %; single scattering 0.655, 19.3 %. The reference
-/// stops doubling its paths at a change of 6e-3 (14 s here): at 3e-3 (48
-/// s) the figures were 0.990, 4.46 %; 0.972, 5.69 %; 0.657, 19.2 %, so its
-/// noise moves them by a few hundredths of a percent, far inside the
-/// bounds' margins. The issue asks
-/// 5 % energy and 3 % RMS: the columns meet the first here, not the
-/// second. The bounds hold most of what the columns gained over the
-/// octaves (RMS below 5 %, energy within 5 %) and keep them at least
-/// twice as close as single scattering.
+/// The default, multiple scattering by delta-Eddington columns spread
+/// over rings (`diffuse_node`), against the Monte Carlo reference (all
+/// orders) on the cumulus at 24x18 pixel centres, beside the columns
+/// without rings (`column_spread = 0`, the lateral leakage by
+/// `column_width`), the octaves and single scattering on the same pixels.
+/// Measured (docs/volumes.md): rings energy 0.998, 3.63 % RMS (8-bit);
+/// no rings 0.987, 4.48 %; octaves 0.970, 5.70 %; single scattering 0.655,
+/// 19.3 %. The reference stops doubling its paths at a change of 6e-3 (14
+/// s here): at 3e-3 (48 s) the figures without rings were 0.990, 4.46 %,
+/// so its noise moves them by a few hundredths of a percent. The issue
+/// asks 5 % energy and 3 % RMS: the rings meet the first, not the second.
+/// The bounds hold most of what the rings gained (RMS below 4 %, energy
+/// within 3 %, at least half a point closer than without rings) and keep
+/// them at least four times as close as single scattering.
 #[test]
 fn multiple_scattering_against_monte_carlo() {
     use slicelight::volumes::Scattering;
@@ -328,21 +329,26 @@ fn multiple_scattering_against_monte_carlo() {
     let (reference, _) = slicelight::reference::render_converged(&data, 6e-3);
     let against = |d: &SceneData| difference(&to_f64(&cpu_image(d)), &reference, data.exposure);
     let columns = against(&data);
+    let unspread = against(&data.reconfigure(move |f| f.volumes.column_spread = Some(0.0)).unwrap());
     let octaves = against(&data.reconfigure(move |f| f.volumes.scattering = Scattering::Octaves).unwrap());
     let single = against(&data.reconfigure(move |f| f.volumes.scattering = Scattering::Single).unwrap());
     println!(
-        "cumulus 24x18 against Monte Carlo: columns {:.3} energy, {:.2} % RMS; octaves {:.3}, {:.2} %; single {:.3}, {:.2} %",
+        "cumulus 24x18 against Monte Carlo: columns {:.3} energy, {:.2} % RMS; without rings {:.3}, {:.2} %; octaves {:.3}, {:.2} %; single {:.3}, {:.2} %",
         columns.energy_ratio,
         columns.rms_8bit_percent,
+        unspread.energy_ratio,
+        unspread.rms_8bit_percent,
         octaves.energy_ratio,
         octaves.rms_8bit_percent,
         single.energy_ratio,
         single.rms_8bit_percent
     );
     assert!(single.energy_ratio < 0.95, "single scattering misses the higher orders: {single:?}");
-    assert!((columns.energy_ratio - 1.0).abs() < 0.05, "{columns:?}");
-    assert!(columns.rms_8bit_percent < 5.0, "{columns:?}");
-    assert!(columns.rms_8bit_percent < 0.5 * single.rms_8bit_percent, "{columns:?} against {single:?}");
+    assert!((columns.energy_ratio - 1.0).abs() < 0.03, "{columns:?}");
+    assert!(columns.rms_8bit_percent < 4.0, "{columns:?}");
+    assert!(columns.rms_8bit_percent < unspread.rms_8bit_percent - 0.5, "{columns:?} against {unspread:?}");
+    assert!((unspread.energy_ratio - 1.0).abs() < 0.05 && unspread.rms_8bit_percent < 5.0, "{unspread:?}");
+    assert!(columns.rms_8bit_percent < 0.25 * single.rms_8bit_percent, "{columns:?} against {single:?}");
 }
 
 /// The Monte Carlo walk counting order 1 only agrees with the quadrature
@@ -1179,7 +1185,8 @@ fn columns_conserve_energy_at_the_edges() {
     for omega in [0.0f32, 0.3, 0.6, 0.9, 0.99, 1.0] {
         for g in [-0.9f32, -0.3, 0.0, 0.58, 0.85, 0.95] {
             for depth in [0.0f32, 1e-4, 0.1, 1.0, 10.0, 100.0, 1e4] {
-                for width in [1e-3f32, 0.3, 1.0, 1.75, 10.0, 1e6] {
+                // 0: no lateral leakage at all (the ring's columns, `diffuse_node`).
+                for width in [0.0f32, 1e-3, 0.3, 1.0, 1.75, 10.0, 1e6] {
                     let at = |tau: f32| column_channel(omega, g, g * g, tau, depth, width);
                     for tau in [0.0, 0.5 * depth, depth] {
                         let (d, f, j) = at(tau);
@@ -1190,7 +1197,7 @@ fn columns_conserve_energy_at_the_edges() {
                     let (direct, bottom, _) = at(depth);
                     let out = 0.5 * (top + bottom) + direct;
                     assert!(out <= 1.0 + 1e-3, "{omega} {g} {depth} {width}: {out} leaves");
-                    if omega >= MAX_COLUMN_ALBEDO && width >= 1e6 && depth <= 10.0 {
+                    if omega >= MAX_COLUMN_ALBEDO && (width >= 1e6 || width == 0.0) && depth <= 10.0 {
                         let held = (1.0 - MAX_COLUMN_ALBEDO) * 3.0 * depth + 1e-3;
                         assert!((out - 1.0).abs() < held, "{g} {depth}: {out} leaves without absorption");
                     }

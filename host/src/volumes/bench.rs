@@ -40,10 +40,13 @@ pub struct Config {
     pub planes: Option<u32>,
     /// Transmittance-volume nodes a side (`None`: the default).
     pub light_grid: Option<u32>,
-    /// Octaves (1: single scattering) where `column_width` is `None`.
+    /// Octaves (1: single scattering) where neither `column_width` nor
+    /// `column_spread` is given.
     pub octaves: u32,
-    /// Multiple scattering by columns of this width (`column_light`).
+    /// Multiple scattering by columns of this width, no ring (`column_light`).
     pub column_width: Option<f32>,
+    /// Multiple scattering by columns spread over rings this wide (`diffuse_node`).
+    pub column_spread: Option<f32>,
     /// Splatting (`splat`) instead of slices.
     pub splatting: bool,
 }
@@ -52,16 +55,26 @@ pub struct Config {
 /// metaballs, so the `splatting` series (single scattering, and the default
 /// columns) runs too.
 pub fn sweep(quick: bool, splattable: bool) -> Vec<Config> {
-    let base = Config { series: "", planes: None, light_grid: None, octaves: 1, column_width: None, splatting: false };
+    let base = Config {
+        series: "",
+        planes: None,
+        light_grid: None,
+        octaves: 1,
+        column_width: None,
+        column_spread: None,
+        splatting: false,
+    };
     let planes: &[u32] = if quick { &[32, 128, 512] } else { &[16, 32, 64, 128, 256, 512, 1024] };
     let grids: &[u32] = if quick { &[16, 64, 128] } else { &[16, 32, 64, 128, 256] };
     let octaves: &[u32] = if quick { &[1, 8] } else { &[1, 2, 4, 8, 12] };
     let widths: &[f32] = if quick { &[super::COLUMN_WIDTH] } else { &[1.0, super::COLUMN_WIDTH, 3.0] };
+    let spreads: &[f32] = if quick { &[super::COLUMN_SPREAD] } else { &[0.5, super::COLUMN_SPREAD, 1.5] };
     let mut v = Vec::new();
     v.extend(planes.iter().map(|&n| Config { series: "planes", planes: Some(n), ..base }));
     v.extend(grids.iter().map(|&n| Config { series: "light-grid", light_grid: Some(n), ..base }));
     v.extend(octaves.iter().map(|&n| Config { series: "octaves", octaves: n, ..base }));
     v.extend(widths.iter().map(|&w| Config { series: "columns", column_width: Some(w), ..base }));
+    v.extend(spreads.iter().map(|&w| Config { series: "spread", column_spread: Some(w), ..base }));
     if splattable {
         let splats = Config { series: "splatting", splatting: true, ..base };
         v.push(splats);
@@ -81,7 +94,8 @@ fn configure(data: &SceneData, c: &Config) -> Result<SceneData> {
         f.volume.iter_mut().for_each(|v| v.method = method);
         s.octaves = None;
         s.column_width = c.column_width;
-        if c.column_width.is_some() {
+        s.column_spread = c.column_spread;
+        if c.column_width.is_some() || c.column_spread.is_some() {
             s.scattering = Scattering::Multiple;
         } else if c.octaves == 1 {
             s.scattering = Scattering::Single;
@@ -143,7 +157,15 @@ pub fn run(
         let mut references = Vec::new();
         for column_width in [None, Some(super::COLUMN_WIDTH)] {
             let single = column_width.is_none();
-            let c = Config { series: "", planes: None, light_grid: None, octaves: 1, column_width, splatting: false };
+            let c = Config {
+                series: "",
+                planes: None,
+                light_grid: None,
+                octaves: 1,
+                column_width,
+                column_spread: None,
+                splatting: false,
+            };
             let d = configure(data, &c)?;
             let t = std::time::Instant::now();
             let (values, _) = crate::reference::render_converged_at(&d, &pixels, if single { 2e-4 } else { 3e-3 });
@@ -165,6 +187,7 @@ pub fn run(
                     &super::automaton::Smooth,
                     &super::Density,
                     &super::OpticalDepth,
+                    &super::Diffuse,
                     &super::splat::SplatSort,
                     &super::splat::SplatTextures,
                     &super::splat::SplatTiles,
@@ -183,7 +206,7 @@ pub fn run(
                     };
                 let img = &timed.last.image;
                 let at: Vec<DVec3> = pixels.iter().map(|&i| img[i as usize].truncate().as_dvec3()).collect();
-                let all_orders = c.octaves > 1 || c.column_width.is_some();
+                let all_orders = c.octaves > 1 || c.column_width.is_some() || c.column_spread.is_some();
                 let reference = &references[if all_orders { 1 } else { 0 }];
                 let diff = crate::metrics::difference(&at, reference, data.exposure);
                 let row = Row {
@@ -200,13 +223,14 @@ pub fn run(
                     energy_ratio: diff.energy_ratio,
                 };
                 eprintln!(
-                    "{name:>16} {:>4} {:<10} planes={:<5} light-grid={:<5} octaves={:<2} columns={:<5} {:>8.4} s (grids {:.4} s, volumes {:.4} s)  rms {:.3}%  max {:.2}%  energy {:.3}",
+                    "{name:>16} {:>4} {:<10} planes={:<5} light-grid={:<5} octaves={:<2} columns={:<5} spread={:<5} {:>8.4} s (grids {:.4} s, volumes {:.4} s)  rms {:.3}%  max {:.2}%  energy {:.3}",
                     row.backend,
                     c.series,
                     c.planes.map_or("auto".to_string(), |n| n.to_string()),
                     c.light_grid.map_or("auto".to_string(), |n| n.to_string()),
                     c.octaves,
                     c.column_width.map_or("-".to_string(), |w| w.to_string()),
+                    c.column_spread.map_or("-".to_string(), |w| w.to_string()),
                     row.median_seconds,
                     row.grids_median_seconds,
                     row.volumes_median_seconds,
@@ -235,6 +259,7 @@ struct Record<'a> {
     light_grid: String,
     octaves: u32,
     column_width: String,
+    column_spread: String,
     median_seconds: f64,
     grids_median_seconds: f64,
     volumes_median_seconds: f64,
@@ -257,6 +282,7 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
             light_grid: auto(r.config.light_grid),
             octaves: r.config.octaves,
             column_width: r.config.column_width.map_or("none".to_string(), |w| w.to_string()),
+            column_spread: r.config.column_spread.map_or("none".to_string(), |w| w.to_string()),
             median_seconds: r.median_seconds,
             grids_median_seconds: r.grids_median_seconds,
             volumes_median_seconds: r.volumes_median_seconds,

@@ -22,8 +22,8 @@ use slicelight_shaders::types::{
     PHASE_ISOTROPIC, PHASE_RAYLEIGH,
 };
 use slicelight_shaders::volumes::{
-    density_cell, optical_depth_column, volumes_pixel, GpuMetaball, GpuVolume, LightGrid, VolumeInputs, VolumesParams,
-    METHOD_SLICES, METHOD_SPLATTING, PHASE_DOUBLE_HENYEY_GREENSTEIN,
+    density_cell, diffuse_node, optical_depth_column, spread_columns, volumes_pixel, GpuMetaball, GpuVolume, LightGrid,
+    VolumeInputs, VolumesParams, METHOD_SLICES, METHOD_SPLATTING, PHASE_DOUBLE_HENYEY_GREENSTEIN,
 };
 use std::path::Path;
 
@@ -37,6 +37,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &automaton::Smooth,
     &Density,
     &OpticalDepth,
+    &Diffuse,
     &splat::SplatSort,
     &splat::SplatTextures,
     &splat::SplatTiles,
@@ -81,6 +82,22 @@ pub static LIGHT_GRIDS: Resource = Resource {
 /// Per light, the optical depth through the volumes at its grid's nodes.
 pub static OPTICAL_DEPTHS: Resource =
     Resource { binding: 46, name: "optical depths", kind: ResourceKind::Frame(|s| s.volumes.depth_nodes() * 16) };
+/// The columns' smoothed diffuse light at the light grids' nodes
+/// (`diffuse_node`: fluence and flux, a `Vec4` each per node); one
+/// node's worth where no pass writes it.
+pub static DIFFUSE: Resource =
+    Resource { binding: 119, name: "diffuse light", kind: ResourceKind::Frame(|s| diffuse_nodes(s) * 32) };
+
+/// The nodes `DIFFUSE` holds (1 where the slices do not spread the columns).
+fn diffuse_nodes(s: &SceneData) -> u64 {
+    let p = &s.volumes.params;
+    if s.volumes.enabled && spread_columns(p) && p.method == METHOD_SLICES {
+        s.volumes.depth_nodes().max(1)
+    } else {
+        1
+    }
+}
+
 /// The volumes' radiance per pixel (rgb).
 pub static VOLUME_RADIANCE: Resource =
     Resource { binding: 47, name: "volume radiance", kind: ResourceKind::PerPixel { blank: no_radiance } };
@@ -183,6 +200,12 @@ pub struct Settings {
     /// column as a multiple of the column's depth (`COLUMN_WIDTH` by
     /// default; `column_light`).
     pub column_width: Option<f32>,
+    /// With `"multiple"` on the slices: the ring the columns' diffuse light
+    /// is averaged over, its radius a multiple of `sqrt(H d)` (the light
+    /// ray's length inside the volumes and a point's depth along it;
+    /// `COLUMN_SPREAD` by default, 0 when `column_width` is given;
+    /// `diffuse_node`). 0: no ring, the leakage by `column_width` instead.
+    pub column_spread: Option<f32>,
     /// With `"octaves"`: the octaves' count and their factors on the
     /// scattering coefficient, the light's optical depth and the phase
     /// function's asymmetry (`OCTAVES`, `OCTAVE_*` by default).
@@ -206,11 +229,18 @@ pub enum Scattering {
 /// scattering"); 1 would be a ball's (as wide as deep).
 pub const COLUMN_WIDTH: f32 = 1.75;
 
-/// How a scene's volumes scatter: `(columns, width)` for `column_light`
-/// and `(count, a, b, c)` for the octaves (count 1: none).
+/// The default `column_spread`: chosen with `RING_CENTRE_WEIGHT` against
+/// the Monte Carlo reference on thin, medium and dense clouds
+/// (`docs/volumes.md`, "Multiple scattering").
+pub const COLUMN_SPREAD: f32 = 1.0;
+
+/// How a scene's volumes scatter: `(columns, width, spread)` for
+/// `column_light` and `diffuse_node`, and `(count, a, b, c)` for the
+/// octaves (count 1: none).
 struct Orders {
     columns: bool,
     width: f32,
+    spread: f32,
     octaves: (u32, f32, f32, f32),
 }
 
@@ -220,11 +250,30 @@ fn orders(settings: &Settings) -> Result<Orders> {
     if !columns && settings.column_width.is_some() {
         bail!(invalid("volumes.column_width", "none unless scattering = \"multiple\"", "a value"));
     }
+    if !columns && settings.column_spread.is_some() {
+        bail!(invalid("volumes.column_spread", "none unless scattering = \"multiple\"", "a value"));
+    }
     let width = settings.column_width.unwrap_or(COLUMN_WIDTH);
     if !(width > 0.0 && width <= 1000.0) {
         bail!(invalid("volumes.column_width", "a positive multiple of a column's depth, at most 1000", width));
     }
-    Ok(Orders { columns, width, octaves })
+    // A width asked for is the buckling's: no ring unless one is asked for too.
+    let spread = settings.column_spread.unwrap_or(if settings.column_width.is_some() { 0.0 } else { COLUMN_SPREAD });
+    if !(0.0..=10.0).contains(&spread) {
+        bail!(invalid(
+            "volumes.column_spread",
+            "a multiple of sqrt(a light ray's length in the volumes times the depth) in [0, 10]",
+            spread
+        ));
+    }
+    if spread > 0.0 && settings.column_width.is_some() {
+        bail!(invalid(
+            "volumes.column_width",
+            "none with column_spread > 0 (the ring carries the lateral leakage; column_spread = 0 for the width's)",
+            width
+        ));
+    }
+    Ok(Orders { columns, width, spread: if columns { spread } else { 0.0 }, octaves })
 }
 
 /// Default octaves of multiple scattering and their factors (`a`, `b`, `c`
@@ -787,6 +836,7 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
         octave_phase: c,
         columns: orders.columns as u32,
         column_width: orders.width,
+        column_spread: orders.spread,
         automaton_volume,
         method: if list[0].method == Method::Splatting { METHOD_SPLATTING } else { METHOD_SLICES },
         ball_count: balls.len() as u32,
@@ -816,7 +866,9 @@ pub fn configure(list: &[Volume], settings: &Settings, data: &SceneData, base: &
 /// The scattering a volume renderer's plan names: single, the columns
 /// and their width, or the octaves and their factors.
 fn scattering_label(p: &VolumesParams) -> String {
-    if p.columns != 0 {
+    if spread_columns(p) && p.method == METHOD_SLICES {
+        format!("multiple scattering (delta-Eddington columns spread over rings, column_spread {})", p.column_spread)
+    } else if p.columns != 0 {
         format!("multiple scattering (delta-Eddington columns, width {})", p.column_width)
     } else if p.octaves > 1 {
         format!(
@@ -976,6 +1028,82 @@ impl Pass for OpticalDepth {
     }
 }
 
+pub struct Diffuse;
+
+impl Pass for Diffuse {
+    fn name(&self) -> &'static str {
+        "volume_diffuse"
+    }
+    fn kernel(&self) -> &'static str {
+        "volumes::diffuse_kernel"
+    }
+    fn reads(&self) -> &'static [&'static Resource] {
+        resources![COMMON, LIGHTS, VOLUMES_PARAMS, VOLUMES, DENSITY, LIGHT_GRIDS, OPTICAL_DEPTHS]
+    }
+    fn writes(&self) -> &'static [&'static Resource] {
+        resources![DIFFUSE]
+    }
+    fn dispatch(&self) -> Dispatch {
+        Dispatch::Whole
+    }
+    fn plan(&self, scene: &SceneData) -> Plan {
+        if let Some(skip) = skip_without_volumes(scene) {
+            return skip;
+        }
+        let p = &scene.volumes.params;
+        if p.method == METHOD_SPLATTING {
+            return Plan::skip("the volumes are splatted (their columns keep column_width's leakage)");
+        }
+        if p.columns == 0 {
+            return Plan::skip("no multiple scattering by columns (scattering = \"single\" or \"octaves\")");
+        }
+        if p.column_spread <= 0.0 {
+            return Plan::skip("column_spread = 0 (the columns leak by column_width)");
+        }
+        let nodes = scene.volumes.depth_nodes();
+        Plan::run(
+            format!(
+                "the columns' diffuse light at {nodes} transmittance-volume nodes, each spread over a ring \
+                 (column_spread {}; {:.1} MiB)",
+                p.column_spread,
+                nodes as f64 * 32.0 / (1u64 << 20) as f64
+            ),
+            nodes,
+        )
+    }
+    fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
+        let v = &scene.volumes;
+        let nodes = v.depth_nodes() as usize;
+        frame.write_all::<Vec4>(&DIFFUSE, 2 * nodes, |frame, out| {
+            let density = frame.get::<f32>(&DENSITY);
+            let depths = frame.get::<Vec4>(&OPTICAL_DEPTHS);
+            let pairs: &mut [[Vec4; 2]] = bytemuck::cast_slice_mut(out);
+            for_each_invocation(pairs, 0, progress, |i, o| {
+                let (fluence, flux) = diffuse_node(
+                    i,
+                    &v.params,
+                    &scene.lights,
+                    &v.grids,
+                    &v.volumes,
+                    density,
+                    depths,
+                    common.light_count,
+                );
+                *o = [fluence, flux];
+            });
+        });
+    }
+    fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
+        // Seven columns' closed forms (a dozen f32 exps each) from
+        // trilinear lookups of depths that agree to 1e-4: 1e-3 of the
+        // largest value. A ring point on a volume's edge may fall inside
+        // on one backend and outside on the other: 1e-3 of the values may
+        // differ more.
+        let c = cpu.get::<Vec4>(&DIFFUSE);
+        compare_rgb("diffuse light", gpu.get(&DIFFUSE), c, 1e-3, c.len() * 3 / 1000 + 1)
+    }
+}
+
 pub struct Volumes;
 
 impl Pass for Volumes {
@@ -996,7 +1124,8 @@ impl Pass for Volumes {
             VOLUMES,
             DENSITY,
             LIGHT_GRIDS,
-            OPTICAL_DEPTHS
+            OPTICAL_DEPTHS,
+            DIFFUSE
         ]
     }
     fn writes(&self) -> &'static [&'static Resource] {
@@ -1042,6 +1171,7 @@ impl Pass for Volumes {
             shadow: frame.get(&SHADOW_MAPS),
             grids: &v.grids,
             depths: frame.get(&OPTICAL_DEPTHS),
+            diffuse: frame.get(&DIFFUSE),
         };
         let layers = per_pixel_layers(common, frame, progress, |i, d| volumes_pixel(i, common, &inputs, d));
         frame.insert(&VOLUME_RADIANCE, layers.0);

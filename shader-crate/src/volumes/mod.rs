@@ -141,6 +141,12 @@ pub struct VolumesParams {
     /// column, as a multiple of the column's scaled optical depth
     /// (dimensionless).
     pub column_width: f32,
+    /// With the columns on the slices: the radius of the ring their diffuse
+    /// light is averaged over across the light's travel, as a multiple of
+    /// `sqrt(H d)`, `H` the light ray's length inside the volumes and `d`
+    /// the node's depth along it (`diffuse_node`; 0: no ring, the lateral
+    /// leakage by `column_width`'s buckling instead).
+    pub column_spread: f32,
     /// The volume filled by the cloud automaton, plus one (0: none).
     pub automaton_volume: u32,
     /// `METHOD_SLICES` or `METHOD_SPLATTING` (`splat`): how every volume is drawn.
@@ -346,7 +352,10 @@ fn light_space_point(light: &GpuLight, u: f32, v: f32, z: f32) -> (Vec3, f32) {
 /// `out[node - base]` (`node` its index in the whole optical-depth buffer:
 /// the GPU passes the whole buffer and `base` 0, the CPU each column's own
 /// slice), by the composite midpoint rule with `column_substeps` samples per
-/// node interval (`tau_0 = 0`, `tau_{k+1} = tau_k + sum sigma_t(p) ds`).
+/// node interval (`tau_0 = 0`, `tau_{k+1} = tau_k + sum sigma_t(p) ds`);
+/// in `w`, the ray's length (m) inside the volumes so far (the midpoint
+/// samples where any volume's extinction is above 0: `diffuse_node`'s
+/// ring radius).
 #[allow(clippy::too_many_arguments)]
 pub fn optical_depth_column(
     index: u32,
@@ -380,7 +389,12 @@ pub fn optical_depth_column(
         while s < sub {
             let z = z0 + dz * (s as f32 + 0.5) / sub as f32;
             let (p, stretch) = light_space_point(light, u, v, z);
-            tau += extinction_at(params, volumes, density, p) * (stretch * dz / sub as f32);
+            let sigma = extinction_at(params, volumes, density, p);
+            let ds = stretch * dz / sub as f32;
+            tau += sigma * ds;
+            if sigma.x > 0.0 || sigma.y > 0.0 || sigma.z > 0.0 {
+                tau.w += ds;
+            }
             s += 1;
         }
         out[(first + k - base) as usize] = tau;
@@ -486,6 +500,10 @@ pub struct VolumeInputs<'a> {
     pub shadow: &'a [f32],
     pub grids: &'a [LightGrid],
     pub depths: &'a [Vec4],
+    /// The columns' smoothed diffuse light at the light grids' nodes
+    /// (`diffuse_node`: fluence, then flux, per node); empty unless
+    /// `params.column_spread > 0` with the columns.
+    pub diffuse: &'a [Vec4],
 }
 
 /// Radiance (W/(m^2 sr), rgb) arriving at `p` from light `l` before the
@@ -685,7 +703,12 @@ fn in_scattered(common: &CommonParams, inputs: &VolumeInputs, p: Vec3, d: Vec3) 
                 let vol = &inputs.volumes[v];
                 let rho = grid_density(vol, inputs.density, p);
                 if rho > 0.0 {
-                    source += scattered_light(params, vol, e, tau, through, cos_theta) * vol.sigma_s * rho;
+                    let light_here = if spread_columns(params) {
+                        spread_column_light(vol, &inputs.grids[l], inputs.diffuse, light, p, e, tau, cos_theta)
+                    } else {
+                        scattered_light(params, vol, e, tau, through, cos_theta)
+                    };
+                    source += light_here * vol.sigma_s * rho;
                 }
                 v += 1;
             }
@@ -783,6 +806,32 @@ pub fn optical_depth_kernel(
     }
 }
 
+/// The diffuse-light kernel's entry point (`diffuse_node`): two `Vec4`s a
+/// node, fluence then flux.
+#[allow(clippy::too_many_arguments)]
+#[spirv(compute(threads(64)))]
+pub fn diffuse_kernel(
+    #[spirv(global_invocation_id)] id: UVec3,
+    #[spirv(num_workgroups)] groups: UVec3,
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 0)] common: &[CommonParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 1)] lights: &[GpuLight],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 40)] params: &[VolumesParams],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 41)] volumes: &[GpuVolume],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 44)] density: &[f32],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 45)] grids: &[LightGrid],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 119)] diffuse: &mut [Vec4],
+) {
+    let index = crate::flat_index(id, groups);
+    let nodes = (diffuse.len() / 2) as u32;
+    if index < nodes {
+        let (fluence, flux) =
+            diffuse_node(index, &params[0], lights, grids, volumes, density, depths, common[0].light_count);
+        diffuse[2 * index as usize] = fluence;
+        diffuse[2 * index as usize + 1] = flux;
+    }
+}
+
 /// The volumes pass's entry point (`volumes_pixel`).
 #[allow(clippy::too_many_arguments)]
 #[spirv(compute(threads(64)))]
@@ -801,11 +850,13 @@ pub fn volumes_kernel(
     #[spirv(storage_buffer, descriptor_set = 0, binding = 46)] depths: &[Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 47)] radiance: &mut [Vec4],
     #[spirv(storage_buffer, descriptor_set = 0, binding = 48)] transmittance: &mut [Vec4],
+    #[spirv(storage_buffer, descriptor_set = 0, binding = 119)] diffuse: &[Vec4],
 ) {
     let index = crate::flat_index(id, groups);
     let common = &common[0];
     if index < common.band_pixels {
-        let inputs = VolumeInputs { params: &params[0], volumes, density, lights, light_map, shadow, grids, depths };
+        let inputs =
+            VolumeInputs { params: &params[0], volumes, density, lights, light_map, shadow, grids, depths, diffuse };
         let distance = gbuffer[index as usize].normal_distance.w;
         let (l, t) = volumes_pixel(common.band_start + index, common, &inputs, distance);
         radiance[index as usize] = l;
@@ -850,7 +901,7 @@ pub const MAX_COLUMN_ALBEDO: f32 = 0.9999;
 /// in the Eddington (P1) approximation with Marshak's boundary conditions.
 /// `width` is the medium's lateral extent as a multiple of the scaled
 /// depth: its leakage sideways enters as diffusion theory's geometric
-/// buckling (eq. C4).
+/// buckling (eq. C4); 0: none (a slab without sides).
 pub fn column_channel(omega: f32, g: f32, f: f32, tau: f32, through: f32, width: f32) -> (f32, f32, f32) {
     // (C2) delta-M scaling: the forward peak `f` travels on with the beam.
     let scale = (1.0 - omega * f).max(1e-6);
@@ -862,8 +913,13 @@ pub fn column_channel(omega: f32, g: f32, f: f32, tau: f32, through: f32, width:
     // (C4) the slab's decay constant, and the lateral leakage of a medium
     // `width depth` wide (plus the extrapolation length `2/(3 transport)`
     // on each side), in both lateral directions.
-    let extent = width * depth + 4.0 / (3.0 * transport);
-    let mut k2 = 3.0 * (1.0 - w) * transport + 2.0 * core::f32::consts::PI * core::f32::consts::PI / (extent * extent);
+    let lateral = if width > 0.0 {
+        let extent = width * depth + 4.0 / (3.0 * transport);
+        2.0 * core::f32::consts::PI * core::f32::consts::PI / (extent * extent)
+    } else {
+        0.0
+    };
+    let mut k2 = 3.0 * (1.0 - w) * transport + lateral;
     // The particular solution is singular at k = 1: step off it (the
     // cancellation that remains costs below 1e-3 of the fluence).
     if (k2 - 1.0).abs() < 1e-3 {
@@ -893,6 +949,194 @@ pub fn column_channel(omega: f32, g: f32, f: f32, tau: f32, through: f32, width:
     let slope = -k * a * down + k * b * up - alpha * direct;
     let flux = (3.0 * w * gs * direct - slope) / (3.0 * transport);
     (direct, fluence, flux)
+}
+
+/// Whether the slices take the columns' diffuse light from the light
+/// grids' smoothed nodes (`diffuse_node`).
+pub fn spread_columns(params: &VolumesParams) -> bool {
+    params.columns != 0 && params.column_spread > 0.0
+}
+
+/// Points of `diffuse_node`'s ring, evenly around it.
+pub const RING_POINTS: u32 = 6;
+
+/// The weight of a node's own column in `diffuse_node` (the ring shares
+/// the rest): fitted with `column_spread` against the Monte Carlo
+/// reference (`docs/volumes.md`, "Multiple scattering").
+pub const RING_CENTRE_WEIGHT: f32 = 0.3;
+
+/// The delta-Eddington column's fields at optical depth `tau` of a ray
+/// `through` deep, per unit irradiance, with no lateral leakage (eq. C4's
+/// buckling off; the ring carries it): `(direct, fluence, flux)` per
+/// channel (rgb; `column_channel`).
+fn column_fields(vol: &GpuVolume, tau: Vec4, through: Vec4) -> (Vec4, Vec4, Vec4) {
+    let (g, f) = phase_moments(vol);
+    let channel = |sigma_s: f32, sigma_t: f32, tau: f32, through: f32| -> (f32, f32, f32) {
+        let omega = if sigma_t > 0.0 { sigma_s / sigma_t } else { 0.0 };
+        column_channel(omega, g, f, tau, through, 0.0)
+    };
+    let (s, t) = (vol.sigma_s, vol.sigma_t);
+    let x = channel(s.x, t.x, tau.x, through.x);
+    let grey = s.y == s.x
+        && s.z == s.x
+        && t.y == t.x
+        && t.z == t.x
+        && tau.y == tau.x
+        && tau.z == tau.x
+        && through.y == through.x
+        && through.z == through.x;
+    let (y, z) = if grey { (x, x) } else { (channel(s.y, t.y, tau.y, through.y), channel(s.z, t.z, tau.z, through.z)) };
+    (Vec4::new(x.0, y.0, z.0, 0.0), Vec4::new(x.1, y.1, z.1, 0.0), Vec4::new(x.2, y.2, z.2, 0.0))
+}
+
+/// The volume whose extinction at `p` is largest (0 where none is there):
+/// whose albedo and phase function `diffuse_node` solves a column with.
+fn dominant_volume(params: &VolumesParams, volumes: &[GpuVolume], density: &[f32], p: Vec3) -> usize {
+    let mut best = 0;
+    let mut most = 0.0;
+    let mut v = 0;
+    while v < params.volume_count as usize {
+        let sigma = volumes[v].sigma_t.x * grid_density(&volumes[v], density, p);
+        if sigma > most {
+            most = sigma;
+            best = v;
+        }
+        v += 1;
+    }
+    best
+}
+
+/// Diffuse-light kernel: node `index` of the lights' grids (over all
+/// lights' grids in order, as `depths`), the columns' diffuse light there
+/// per unit irradiance (W/m^2 per W/m^2): `(fluence, flux)`, rgb each.
+///
+/// A column alone (eqs. C1-C5) is a slab as wide as the sky; a cloud's
+/// light also diffuses sideways, out of its domes and into its flanks
+/// (the radiative smoothing of the independent-column approximation's
+/// field, Marshak et al. 1995, over about the cloud's depth). So the node
+/// takes `RING_CENTRE_WEIGHT` of its own column's fields and shares the
+/// rest among `RING_POINTS` points on a ring across the light's travel,
+/// of radius `column_spread sqrt(H d)` (m), `H` the length of the node's
+/// light ray inside the volumes and `d` that length up to the node
+/// (`depths`' `w`): nothing at the lit face, the ray's whole length at
+/// its far end. Each ring point has its own column's fields, none where
+/// the ring point lies outside every volume (the light that diffuses there
+/// has left the cloud) unless the node does too (its value is then only
+/// what the samples inside near it interpolate toward). The columns solve
+/// without eq. C4's buckling: the ring is the lateral leakage. The albedo
+/// and phase function are those of the volume with the most extinction at
+/// the node.
+#[allow(clippy::too_many_arguments)]
+pub fn diffuse_node(
+    index: u32,
+    params: &VolumesParams,
+    lights: &[GpuLight],
+    grids: &[LightGrid],
+    volumes: &[GpuVolume],
+    density: &[f32],
+    depths: &[Vec4],
+    light_count: u32,
+) -> (Vec4, Vec4) {
+    // The light and column holding the node, and its place on the column.
+    let mut first = 0;
+    let mut l = 0;
+    while l < light_count as usize {
+        let g = &grids[l];
+        let nodes = g.nu * g.nv * g.nz;
+        if index < first + nodes {
+            break;
+        }
+        first += nodes;
+        l += 1;
+    }
+    if l >= light_count as usize {
+        return (Vec4::ZERO, Vec4::ZERO);
+    }
+    let g = &grids[l];
+    let light = &lights[l];
+    let local = index - first;
+    let (column, k) = (local / g.nz, local % g.nz);
+    let (i, j) = (column % g.nu, column / g.nu);
+    let u = g.lo.x + (g.hi.x - g.lo.x) * i as f32 / (g.nu - 1).max(1) as f32;
+    let v = g.lo.y + (g.hi.y - g.lo.y) * j as f32 / (g.nv - 1).max(1) as f32;
+    let z = g.lo.z + (g.hi.z - g.lo.z) * k as f32 / (g.nz - 1).max(1) as f32;
+    let (p, _) = light_space_point(light, u, v, z);
+    let tau = depths[(g.offset + local) as usize];
+    let through = depths[(g.offset + column * g.nz + g.nz - 1) as usize];
+    let vol = &volumes[dominant_volume(params, volumes, density, p)];
+    let (_, mut fluence, mut flux) = column_fields(vol, tau, through);
+    // From 0 at the lit face to the ray's whole length at the far one,
+    // as the square root of the depth (m).
+    let radius = params.column_spread * (through.w * tau.w).max(0.0).sqrt();
+    // A node outside every volume holds what the samples inside near it
+    // interpolate toward: its ring is not cut by the vacuum around it.
+    let sigma = extinction_at(params, volumes, density, p);
+    let inside = sigma.x > 0.0 || sigma.y > 0.0 || sigma.z > 0.0;
+    if radius > 0.0 {
+        // Across the travel at p: the light's own axes (a spot's, at its axis).
+        let (a, b) = (light.axis_x.xyz(), light.axis_y.xyz());
+        let share = (1.0 - RING_CENTRE_WEIGHT) / RING_POINTS as f32;
+        fluence *= RING_CENTRE_WEIGHT;
+        flux *= RING_CENTRE_WEIGHT;
+        let mut n = 0;
+        while n < RING_POINTS {
+            let angle = n as f32 * (2.0 * core::f32::consts::PI / RING_POINTS as f32);
+            let q = p + (a * angle.cos() + b * angle.sin()) * radius;
+            let sigma = extinction_at(params, volumes, density, q);
+            if !inside || sigma.x > 0.0 || sigma.y > 0.0 || sigma.z > 0.0 {
+                let (tq, thq) = light_optical_depths(light, g, depths, q);
+                let (_, fq, hq) = column_fields(vol, tq, thq);
+                fluence += fq * share;
+                flux += hq * share;
+            }
+            n += 1;
+        }
+    }
+    (fluence, flux)
+}
+
+/// Multiple scattering by columns spread across the light's travel (the
+/// slices' default): what light `e` scatters toward the camera at `p` per
+/// unit scattering coefficient (as `column_light`), the scaled direct
+/// beam at `p`'s own optical depth `tau` with the phase function, and the
+/// diffuse light's P1 radiance from `diffuse_node`'s fields, trilinear
+/// between the light grid `g`'s nodes.
+#[allow(clippy::too_many_arguments)]
+pub fn spread_column_light(
+    vol: &GpuVolume,
+    g: &LightGrid,
+    diffuse: &[Vec4],
+    light: &GpuLight,
+    p: Vec3,
+    e: Vec4,
+    tau: Vec4,
+    cos_theta: f32,
+) -> Vec4 {
+    let (gm, f) = phase_moments(vol);
+    let phase = volume_phase(vol, cos_theta, 1.0);
+    let (s, t) = (vol.sigma_s, vol.sigma_t);
+    // (C2): the direct beam's scaled optical depth, per channel.
+    let scaled = |sigma_s: f32, sigma_t: f32, tau: f32| -> f32 {
+        let omega = if sigma_t > 0.0 { sigma_s / sigma_t } else { 0.0 };
+        (-(1.0 - omega * f).max(1e-6) * tau).exp()
+    };
+    let direct = Vec4::new(scaled(s.x, t.x, tau.x), scaled(s.y, t.y, tau.y), scaled(s.z, t.z, tau.z), 0.0);
+    let (fc, place) = grid_place(light, g, p);
+    let mut radiance = Vec4::ZERO;
+    if place != OUTSIDE {
+        let fluence = trilinear(
+            |k, i, j| diffuse[(2 * (g.offset + (j * g.nu + i) * g.nz + k)) as usize],
+            fc,
+            UVec3::new(g.nz, g.nu, g.nv),
+        );
+        let flux = trilinear(
+            |k, i, j| diffuse[(2 * (g.offset + (j * g.nu + i) * g.nz + k) + 1) as usize],
+            fc,
+            UVec3::new(g.nz, g.nu, g.nv),
+        );
+        radiance = ((fluence + flux * (3.0 * gm * cos_theta)) * (1.0 / (4.0 * core::f32::consts::PI))).max(Vec4::ZERO);
+    }
+    e * (direct * phase + radiance)
 }
 
 /// Multiple scattering by delta-Eddington columns (the default; eqs. C1-C6
@@ -965,6 +1209,141 @@ mod tests {
             .sum();
         let exact = 4.0 * std::f64::consts::PI * (1.0 / 3.0 - 22.0 / 45.0 + 17.0 / 63.0 - 4.0 / 81.0);
         assert!((sum - exact).abs() < 1e-5 * exact, "{sum} against {exact}");
+    }
+
+    /// A slab 10 m thick and 100 m wide (density 1 in a 2x2x2 grid,
+    /// `sigma_t` 1/m, albedo 0.99, Henyey-Greenstein 0.85) under a light
+    /// travelling straight down; its light grid 21x21 columns 5 m apart
+    /// across it, 21 nodes 1 m apart from 5 m above the slab's top; the
+    /// optical depths by `optical_depth_column`.
+    fn slab(spread: f32) -> Slab {
+        let volume = GpuVolume {
+            min: Vec4::new(-50.0, 0.0, -50.0, 0.0),
+            max: Vec4::new(50.0, 10.0, 50.0, 0.0),
+            sigma_s: Vec4::new(0.99, 0.99, 0.99, 0.0),
+            sigma_t: Vec4::new(1.0, 1.0, 1.0, 0.0),
+            phase_kind: crate::types::PHASE_HENYEY_GREENSTEIN,
+            g1: 0.85,
+            nx: 2,
+            ny: 2,
+            nz: 2,
+            ..Default::default()
+        };
+        let light = GpuLight {
+            position: Vec4::new(0.0, 15.0, 0.0, 0.0),
+            axis_x: Vec4::new(1.0, 0.0, 0.0, 0.0),
+            axis_y: Vec4::new(0.0, 0.0, 1.0, 0.0),
+            axis_z: Vec4::new(0.0, -1.0, 0.0, 0.0),
+            kind: LIGHT_DIRECTIONAL,
+            ..Default::default()
+        };
+        let grid = LightGrid {
+            lo: Vec4::new(-50.0, -50.0, 0.0, 0.0),
+            hi: Vec4::new(50.0, 50.0, 20.0, 0.0),
+            nu: 21,
+            nv: 21,
+            nz: 21,
+            offset: 0,
+        };
+        let params = VolumesParams {
+            volume_count: 1,
+            column_count: 441,
+            column_substeps: 8,
+            columns: 1,
+            column_spread: spread,
+            ..Default::default()
+        };
+        let common = CommonParams { light_count: 1, ..Default::default() };
+        let density = [1.0f32; 8];
+        let mut depths = vec![Vec4::ZERO; 441 * 21];
+        for column in 0..441u32 {
+            let nodes = &mut depths[(column * 21) as usize..((column + 1) * 21) as usize];
+            optical_depth_column(column, &common, &params, &[light], &[grid], &[volume], &density, nodes, column * 21);
+        }
+        Slab { params, lights: [light], grids: [grid], volumes: [volume], density, depths }
+    }
+
+    /// `slab`'s scene: what `diffuse_node` reads.
+    struct Slab {
+        params: VolumesParams,
+        lights: [GpuLight; 1],
+        grids: [LightGrid; 1],
+        volumes: [GpuVolume; 1],
+        density: [f32; 8],
+        depths: Vec<Vec4>,
+    }
+
+    /// The ring leaves a medium that is the same all across alone (every
+    /// ring point's column is the node's own), takes light away where part
+    /// of the ring lies outside the volume (the light that diffuses out of
+    /// a cloud's side), and without a spread is the column alone (eq. C4's
+    /// buckling off).
+    #[test]
+    fn the_ring_spreads_a_column_only_where_the_medium_changes_across() {
+        let node = |i: u32, j: u32, k: u32| (j * 21 + i) * 21 + k;
+        for spread in [0.0f32, 1.0] {
+            let Slab { params, lights, grids, volumes, density, depths } = slab(spread);
+            let at = |n: u32| diffuse_node(n, &params, &lights, &grids, &volumes, &density, &depths, 1);
+            for k in [5u32, 10, 15, 20] {
+                // The column alone, from the node's own depths.
+                let tau = depths[node(10, 10, k) as usize];
+                let through = depths[node(10, 10, 20) as usize];
+                assert!((through.x - 10.0).abs() < 1e-3 && (through.w - 10.0).abs() < 1e-3, "{through:?}");
+                let (g, f) = phase_moments(&volumes[0]);
+                let (_, fluence, flux) = column_channel(0.99, g, f, tau.x, through.x, 0.0);
+                // The middle column (u = v = 0) and ones 10 m in from a
+                // side: the ring (radius sqrt(10 m * depth) <= 10 m) stays
+                // in the slab.
+                for (i, j) in [(10u32, 10u32), (2, 10), (10, 18)] {
+                    let (a, b) = at(node(i, j, k));
+                    assert!(
+                        (a.x - fluence).abs() <= 1e-4 * fluence.abs().max(1e-3),
+                        "{spread} {k}: {a:?} against {fluence}"
+                    );
+                    assert!((b.x - flux).abs() <= 1e-4 * fluence.abs().max(1e-3), "{spread} {k}: {b:?} against {flux}");
+                    assert_eq!((a.y, a.z), (a.x, a.x), "a grey slab's channels are one");
+                }
+            }
+        }
+    }
+
+    /// A step: a second box 10 m tall on the slab's left half (x <= 0),
+    /// the light 5 m above it. A node 5 m deep in the step and 5 m from its
+    /// side has a ring of radius sqrt(20 m * 5 m) = 10 m: the ring point
+    /// toward +x lies over the slab's right half, in the air above it,
+    /// where the light that diffuses out of the step's side is lost; the
+    /// node keeps its column's share and the five other points' (each the
+    /// same column as the step's middle, 25 m from any side).
+    #[test]
+    fn the_ring_loses_what_diffuses_out_of_a_side() {
+        let Slab { mut params, mut lights, mut grids, volumes, .. } = slab(1.0);
+        let step = GpuVolume {
+            min: Vec4::new(-50.0, 10.0, -50.0, 0.0),
+            max: Vec4::new(0.0, 20.0, 50.0, 0.0),
+            density_offset: 8,
+            ..volumes[0]
+        };
+        let volumes = [volumes[0], step];
+        let density = [1.0f32; 16];
+        lights[0].position.y = 25.0;
+        grids[0].hi.z = 30.0;
+        grids[0].nz = 31;
+        params.volume_count = 2;
+        let common = CommonParams { light_count: 1, ..Default::default() };
+        let mut depths = vec![Vec4::ZERO; 441 * 31];
+        for column in 0..441u32 {
+            let nodes = &mut depths[(column * 31) as usize..((column + 1) * 31) as usize];
+            optical_depth_column(column, &common, &params, &lights, &grids, &volumes, &density, nodes, column * 31);
+        }
+        let node = |i: u32, j: u32, k: u32| (j * 21 + i) * 31 + k;
+        let at = |n: u32| diffuse_node(n, &params, &lights, &grids, &volumes, &density, &depths, 1).0.x;
+        // z = 10: 5 m into the step (y = 15). x = -25 (i = 5) and x = -5 (i = 9).
+        let (middle, side) = (at(node(5, 10, 10)), at(node(9, 10, 10)));
+        let through = depths[node(9, 10, 30) as usize];
+        assert!((through.w - 20.0).abs() < 1e-3 && (depths[node(9, 10, 10) as usize].w - 5.0).abs() < 1e-3);
+        let share = (1.0 - RING_CENTRE_WEIGHT) / RING_POINTS as f32;
+        assert!(middle > 0.0);
+        assert!((side - middle * (1.0 - share)).abs() < 0.02 * middle, "{side} against {middle} less a share");
     }
 
     #[test]

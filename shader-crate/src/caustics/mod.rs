@@ -755,7 +755,7 @@ pub fn rasterize<A: AtomicWords + ?Sized>(
     if !all_steep && !refine {
         return;
     }
-    let y = params.map_origin.y + k as f32 * params.plane_spacing;
+    let y = plane_height(params, k);
     let v0 = glass.vertices[tri.vertices[0] as usize];
     let v1 = glass.vertices[tri.vertices[1] as usize];
     let v2 = glass.vertices[tri.vertices[2] as usize];
@@ -1217,13 +1217,7 @@ fn draw_cross_section<A: AtomicWords + ?Sized>(
     slope_z: f32,
 ) {
     let (ax, az, bx, bz, cx, cz) = (tri.ax, tri.az, tri.bx, tri.bz, tri.cx, tri.cz);
-    // A corner that is not finite draws nothing (its edge functions would
-    // bound no sub-sample row: `SubRows` would count every sample). Each
-    // compared on its own: `max` passes a NaN over; and not `is_finite`,
-    // whose infinite literal the SPIR-V front end rejects.
-    let finite =
-        ax.abs() < 1e30 && az.abs() < 1e30 && bx.abs() < 1e30 && bz.abs() < 1e30 && cx.abs() < 1e30 && cz.abs() < 1e30;
-    if !finite {
+    if !tri.is_finite() {
         return;
     }
     let (wmax, hmax) = (params.map_width as f32 - 1.0, params.map_height as f32 - 1.0);
@@ -1364,6 +1358,16 @@ impl Triangle2 {
             ez: Vec3::new(abx, bcx, cax) * sign,
             c: Vec3::new(0.0, bcz * abx - bcx * abz, 0.0) * sign,
         }
+    }
+
+    /// Whether every corner is finite (below 1e30 in size). A cross-section
+    /// with a corner that is not draws nothing: its edge functions would
+    /// bound no sub-sample row, and `SubRows` would count every sample.
+    /// Each corner compared on its own (`max` passes a NaN over), and not
+    /// by `is_finite`, whose infinite literal the SPIR-V front end rejects.
+    pub fn is_finite(&self) -> bool {
+        let small = |v: f32| v.abs() < 1e30;
+        small(self.ax) && small(self.az) && small(self.bx) && small(self.bz) && small(self.cx) && small(self.cz)
     }
 }
 
@@ -1574,6 +1578,11 @@ pub fn caustic_irradiance(words: &[u32], params: &CausticsParams, p: Vec3, n: Ve
     density * (cos * len)
 }
 
+/// The height (m) of sample plane `k` (`params.map_origin.y` the lowest).
+fn plane_height(params: &CausticsParams, k: u32) -> f32 {
+    params.map_origin.y + k as f32 * params.plane_spacing
+}
+
 /// The span `(t0, t1)` of the view ray `o + t d` (`0 <= t <= t_far`)
 /// between shaft planes `k` and `k + 1`, within the x-z box both their
 /// maps cover (empty: `t1 <= t0`).
@@ -1581,8 +1590,8 @@ fn slab_span(params: &CausticsParams, o: Vec3, d: Vec3, k: u32, t_far: f32) -> (
     let (r0, r1) = (params.rects[k as usize], params.rects[k as usize + 1]);
     let (s0, s1) = (r0.z * params.map_width as f32, r1.z * params.map_width as f32);
     let (u0, u1) = (r0.z * params.map_height as f32, r1.z * params.map_height as f32);
-    let y0 = params.map_origin.y + k as f32 * params.plane_spacing;
-    let span = clip_axis(o.y, d.y, y0, y0 + params.plane_spacing, (0.0, t_far));
+    let y_k = plane_height(params, k);
+    let span = clip_axis(o.y, d.y, y_k, y_k + params.plane_spacing, (0.0, t_far));
     let span = clip_axis(o.x, d.x, r0.x.min(r1.x), (r0.x + s0).max(r1.x + s1), span);
     clip_axis(o.z, d.z, r0.y.min(r1.y), (r0.y + u0).max(r1.y + u1), span)
 }
@@ -1680,7 +1689,7 @@ pub fn caustic_shafts_pixel(
             // read bilinear in its own square (`plane_rect`) and the two
             // interpolated linearly in height, as `caustic_irradiance`
             // reads the receivers' maps.
-            let y0 = params.map_origin.y + k as f32 * params.plane_spacing;
+            let y_k = plane_height(params, k);
             // int_a^(a + dt) e^(-sigma t) dt = e^(-sigma a) dt phi(sigma dt),
             // per channel: e^(-sigma a) carried from one interval to the
             // next by e^(-sigma dt), both taken at the slab's first lit
@@ -1691,7 +1700,7 @@ pub fn caustic_shafts_pixel(
             while i < n {
                 let a = t0 + i * dt;
                 let p = o + d * (a + 0.5 * dt);
-                let w = ((p.y - y0) / params.plane_spacing).clamp(0.0, 1.0);
+                let w = ((p.y - y_k) / params.plane_spacing).clamp(0.0, 1.0);
                 let below = resolved_at(texels, params, k, p.x, p.z);
                 let above = if w > 0.0 { resolved_at(texels, params, k + 1, p.x, p.z) } else { Vec4::ZERO };
                 let scattered = below * (1.0 - w) + above * w;
@@ -1931,13 +1940,20 @@ pub fn caustics_kernel(
 mod tests {
     use super::*;
 
+    /// Uniform numbers in [0, 1) from a 64-bit linear congruential
+    /// generator seeded with `seed` (24 bits each).
+    fn uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 40) as f64) / (1u64 << 24) as f64
+        }
+    }
+
     #[test]
     fn packed_rgb_keeps_each_channel_to_2_pow_minus_17_of_the_largest() {
-        let mut state = 7u64;
-        let mut next = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((state >> 40) as f32) / (1u64 << 24) as f32
-        };
+        let mut uniform = uniform(7);
+        let mut next = move || uniform() as f32;
         for k in 0..20_000 {
             // Magnitudes from 1e-30 to 1e30, channels spread over 6 decades.
             let scale = 10f32.powf(next() * 60.0 - 30.0);
@@ -1961,11 +1977,7 @@ mod tests {
     /// either way (f32 rounding), so the f64 count is bracketed.
     #[test]
     fn sub_rows_count_the_samples_inside() {
-        let mut state = 11u64;
-        let mut next = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((state >> 40) as f64) / (1u64 << 24) as f64
-        };
+        let mut next = uniform(11);
         let mut texels = 0;
         for k in 0..4000 {
             let scale = [0.3, 2.0, 12.0][k % 3];

@@ -212,18 +212,17 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
     if !(flux.x > 0.0 || flux.y > 0.0 || flux.z > 0.0) {
         return;
     }
+    let t = Triangle2::new(pa.x, pa.y, pb.x, pb.y, pc.x, pc.y);
     let lo = pa.min(pb).min(pc);
     let hi = pa.max(pb).max(pc);
     let (i0, j0) = ((lo.x - 0.5).ceil(), (lo.y - 0.5).ceil());
     let (i1, j1) = ((hi.x + 0.5).floor(), (hi.y + 0.5).floor());
-    // (Not `is_finite`: its infinite literal is a constant the SPIR-V
-    // front end rejects; a NaN fails the comparison.)
-    let finite = lo.abs().max_element() < 1e30 && hi.abs().max_element() < 1e30;
-    if !finite || (i1 - i0 + 1.0) * (j1 - j0 + 1.0) > MAX_TEXELS {
+    // Each corner tested (`min` and `max` pass a NaN over: the box alone
+    // would let a NaN corner through).
+    if !t.is_finite() || (i1 - i0 + 1.0) * (j1 - j0 + 1.0) > MAX_TEXELS {
         words.fetch_add(REJECTED_WORD, 1);
         return;
     }
-    let t = Triangle2::new(pa.x, pa.y, pb.x, pb.y, pc.x, pc.y);
     let (w, h) = (i1 - i0 + 1.0, j1 - j0 + 1.0);
     if w * h <= 4.0 {
         // Most cross-sections span at most 2x2 texels: one walk, each

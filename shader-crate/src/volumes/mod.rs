@@ -977,15 +977,11 @@ fn column_fields(vol: &GpuVolume, tau: Vec4, through: Vec4) -> (Vec4, Vec4, Vec4
     };
     let (s, t) = (vol.sigma_s, vol.sigma_t);
     let x = channel(s.x, t.x, tau.x, through.x);
-    let grey = s.y == s.x
-        && s.z == s.x
-        && t.y == t.x
-        && t.z == t.x
-        && tau.y == tau.x
-        && tau.z == tau.x
-        && through.y == through.x
-        && through.z == through.x;
-    let (y, z) = if grey { (x, x) } else { (channel(s.y, t.y, tau.y, through.y), channel(s.z, t.z, tau.z, through.z)) };
+    let (y, z) = if grey_column(vol, tau, through) {
+        (x, x)
+    } else {
+        (channel(s.y, t.y, tau.y, through.y), channel(s.z, t.z, tau.z, through.z))
+    };
     (Vec4::new(x.0, y.0, z.0, 0.0), Vec4::new(x.1, y.1, z.1, 0.0), Vec4::new(x.2, y.2, z.2, 0.0))
 }
 
@@ -1168,18 +1164,27 @@ pub fn column_light(
     };
     let (s, t) = (vol.sigma_s, vol.sigma_t);
     let x = channel(s.x, t.x, tau.x, through.x);
-    // A grey medium (clouds, smoke) gives every channel the same inputs,
-    // so the same bits: solve the slab once.
-    let grey = s.y == s.x
+    let (y, z) = if grey_column(vol, tau, through) {
+        (x, x)
+    } else {
+        (channel(s.y, t.y, tau.y, through.y), channel(s.z, t.z, tau.z, through.z))
+    };
+    e * Vec4::new(x, y, z, 0.0)
+}
+
+/// Whether every channel of a column has the same inputs (a grey medium,
+/// as clouds and smoke are): then they have the same bits, and the slab is
+/// solved once.
+fn grey_column(vol: &GpuVolume, tau: Vec4, through: Vec4) -> bool {
+    let (s, t) = (vol.sigma_s, vol.sigma_t);
+    s.y == s.x
         && s.z == s.x
         && t.y == t.x
         && t.z == t.x
         && tau.y == tau.x
         && tau.z == tau.x
         && through.y == through.x
-        && through.z == through.x;
-    let (y, z) = if grey { (x, x) } else { (channel(s.y, t.y, tau.y, through.y), channel(s.z, t.z, tau.z, through.z)) };
-    e * Vec4::new(x, y, z, 0.0)
+        && through.z == through.x
 }
 
 #[cfg(test)]

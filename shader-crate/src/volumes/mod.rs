@@ -320,13 +320,14 @@ pub fn extinction_at(params: &VolumesParams, volumes: &[GpuVolume], grid: &[f32]
     sigma
 }
 
-/// The light whose grid holds column `index` (over all lights' grids in
-/// order), and the column's index within it.
-fn light_of_column(index: u32, grids: &[LightGrid], light_count: u32) -> (usize, u32) {
+/// The light whose grid holds item `index` of `count(grid)` a grid (its
+/// columns or its nodes, over all lights' grids in order), and the item's
+/// index within that grid; `(0, u32::MAX)` past the last.
+fn light_holding(index: u32, grids: &[LightGrid], light_count: u32, count: impl Fn(&LightGrid) -> u32) -> (usize, u32) {
     let mut first = 0;
     let mut l = 0;
     while l < light_count as usize {
-        let columns = grids[l].nu * grids[l].nv;
+        let columns = count(&grids[l]);
         if index < first + columns {
             return (l, index - first);
         }
@@ -368,7 +369,7 @@ pub fn optical_depth_column(
     out: &mut [Vec4],
     base: u32,
 ) {
-    let (l, column) = light_of_column(index, grids, common.light_count);
+    let (l, column) = light_holding(index, grids, common.light_count, |g| g.nu * g.nv);
     if column == u32::MAX {
         return;
     }
@@ -450,8 +451,13 @@ fn grid_place(light: &GpuLight, g: &LightGrid, p: Vec3) -> (Vec3, u32) {
 /// light grid `g`, trilinear between nodes (z fastest: a column is
 /// contiguous).
 fn grid_lookup(g: &LightGrid, depths: &[Vec4], f: Vec3) -> Vec4 {
-    let at = |k: u32, i: u32, j: u32| depths[(g.offset + (j * g.nu + i) * g.nz + k) as usize];
-    trilinear(at, f, UVec3::new(g.nz, g.nu, g.nv))
+    trilinear(|k, i, j| depths[grid_node(g, k, i, j) as usize], f, UVec3::new(g.nz, g.nu, g.nv))
+}
+
+/// The index of node `k` of column `(i, j)` of light grid `g` among all
+/// grids' nodes (z fastest: a column is contiguous).
+fn grid_node(g: &LightGrid, k: u32, i: u32, j: u32) -> u32 {
+    g.offset + (j * g.nu + i) * g.nz + k
 }
 
 /// Light `l`'s transmittance (rgb) through the volumes to `p`, from its
@@ -966,14 +972,16 @@ pub const RING_POINTS: u32 = 6;
 pub const RING_CENTRE_WEIGHT: f32 = 0.3;
 
 /// The delta-Eddington column's fields at optical depth `tau` of a ray
-/// `through` deep, per unit irradiance, with no lateral leakage (eq. C4's
-/// buckling off; the ring carries it): `(direct, fluence, flux)` per
-/// channel (rgb; `column_channel`).
-fn column_fields(vol: &GpuVolume, tau: Vec4, through: Vec4) -> (Vec4, Vec4, Vec4) {
+/// `through` deep, per unit irradiance, its lateral leakage by `width`
+/// (eq. C4; 0: none, where the ring carries it): `(direct, fluence,
+/// flux)` per channel (rgb; `column_channel`). One channel at a time,
+/// unrolled: a Vec4 indexed by a loop variable becomes a pointer select
+/// that Vulkan's SPIR-V does not allow.
+fn column_fields(vol: &GpuVolume, tau: Vec4, through: Vec4, width: f32) -> (Vec4, Vec4, Vec4) {
     let (g, f) = phase_moments(vol);
     let channel = |sigma_s: f32, sigma_t: f32, tau: f32, through: f32| -> (f32, f32, f32) {
         let omega = if sigma_t > 0.0 { sigma_s / sigma_t } else { 0.0 };
-        column_channel(omega, g, f, tau, through, 0.0)
+        column_channel(omega, g, f, tau, through, width)
     };
     let (s, t) = (vol.sigma_s, vol.sigma_t);
     let x = channel(s.x, t.x, tau.x, through.x);
@@ -1034,23 +1042,12 @@ pub fn diffuse_node(
     light_count: u32,
 ) -> (Vec4, Vec4) {
     // The light and column holding the node, and its place on the column.
-    let mut first = 0;
-    let mut l = 0;
-    while l < light_count as usize {
-        let g = &grids[l];
-        let nodes = g.nu * g.nv * g.nz;
-        if index < first + nodes {
-            break;
-        }
-        first += nodes;
-        l += 1;
-    }
-    if l >= light_count as usize {
+    let (l, local) = light_holding(index, grids, light_count, |g| g.nu * g.nv * g.nz);
+    if local == u32::MAX {
         return (Vec4::ZERO, Vec4::ZERO);
     }
     let g = &grids[l];
     let light = &lights[l];
-    let local = index - first;
     let (column, k) = (local / g.nz, local % g.nz);
     let (i, j) = (column % g.nu, column / g.nu);
     let u = g.lo.x + (g.hi.x - g.lo.x) * i as f32 / (g.nu - 1).max(1) as f32;
@@ -1060,15 +1057,15 @@ pub fn diffuse_node(
     let tau = depths[(g.offset + local) as usize];
     let through = depths[(g.offset + column * g.nz + g.nz - 1) as usize];
     let vol = &volumes[dominant_volume(params, volumes, density, p)];
-    let (_, mut fluence, mut flux) = column_fields(vol, tau, through);
+    let (_, mut fluence, mut flux) = column_fields(vol, tau, through, 0.0);
     // From 0 at the lit face to the ray's whole length at the far one,
     // as the square root of the depth (m).
     let radius = params.column_spread * (through.w * tau.w).max(0.0).sqrt();
-    // A node outside every volume holds what the samples inside near it
-    // interpolate toward: its ring is not cut by the vacuum around it.
-    let sigma = extinction_at(params, volumes, density, p);
-    let inside = sigma.x > 0.0 || sigma.y > 0.0 || sigma.z > 0.0;
     if radius > 0.0 {
+        // A node outside every volume holds what the samples inside near
+        // it interpolate toward: its ring is not cut by the vacuum around it.
+        let sigma = extinction_at(params, volumes, density, p);
+        let inside = sigma.x > 0.0 || sigma.y > 0.0 || sigma.z > 0.0;
         // Across the travel at p: the light's own axes (a spot's, at its axis).
         let (a, b) = (light.axis_x.xyz(), light.axis_y.xyz());
         let share = (1.0 - RING_CENTRE_WEIGHT) / RING_POINTS as f32;
@@ -1081,7 +1078,7 @@ pub fn diffuse_node(
             let sigma = extinction_at(params, volumes, density, q);
             if !inside || sigma.x > 0.0 || sigma.y > 0.0 || sigma.z > 0.0 {
                 let (tq, thq) = light_optical_depths(light, g, depths, q);
-                let (_, fq, hq) = column_fields(vol, tq, thq);
+                let (_, fq, hq) = column_fields(vol, tq, thq, 0.0);
                 fluence += fq * share;
                 flux += hq * share;
             }
@@ -1120,17 +1117,10 @@ pub fn spread_column_light(
     let (fc, place) = grid_place(light, g, p);
     let mut radiance = Vec4::ZERO;
     if place != OUTSIDE {
-        let fluence = trilinear(
-            |k, i, j| diffuse[(2 * (g.offset + (j * g.nu + i) * g.nz + k)) as usize],
-            fc,
-            UVec3::new(g.nz, g.nu, g.nv),
-        );
-        let flux = trilinear(
-            |k, i, j| diffuse[(2 * (g.offset + (j * g.nu + i) * g.nz + k) + 1) as usize],
-            fc,
-            UVec3::new(g.nz, g.nu, g.nv),
-        );
-        radiance = ((fluence + flux * (3.0 * gm * cos_theta)) * (1.0 / (4.0 * core::f32::consts::PI))).max(Vec4::ZERO);
+        let n = UVec3::new(g.nz, g.nu, g.nv);
+        let fluence = trilinear(|k, i, j| diffuse[(2 * grid_node(g, k, i, j)) as usize], fc, n);
+        let flux = trilinear(|k, i, j| diffuse[(2 * grid_node(g, k, i, j) + 1) as usize], fc, n);
+        radiance = p1_radiance(fluence, flux, gm, cos_theta);
     }
     e * (direct * phase + radiance)
 }
@@ -1152,24 +1142,17 @@ pub fn column_light(
     through: Vec4,
     cos_theta: f32,
 ) -> Vec4 {
-    let (g, f) = phase_moments(vol);
-    let p = volume_phase(vol, cos_theta, 1.0);
-    // One channel at a time, unrolled: a Vec4 indexed by a loop variable
-    // becomes a pointer select that Vulkan's SPIR-V does not allow.
-    let channel = |sigma_s: f32, sigma_t: f32, tau: f32, through: f32| -> f32 {
-        let omega = if sigma_t > 0.0 { sigma_s / sigma_t } else { 0.0 };
-        let (direct, fluence, flux) = column_channel(omega, g, f, tau, through, params.column_width);
-        let diffuse = ((fluence + 3.0 * g * flux * cos_theta) / (4.0 * core::f32::consts::PI)).max(0.0);
-        direct * p + diffuse
-    };
-    let (s, t) = (vol.sigma_s, vol.sigma_t);
-    let x = channel(s.x, t.x, tau.x, through.x);
-    let (y, z) = if grey_column(vol, tau, through) {
-        (x, x)
-    } else {
-        (channel(s.y, t.y, tau.y, through.y), channel(s.z, t.z, tau.z, through.z))
-    };
-    e * Vec4::new(x, y, z, 0.0)
+    let (g, _) = phase_moments(vol);
+    let (direct, fluence, flux) = column_fields(vol, tau, through, params.column_width);
+    e * (direct * volume_phase(vol, cos_theta, 1.0) + p1_radiance(fluence, flux, g, cos_theta))
+}
+
+/// (C6) The diffuse light's P1 radiance toward the camera per unit
+/// irradiance, `(phi + 3 g F cos theta) / 4 pi` per channel, none below 0
+/// (W/(m^2 sr)): `fluence` and `flux` the column's (`column_fields`), `g`
+/// the phase function's mean cosine.
+fn p1_radiance(fluence: Vec4, flux: Vec4, g: f32, cos_theta: f32) -> Vec4 {
+    ((fluence + flux * (3.0 * g) * cos_theta) / (4.0 * core::f32::consts::PI)).max(Vec4::ZERO)
 }
 
 /// Whether every channel of a column has the same inputs (a grey medium,

@@ -136,6 +136,7 @@ fn good_scene_writes_png_exr_and_stats() {
         "sea.order2",
         "sea.bottom",
         "sea.glass",
+        "sea.glass_air",
         "cloud_automaton",
         "cloud_automaton.smooth",
         "volume_density",

@@ -925,3 +925,46 @@ fn objects_above_the_water_are_seen_through_snells_window() {
     assert!(changed.len() > 40, "the raft fills part of the window: {}", changed.len());
     assert!(d.rms_8bit_percent < 0.6 && local.rms_8bit_percent < 1.0 && d.max_8bit_percent < 6.0, "{d:?} {local:?}");
 }
+
+/// A glass ball (radius 0.4 m, index 1.5) hung 0.8 m above flat water,
+/// seen from 2 m under it through Snell's window: where the view ray
+/// leaves the water toward the ball, what the ball shows (the sky and the
+/// sun bent through it, and the sky it mirrors), not the sky behind it.
+/// The method's pixel centres against the reference (the glass traced in
+/// f64: `reference::seen_in_air`), order 2 off on both sides.
+#[test]
+fn glass_above_the_water_is_seen_through_snells_window() {
+    let ball = "[[object]]\ntype = \"sphere\"\ncenter = [0.9, 1.2, -1.6]\nradius = 0.4\nmaterial = { kind = \"glass\", ior = 1.5 }";
+    let sea = "depth_m = 12.0\nwaves = { kind = \"flat\" }\nsecond_order = false";
+    let with = common::scene_from_str(&under_text(2.0, [0.2, 1.0, -0.3], (24, 16), 30.0, sea, ball));
+    let without = common::scene_from_str(&under_text(2.0, [0.2, 1.0, -0.3], (24, 16), 30.0, sea, ""));
+    let image = slicelight::metrics::to_f64(&render(&with).image);
+    let open = slicelight::metrics::to_f64(&render(&without).image);
+    let reference = reference_image(&with);
+    let d = slicelight::metrics::difference(&image, &reference, with.exposure);
+    // Where the ball changes the reference's picture by more than 5 % of
+    // the 8-bit range.
+    let changed: Vec<usize> = (0..image.len())
+        .filter(|&i| (reference[i] - open[i]).abs().max_element() > 0.05 * open[i].max_element().max(1e-12))
+        .collect();
+    let there: Vec<DVec3> = changed.iter().map(|&i| image[i]).collect();
+    let there_ref: Vec<DVec3> = changed.iter().map(|&i| reference[i]).collect();
+    let was: Vec<DVec3> = changed.iter().map(|&i| open[i]).collect();
+    let local = slicelight::metrics::difference(&there, &there_ref, with.exposure);
+    let unseen = slicelight::metrics::difference(&was, &there_ref, with.exposure);
+    println!(
+        "whole image: RMS {:.3} % (8-bit), max {:.2} %, energy {:.4}; the {} pixels the ball changes: RMS {:.3} %, \
+         max {:.2} %, energy {:.4} (the sky behind the ball instead: RMS {:.3} %)",
+        d.rms_8bit_percent,
+        d.max_8bit_percent,
+        d.energy_ratio,
+        changed.len(),
+        local.rms_8bit_percent,
+        local.max_8bit_percent,
+        local.energy_ratio,
+        unseen.rms_8bit_percent
+    );
+    assert!(changed.len() > 10, "the ball fills part of the window: {}", changed.len());
+    assert!(local.rms_8bit_percent < 0.25 * unseen.rms_8bit_percent, "{local:?} against {unseen:?}");
+    assert!(d.rms_8bit_percent < 1.0 && local.rms_8bit_percent < 2.0, "{d:?} {local:?}");
+}

@@ -311,32 +311,7 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
         }
     };
     if data.materials[hit.material as usize].kind == MATERIAL_GLASS {
-        // Through glass: the opaque surface behind, lit directly (and by
-        // the sky's light under a sky), per channel; or, under a sky, the
-        // sky where the ray leaves the glass for good. Reflected at the
-        // first interface: the opaque surface the mirrored ray meets, lit
-        // the same way, or the sky (a second glass is not followed).
-        let mut radiance = DVec3::ZERO;
-        let (q, r, mirrored) = crate::caustics::reference::glass_reflection(data, o, d, &hit);
-        let mut sky = open_sky(data, q, mirrored) * r;
-        if let Some(seen) = object_in_air(data, q, mirrored) {
-            radiance += seen * r;
-        }
-        for c in 0..3 {
-            match crate::caustics::reference::through_glass(data, o, d, &hit, c) {
-                Some((q, dir, weight, Some(behind))) => {
-                    // Lit by the lights and, under a sky, by the sky.
-                    let at = q + dir * behind.t;
-                    let normal = if behind.normal.dot(dir) > 0.0 { -behind.normal } else { behind.normal };
-                    let sky_light = crate::sky::reference::sky_light(data, at, normal, behind.albedo);
-                    let l = (direct(data, q, dir, &behind) + sky_light) * (-sigma_t * behind.t).exp();
-                    radiance[c] += l[c] * weight;
-                }
-                Some((q, dir, weight, None)) => sky[c] += open_sky(data, q, dir)[c] * weight,
-                None => {}
-            }
-        }
-        return (air(radiance * (-sigma_t * hit.t).exp() + sky), hit.t);
+        return (air(glass_seen(data, o, d, &hit)), hit.t);
     }
     // A terrain's ripples at their full resolution (the LOD's truth).
     let hit = crate::desert::reference::rippled(data, o, d, hit.clone());
@@ -344,6 +319,38 @@ fn surface_and_distance(data: &SceneData, x: u32, y: u32, sample: u32) -> (DVec3
     let normal = if hit.normal.dot(d) > 0.0 { -hit.normal } else { hit.normal };
     let sky = crate::sky::reference::sky_light(data, o + d * hit.t, normal, hit.albedo);
     (air((direct(data, o, d, &hit) + sky) * (-sigma_t * hit.t).exp()), hit.t)
+}
+
+/// The light toward `o` along the ray `o + t d` whose first hit `hit` is
+/// glass, f64. Through the glass: the opaque surface behind, lit directly
+/// (and by the sky's light under a sky), per channel; or, under a sky, the
+/// sky where the ray leaves the glass for good. Reflected at the first
+/// interface: the opaque surface the mirrored ray meets, lit the same way,
+/// or the sky (a second glass is not followed). The `[medium]` attenuates
+/// the way to the surfaces, not to the sky (as the sky seen directly).
+fn glass_seen(data: &SceneData, o: DVec3, d: DVec3, hit: &Surface) -> DVec3 {
+    let sigma_t = d3(data.common.sigma_t);
+    let mut radiance = DVec3::ZERO;
+    let (q, r, mirrored) = crate::caustics::reference::glass_reflection(data, o, d, hit);
+    let mut sky = open_sky(data, q, mirrored) * r;
+    if let Some(seen) = object_in_air(data, q, mirrored) {
+        radiance += seen * r;
+    }
+    for c in 0..3 {
+        match crate::caustics::reference::through_glass(data, o, d, hit, c) {
+            Some((q, dir, weight, Some(behind))) => {
+                // Lit by the lights and, under a sky, by the sky.
+                let at = q + dir * behind.t;
+                let normal = if behind.normal.dot(dir) > 0.0 { -behind.normal } else { behind.normal };
+                let sky_light = crate::sky::reference::sky_light(data, at, normal, behind.albedo);
+                let l = (direct(data, q, dir, &behind) + sky_light) * (-sigma_t * behind.t).exp();
+                radiance[c] += l[c] * weight;
+            }
+            Some((q, dir, weight, None)) => sky[c] += open_sky(data, q, dir)[c] * weight,
+            None => {}
+        }
+    }
+    radiance * (-sigma_t * hit.t).exp() + sky
 }
 
 /// What lies along `dir` from `from` if nothing is in the way: the sky
@@ -464,7 +471,7 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let (sky, r) = if p.waves == slicelight_shaders::sea::WAVES_NORMAL_MAP {
         let slope = glam::DVec2::new(-normal.x / normal.y, -normal.z / normal.y);
         let rough = p.roughness.truncate().as_dvec3();
-        let objects = |w: DVec3| object_in_air(data, hit, w);
+        let objects = |w: DVec3| seen_in_air(data, hit, w);
         let shade = clouds * sun_over_water(data, hit);
         let (light, r) = crate::sea::reference::rough_reflection(
             &sky_reference,
@@ -482,7 +489,7 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         let reflected = d + normal * (2.0 * cos_i);
         let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
         let without_sun = sky_reference.sky_without_sun(reflected);
-        let mirrored = object_in_air(data, hit, reflected)
+        let mirrored = seen_in_air(data, hit, reflected)
             .unwrap_or_else(|| without_sun + (sky_reference.radiance(reflected) - without_sun) * clouds);
         (mirrored, r)
     };
@@ -602,7 +609,7 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         let (cos_t, _) = optics::transmitted_cosine(cos_i, n);
         let out = (d * n + (-normal) * (n * cos_i - cos_t)).normalize();
         let out = DVec3::new(out.x, out.y.abs(), out.z).normalize();
-        let air = object_in_air(data, end, out).unwrap_or_else(|| {
+        let air = seen_in_air(data, end, out).unwrap_or_else(|| {
             let sky = SkyReference::new(&data.sky.params, SKY_TOLERANCE);
             let without_sun = sky.sky_without_sun(out);
             without_sun + (sky.radiance(out) - without_sun) * clouds_at(end)
@@ -618,6 +625,19 @@ pub fn sea_radiance_under(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         below += sea.order2(up);
     }
     light + below * r * att * clouds_at(end)
+}
+
+/// What the ray from `from` along `dir` meets in the air over the sea
+/// (from the water's surface: through Snell's window, or mirrored): an
+/// opaque object lit (`object_in_air`), or glass with what lies beyond it
+/// and what it mirrors (`glass_seen`); `None` where it meets nothing.
+pub fn seen_in_air(data: &SceneData, from: DVec3, dir: DVec3) -> Option<DVec3> {
+    let eps = crate::caustics::reference::epsilon(from);
+    let hit = nearest(data, from, dir, eps, f64::INFINITY)?;
+    if data.materials[hit.material as usize].kind == MATERIAL_GLASS {
+        return Some(glass_seen(data, from, dir, &hit));
+    }
+    object_in_air(data, from, dir)
 }
 
 /// The light of the object (not glass) that the ray from `from` along

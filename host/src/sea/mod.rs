@@ -18,9 +18,10 @@ use glam::{Vec3, Vec4};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Deserialize;
+use slicelight_shaders::glass::Glass;
 use slicelight_shaders::optics;
 use slicelight_shaders::scatter::CpuAtomics;
-use slicelight_shaders::sea::air::Above;
+use slicelight_shaders::sea::air::{Above, GlassInAir};
 use slicelight_shaders::sea::caustics::{
     caustic_points, caustic_ray, caustic_triangle, caustic_triangles, shaft_map_len, shaft_mip_texel,
 };
@@ -57,6 +58,7 @@ pub static PASSES: &[&dyn Pass] = &[
     &SeaOrder2,
     &SeaBottom,
     &glass::SeaGlass,
+    &glass::SeaGlassAir,
 ];
 
 /// The family, as `passes::FAMILIES` registers it.
@@ -1564,40 +1566,64 @@ impl Pass for SeaReflection {
         )
     }
     fn run_cpu(&self, scene: &SceneData, common: &CommonParams, frame: &mut Frame, progress: &ProgressBar) {
-        let (p, sky) = (&scene.sea.params, &scene.sky.params);
-        let blank = slicelight_shaders::common::surface::no_surface();
-        frame.write_all::<Vec4>(&SEA_REFLECTION, common.band_pixels as usize, |frame, out| {
-            let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
-            let sky_view = frame.get::<Vec4>(&SKY_VIEW);
-            let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
-            let surface = frame.get::<Vec4>(&SEA_SURFACE);
-            let lit = crate::common::light_inputs(scene, frame);
-            let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
-            let above = Above {
-                common,
-                geometry: scene.geometry(),
-                materials: &scene.materials,
-                lights: &scene.lights,
-                inputs: crate::common::light_inputs(scene, frame),
-                sky,
-                transmittance,
-                sky_view,
-                irradiance: frame.get::<Vec4>(&crate::sky::SKY_IRRADIANCE),
-            };
-            for_each_invocation(out, common.band_start, progress, |i, v| {
-                let k = (i - common.band_start) as usize;
-                let texel = gbuffer.get(k).unwrap_or(&blank);
-                let seen = surface.get(k).copied().unwrap_or(Vec4::ZERO);
-                let waves = &scene.sea.waves;
-                *v = reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds, &above);
-            });
-        });
+        run_air(scene, common, frame, progress, &SEA_REFLECTION, false);
     }
     fn compare(&self, _scene: &SceneData, gpu: &Frame, cpu: &Frame) -> Result<String> {
         // The reflected sky also carries the sky pass's 2e-3 (see its compare).
         let c = cpu.get::<Vec4>(&SEA_REFLECTION);
         compare_rgb("sea reflection", gpu.get(&SEA_REFLECTION), c, 2e-3, c.len() * 3 / 1000 + 1)
     }
+}
+
+/// `reflection_pixel` at every pixel into `out`, with the scene's objects
+/// over the sea (`air::Above`: `sea.reflection`), or with `glass` what
+/// the glass among them shows (`air::GlassInAir`: `sea.glass_air`).
+pub(crate) fn run_air(
+    scene: &SceneData,
+    common: &CommonParams,
+    frame: &mut Frame,
+    progress: &ProgressBar,
+    out: &Resource,
+    glass: bool,
+) {
+    let (p, sky) = (&scene.sea.params, &scene.sky.params);
+    let blank = slicelight_shaders::common::surface::no_surface();
+    frame.write_all::<Vec4>(out, common.band_pixels as usize, |frame, values| {
+        let transmittance = frame.get::<Vec4>(&SKY_TRANSMITTANCE);
+        let sky_view = frame.get::<Vec4>(&SKY_VIEW);
+        let gbuffer = frame.get::<GBufferTexel>(&GBUFFER);
+        let surface = frame.get::<Vec4>(&SEA_SURFACE);
+        let lit = crate::common::light_inputs(scene, frame);
+        let clouds = CloudShadow { lights: &scene.lights, grids: lit.grids, depths: lit.depths };
+        let above = Above {
+            common,
+            geometry: scene.geometry(),
+            materials: &scene.materials,
+            lights: &scene.lights,
+            inputs: crate::common::light_inputs(scene, frame),
+            sky,
+            transmittance,
+            sky_view,
+            irradiance: frame.get::<Vec4>(&crate::sky::SKY_IRRADIANCE),
+        };
+        let meshes = Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
+        let in_air = GlassInAir::new(above, meshes, glass::sea_inputs(scene, frame));
+        // The glass layer only where `sea.reflection`'s rays met glass.
+        let mirror = if glass { frame.get::<Vec4>(&SEA_REFLECTION) } else { &[] };
+        for_each_invocation(values, common.band_start, progress, |i, v| {
+            let k = (i - common.band_start) as usize;
+            let texel = gbuffer.get(k).unwrap_or(&blank);
+            let seen = surface.get(k).copied().unwrap_or(Vec4::ZERO);
+            let waves = &scene.sea.waves;
+            *v = if glass && mirror.get(k).is_none_or(|m| m.w == 0.0) {
+                Vec4::ZERO
+            } else if glass {
+                reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds, &in_air)
+            } else {
+                reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds, &above)
+            };
+        });
+    });
 }
 
 /// A per-pixel sea term whose kernel reads `sea.surface`'s value for the

@@ -92,6 +92,7 @@ pub fn direct_radiance(
 /// What the lights' terms read besides the lights: their light maps and
 /// shadow maps, and the volumes' transmittance volumes (one `LightGrid` per
 /// light and their optical depths; empty in a scene without volumes).
+#[derive(Copy, Clone)]
 pub struct LightInputs<'a> {
     pub light_map: &'a [Vec4],
     pub shadow: &'a [f32],

@@ -24,7 +24,7 @@ use super::{bottom_seen, order1_seen, under};
 use crate::camera::{camera_ray, in_image};
 use crate::common::surface::{channel_part, glass_entry, reflectances, view_channels};
 use crate::geometry::{trace_nearest, NO_HIT};
-use crate::glam::{UVec3, Vec2, Vec3, Vec4};
+use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
 use crate::glass::{is_glass, surface_epsilon, trace_through, Glass, PATH_OUT};
 use crate::sky::SkyParams;
 use crate::types::{CommonParams, GBufferTexel, GlassTriangle, GlassVertex, GpuBvhNode, GpuLight, GpuMaterial};
@@ -67,7 +67,9 @@ pub fn sea_along(s: &SeaInputs, from: Vec3, dir: Vec3) -> Vec3 {
     if !v.hit {
         return Vec3::ZERO;
     }
-    let reflected = reflection_seen(p, s.sky, s.transmittance, s.sky_view, &v, &s.clouds, &super::air::NoObjects);
+    let rough = p.waves == super::WAVES_NORMAL_MAP;
+    let reflected =
+        reflection_seen(p, s.sky, s.transmittance, s.sky_view, &v, &s.clouds, &super::air::NoObjects, rough).xyz();
     let first = order1_seen(p, &v, s.bottom, &s.sunlit, &s.clouds);
     let mut second = Vec3::ZERO;
     if p.second_order != 0 {

@@ -61,7 +61,6 @@ pub mod under;
 #[cfg(target_arch = "spirv")]
 use spirv_std::num_traits::Float;
 
-use self::air::Objects;
 use crate::camera::{camera_ray, in_image, sample_offset};
 use crate::geometry::{trace_nearest, Geometry, Hit, NO_HIT};
 use crate::glam::{UVec3, Vec2, Vec3, Vec4, Vec4Swizzles};
@@ -930,9 +929,16 @@ pub fn view_in_water(dir: Vec3, normal: Vec3, n: f32) -> Vec3 {
 /// water, what lies beyond Snell's window, `e^(-c l) (1 - R) n^2 L_air`
 /// along the ray refracted out (`under::through_window`; `surface`: the
 /// sample's `sea.surface` value): an object above the water where that ray
-/// meets one (`air::Above`), else the sky and the sun.
+/// meets one (`objects`: `air::Above`), else the sky and the sun. With
+/// `air::GlassInAir` (kernel `sea.glass_air`), what glass over the water
+/// shows along the same rays, and nothing else. `w`: how many of the rays
+/// met glass.
+///
+/// One call of `reflection_seen` for all three views (under the water, a
+/// flat sea, waves): a kernel inlines each call of `Objects::seen`, and
+/// the glass's tracing is large.
 #[allow(clippy::too_many_arguments)]
-pub fn reflection_pixel(
+pub fn reflection_pixel<O: air::Objects>(
     index: u32,
     common: &CommonParams,
     p: &SeaParams,
@@ -943,44 +949,49 @@ pub fn reflection_pixel(
     texel: &GBufferTexel,
     surface: Vec4,
     clouds: &CloudShadow,
-    above: &air::Above,
+    objects: &O,
 ) -> Vec4 {
-    if p.underwater != 0 {
-        let v = under::decode(index, common, p, surface);
-        if v.end != under::END_SURFACE {
-            return Vec4::ZERO;
+    let (v, rough, scale) = if p.underwater != 0 {
+        // Through the window: one ray, weighted by the transmission out.
+        let u = under::decode(index, common, p, surface);
+        let mut v = SeaView::default();
+        if u.end == under::END_SURFACE {
+            let (out, factor) = under::through_window(p, &u);
+            if factor > 0.0 {
+                v.hit = true;
+                v.point = u.end_point();
+                v.reflected = out;
+                v.reflectance = factor;
+            }
         }
-        let (out, factor) = under::through_window(p, &v);
-        if factor <= 0.0 {
-            return Vec4::ZERO;
-        }
-        let point = v.end_point();
-        let (seen, object) = above.seen(point, out);
-        let light = if seen {
-            object
-        } else {
-            sky_radiance(sky, transmittance, sky_view, out) + sun_disk(sky, transmittance, out) * clouds.at(p, point)
-        };
-        return (light * factor * under::attenuation(p, &v)).extend(0.0);
-    }
-    // Waves read the slope rule alone (`sea_hit`); a flat sea, the
-    // reflectance and reflected ray (`sea_view`).
-    let v = if p.waves != WAVES_NORMAL_MAP {
-        sea_view(index, common, p, waves, texel)
+        (v, false, under::attenuation(p, &u))
+    } else if p.waves != WAVES_NORMAL_MAP {
+        // A flat sea reads the reflectance and reflected ray (`sea_view`).
+        (sea_view(index, common, p, waves, texel), false, Vec3::ONE)
     } else {
-        sea_hit(index, common, p, waves, texel)
+        // Waves read the slope rule alone (`sea_hit`).
+        (sea_hit(index, common, p, waves, texel), true, Vec3::ONE)
     };
     if !v.hit {
         return Vec4::ZERO;
     }
-    reflection_seen(p, sky, transmittance, sky_view, &v, clouds, above).extend(0.0)
+    let seen = reflection_seen(p, sky, transmittance, sky_view, &v, clouds, objects, rough);
+    (seen.xyz() * scale).extend(seen.w)
 }
 
-/// The sky and the sun reflected at the surface where `v` meets it (rgb):
-/// a flat sea's mirror (`v` from `refracted`), or over waves every facet
-/// of `v`'s slope rule and the sun's glint. Where a reflected ray meets one
-/// of `objects` (`air::Objects`), the object's light in air takes the sky's
-/// place along it; the glint needs the sun seen from the point.
+/// The sky and the sun reflected at the surface where `v` meets it (rgb;
+/// `w` the number of rays traced that met glass):
+/// without `rough`, one ray `v.reflected` weighted by `v.reflectance` (a
+/// flat sea's mirror, or the ray out through Snell's window); with it,
+/// every facet of `v`'s slope rule and the sun's glint. Where a ray meets
+/// one of `objects` (`air::Objects`), the object's light in air takes the
+/// sky's place along it; the glint needs the sun seen from the point.
+///
+/// Every ray is traced at one place (`Objects::seen` is called once in
+/// the code): each node of the rule has one ray, or where objects may be
+/// near it three across the view and, where those lie within a pixel's
+/// angle of each other, the middle one traced for all three.
+#[allow(clippy::too_many_arguments)]
 pub fn reflection_seen<O: air::Objects>(
     p: &SeaParams,
     sky: &SkyParams,
@@ -989,101 +1000,125 @@ pub fn reflection_seen<O: air::Objects>(
     v: &SeaView,
     clouds: &CloudShadow,
     objects: &O,
-) -> Vec3 {
-    if p.waves != WAVES_NORMAL_MAP {
-        let (seen, object) = objects.seen(v.point, v.reflected);
-        if seen {
-            return object * v.reflectance;
-        }
-        let sun = sun_disk(sky, transmittance, v.reflected) * clouds.at(p, v.point);
-        let sky_light = sky_radiance(sky, transmittance, sky_view, v.reflected) + sun;
-        return sky_light * v.reflectance;
-    }
-    // Waves: the sky (and, by the turned-away share, the sun's disk)
-    // reflected by each facet of the slope rule (`surface::SlopeRule`), and
-    // the sun's glint in closed form; the sun's light through the volumes'
-    // shadow at the point (`CloudShadow`).
+    rough: bool,
+) -> Vec4 {
     let n = p.extinction.w;
+    // The sun's light through the volumes' shadow at the point
+    // (`CloudShadow`).
     let shade = clouds.at(p, v.point);
-    // Rays are traced only where the cone around the reflected rays may
-    // meet an object (most of the sea's pixels mirror only the sky, as
-    // without objects).
-    let trace = objects.any() && {
-        let mut axis = reflected_skyward(v.dir, Vec3::Y);
-        let mut k = 0;
-        while k < surface::ALONG_NODES {
-            let mut j = 0;
-            while j < 3 {
-                axis += reflected_skyward(v.dir, v.rule.across(k, surface::ACROSS_NODES[j].0));
-                j += 1;
-            }
-            k += 1;
-        }
-        let axis = axis.normalize();
-        let mut cos_half = axis.dot(reflected_skyward(v.dir, Vec3::Y));
-        k = 0;
-        while k < surface::ALONG_NODES {
-            let mut j = 0;
-            while j < 3 {
-                let r = reflected_skyward(v.dir, v.rule.across(k, surface::ACROSS_NODES[j].0));
-                cos_half = cos_half.min(axis.dot(r));
-                j += 1;
-            }
-            k += 1;
-        }
-        objects.in_cone(v.point, axis, cos_half)
-    };
+    // Over waves, rays are traced only where the cone around the reflected
+    // rays may meet an object (most of the sea's pixels mirror only the
+    // sky, as without objects).
+    let trace = objects.any() && (!rough || reflections_near_objects(v, objects));
+    let nodes = if rough { surface::SLOPE_NODES } else { 1 };
     let mut light = Vec3::ZERO;
+    let mut glass = 0.0;
     let mut k = 0;
-    while k < surface::SLOPE_NODES {
-        let facet = v.rule.node(k);
-        let mut sky_light = Vec3::ZERO;
+    while k < nodes {
+        // Waves: the sky (and, by the turned-away share, the sun's disk)
+        // reflected by each facet of the slope rule (`surface::SlopeRule`).
         // Nodes of weight 1e-3 or less take the sky: the rule's tails (at
         // most 0.9 % of the weight in all, nine nodes).
-        let traced = trace && facet.weight > 1e-3;
-        if trace && k + 1 < surface::SLOPE_NODES {
-            // Objects: each facing node at three slopes across the view
-            // (`SlopeRule::across`), each reflected ray traced (a mirrored
-            // object, unlike the sky, is not smooth across: with the node's
-            // mean slope alone a post's reflection under 7 m/s waves was
-            // 2.9 % RMS (8-bit) off the f64 rule, 1.3 % with the three).
-            // Where the three rays lie within a pixel's angle of each
-            // other, the middle one is traced for all three.
+        let (normal, weight, traced) = if rough {
+            let facet = v.rule.node(k);
+            (facet.normal, facet.weight * reflectance(facet.cos_i, 1.0 / n), trace && facet.weight > 1e-3)
+        } else {
+            (Vec3::Y, v.reflectance, trace)
+        };
+        // Objects: each facing node at three slopes across the view
+        // (`SlopeRule::across`), each reflected ray traced (a mirrored
+        // object, unlike the sky, is not smooth across: with the node's mean
+        // slope alone a post's reflection under 7 m/s waves was 2.9 % RMS
+        // (8-bit) off the f64 rule, 1.3 % with the three). The last node
+        // (the turned-away share) keeps one ray, and the sun's disk.
+        let across = rough && trace && k + 1 < surface::SLOPE_NODES;
+        let sun = !rough || k + 1 == surface::SLOPE_NODES;
+        let narrow = across && {
             let (low, high) = (surface::ACROSS_NODES[0].0, surface::ACROSS_NODES[2].0);
             let (r_low, r_high) =
                 (reflected_skyward(v.dir, v.rule.across(k, low)), reflected_skyward(v.dir, v.rule.across(k, high)));
-            let narrow = r_low.dot(r_high) >= objects.cos_pixel();
-            let middle = reflected_skyward(v.dir, v.rule.across(k, 0.0));
-            let (seen_middle, object_middle) =
-                if traced && narrow { objects.seen(v.point, middle) } else { (false, Vec3::ZERO) };
-            let mut j = 0;
-            while j < 3 {
-                let (z, w) = surface::ACROSS_NODES[j];
-                let r = reflected_skyward(v.dir, v.rule.across(k, z));
-                let (seen, object) = if !traced {
-                    (false, Vec3::ZERO)
-                } else if narrow {
-                    (seen_middle, object_middle)
+            r_low.dot(r_high) >= objects.cos_pixel()
+        };
+        // Slot 0: the node's one ray, or (across) the middle ray, traced for
+        // the three where they are narrow; slots 1-3: the three across.
+        let slots = if across { 4 } else { 1 };
+        let mut node_light = Vec3::ZERO;
+        let mut middle = (air::NOTHING, Vec3::ZERO);
+        let mut j = 0;
+        while j < slots {
+            let (dir, w, run) = if !across {
+                let dir = if rough { reflected_skyward(v.dir, normal) } else { v.reflected };
+                (dir, 1.0, traced)
+            } else if j == 0 {
+                (reflected_skyward(v.dir, v.rule.across(k, 0.0)), 0.0, traced && narrow)
+            } else {
+                let (z, w) = surface::ACROSS_NODES[j - 1];
+                (reflected_skyward(v.dir, v.rule.across(k, z)), w, traced && !narrow)
+            };
+            let found = if run { objects.seen(v.point, dir) } else { (air::NOTHING, Vec3::ZERO) };
+            if found.0 == air::GLASS {
+                glass += 1.0;
+            }
+            if j == 0 {
+                middle = found;
+            }
+            let (kind, object) = if narrow { middle } else { found };
+            let seen = kind != air::NOTHING;
+            if w > 0.0 {
+                let ray_light = if seen {
+                    object
+                } else if objects.sky() {
+                    let sky_light = sky_radiance(sky, transmittance, sky_view, dir);
+                    if sun {
+                        sky_light + sun_disk(sky, transmittance, dir) * shade
+                    } else {
+                        sky_light
+                    }
                 } else {
-                    objects.seen(v.point, r)
+                    Vec3::ZERO
                 };
-                sky_light += w * if seen { object } else { sky_radiance(sky, transmittance, sky_view, r) };
-                j += 1;
+                node_light += w * ray_light;
             }
-        } else {
-            let reflected = reflected_skyward(v.dir, facet.normal);
-            let (seen, object) = if traced { objects.seen(v.point, reflected) } else { (false, Vec3::ZERO) };
-            sky_light = if seen { object } else { sky_radiance(sky, transmittance, sky_view, reflected) };
-            if k + 1 == surface::SLOPE_NODES && !seen {
-                sky_light += sun_disk(sky, transmittance, reflected) * shade;
-            }
+            j += 1;
         }
-        light += sky_light * (facet.weight * reflectance(facet.cos_i, 1.0 / n));
+        light += node_light * weight;
         k += 1;
     }
-    let glint = surface::sun_glint(sky, transmittance, &v.rule, &v.slopes, n);
-    light += glint * shade * objects.sun_seen(v.point, sky.sun_direction.xyz());
-    light
+    if rough {
+        // The sun's glint in closed form.
+        let glint = surface::sun_glint(sky, transmittance, &v.rule, &v.slopes, n);
+        light += glint * shade * objects.sun_seen(v.point, sky.sun_direction.xyz());
+    }
+    light.extend(glass)
+}
+
+/// Whether the cone around the rays that the waves at `v` reflect toward
+/// the sky (every node's three across, and the mean normal's) may meet one
+/// of `objects`.
+fn reflections_near_objects<O: air::Objects>(v: &SeaView, objects: &O) -> bool {
+    let mut axis = reflected_skyward(v.dir, Vec3::Y);
+    let mut k = 0;
+    while k < surface::ALONG_NODES {
+        let mut j = 0;
+        while j < 3 {
+            axis += reflected_skyward(v.dir, v.rule.across(k, surface::ACROSS_NODES[j].0));
+            j += 1;
+        }
+        k += 1;
+    }
+    let axis = axis.normalize();
+    let mut cos_half = axis.dot(reflected_skyward(v.dir, Vec3::Y));
+    k = 0;
+    while k < surface::ALONG_NODES {
+        let mut j = 0;
+        while j < 3 {
+            let r = reflected_skyward(v.dir, v.rule.across(k, surface::ACROSS_NODES[j].0));
+            cos_half = cos_half.min(axis.dot(r));
+            j += 1;
+        }
+        k += 1;
+    }
+    objects.in_cone(v.point, axis, cos_half)
 }
 
 /// The volumes' shadow on the water: the sun's transmittance through them

@@ -136,6 +136,7 @@ fn scenes() -> Vec<CheckedScene> {
         ("sea_diver", Sea, || sky("sea_diver", 180, 120)),
         ("sea_under_pier", Sea, || sky("sea_under_pier", 180, 120)),
         ("under a shore, a sphere in the water", Sea, under_a_shore),
+        ("under the pier, a glass ball above the water", Sea, glass_over_the_diver),
         ("caustics_ball", Caustics, || traced("caustics_ball", 160, 120)),
         ("caustics_fog_ball", Caustics, || traced("caustics_fog_ball", 160, 120)),
         ("caustics_torus, turned", Glass, turned_torus),
@@ -167,6 +168,19 @@ fn under_a_shore() -> SceneData {
         + "\n[[object]]\ntype = \"sphere\"\ncenter = [-2.0, -3.0, -6.0]\nradius = 1.0\nalbedo = [0.7, 0.6, 0.5]\n";
     let data = common::scene_from_str(&text);
     assert!(data.sea.params.underwater != 0 && data.sea.params.bottom_nx >= 2 && data.has_geometry());
+    data
+}
+
+/// `sea_under_pier` at 180x120 with a glass ball (radius 0.4 m) hung
+/// under the deck where the eye sees it through Snell's window
+/// (`sea.glass_air` under the water).
+fn glass_over_the_diver() -> SceneData {
+    let text = std::fs::read_to_string(common::root().join("scenes/sea_under_pier.toml")).unwrap();
+    let text = text.replace("resolution = [720, 480]", "resolution = [180, 120]")
+        + "\n[[object]]\ntype = \"sphere\"\ncenter = [1.5, 1.0, -7.66]\nradius = 0.4\nmaterial = { kind = \"glass\", ior = 1.5 }\n";
+    let mut data = common::scene_from_str(&text);
+    data.caustics.forget_cached_table();
+    assert!(data.sea.params.underwater != 0 && data.has_glass());
     data
 }
 

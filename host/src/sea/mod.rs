@@ -1600,27 +1600,31 @@ pub(crate) fn run_air(
             geometry: scene.geometry(),
             materials: &scene.materials,
             lights: &scene.lights,
-            inputs: crate::common::light_inputs(scene, frame),
+            inputs: lit,
             sky,
             transmittance,
             sky_view,
             irradiance: frame.get::<Vec4>(&crate::sky::SKY_IRRADIANCE),
         };
-        let meshes = Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
-        let in_air = GlassInAir::new(above, meshes, glass::sea_inputs(scene, frame));
-        // The glass layer only where `sea.reflection`'s rays met glass.
-        let mirror = if glass { frame.get::<Vec4>(&SEA_REFLECTION) } else { &[] };
+        // The glass layer's objects, and where `sea.reflection`'s rays met
+        // glass (the only pixels it draws).
+        let in_air = glass.then(|| {
+            let meshes = Glass { vertices: &scene.glass_vertices, triangles: &scene.glass_triangles };
+            (GlassInAir::new(above, meshes, glass::sea_inputs(scene, frame)), frame.get::<Vec4>(&SEA_REFLECTION))
+        });
         for_each_invocation(values, common.band_start, progress, |i, v| {
             let k = (i - common.band_start) as usize;
             let texel = gbuffer.get(k).unwrap_or(&blank);
             let seen = surface.get(k).copied().unwrap_or(Vec4::ZERO);
             let waves = &scene.sea.waves;
-            *v = if glass && mirror.get(k).is_none_or(|m| m.w == 0.0) {
-                Vec4::ZERO
-            } else if glass {
-                reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds, &in_air)
-            } else {
-                reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds, &above)
+            *v = match &in_air {
+                Some((_, mirror)) if mirror.get(k).is_none_or(|m| m.w == 0.0) => Vec4::ZERO,
+                Some((in_air, _)) => {
+                    reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds, in_air)
+                }
+                None => {
+                    reflection_pixel(i, common, p, waves, sky, transmittance, sky_view, texel, seen, &clouds, &above)
+                }
             };
         });
     });

@@ -1231,11 +1231,8 @@ fn draw_cross_section<A: AtomicWords + ?Sized>(
         let mut j = j0;
         while j <= j1 {
             let (lo, hi) = row_span(tri, j, wmax);
-            let rows = SubRows::new(tri, j);
-            let mut i = lo;
-            while i <= hi {
-                count += rows.covered(tri, i);
-                i += 1.0;
+            if lo <= hi {
+                count += SubRows::new(tri, j).covered_span(lo, hi);
             }
             j += 1.0;
         }
@@ -1267,7 +1264,7 @@ fn draw_cross_section<A: AtomicWords + ?Sized>(
         let rows = SubRows::new(tri, j);
         let mut i = lo;
         while i <= hi {
-            let covered = rows.covered(tri, i);
+            let covered = rows.covered(i);
             if covered > 0 {
                 let density = per_sample * (covered as f32 / SUBSAMPLES as f32);
                 deposit(words, params, plane_base + j as u32 * params.map_width + i as u32, density, slope_x, slope_z);
@@ -1372,13 +1369,17 @@ impl Triangle2 {
 }
 
 /// The four sub-sample rows of a texel row `j` (`z = j - 3/8, j - 1/8,
-/// j + 1/8, j + 3/8`, one per component): on each, the interval of `x - ax`
-/// where all three edge functions are non-negative (empty: `lo > hi`).
-/// A texel's coverage is then how many of its four sub-sample columns
-/// fall in each (`covered`), not 16 tests of three edges.
+/// j + 1/8, j + 3/8`, one per component): on each, the samples inside the
+/// cross-section, as the first and last sample index `s` (the row's
+/// samples are at `x = s/4 - 3/8`, so texel column `i` holds `s = 4i` to
+/// `4i + 3`; integers in f32, exact below 2^24) whose `x - ax` lies where
+/// all three edge functions are non-negative (none: `first > last`). A
+/// texel's coverage is then how many of its four sub-sample columns lie
+/// between them (`covered`), not 16 tests of three edges; a run of texels'
+/// coverage, their sum exactly (`covered_span`).
 pub struct SubRows {
-    lo: Vec4,
-    hi: Vec4,
+    first: Vec4,
+    last: Vec4,
 }
 
 /// `[lo, hi]` (of `dx = x - ax`, per sub-sample row at `z - az`) narrowed
@@ -1403,17 +1404,28 @@ impl SubRows {
         let (lo, hi) = edge_bounds(lo, hi, z, t.ex.x, t.ez.x, t.c.x);
         let (lo, hi) = edge_bounds(lo, hi, z, t.ex.y, t.ez.y, t.c.y);
         let (lo, hi) = edge_bounds(lo, hi, z, t.ex.z, t.ez.z, t.c.z);
-        SubRows { lo, hi }
+        // Sample s is at dx = s/4 - 3/8 - ax: in [lo, hi] for s from
+        // ceil(4 (lo + ax) + 3/2) to floor(4 (hi + ax) + 3/2). Held within
+        // +-2^30 (an unbounded side: 1e30), where an f32 integer plus or
+        // minus a texel's few samples stays ordered.
+        let ax = Vec4::splat(t.ax);
+        let bound = Vec4::splat(1_073_741_824.0);
+        let first = ((lo + ax) * 4.0 + Vec4::splat(1.5)).ceil().clamp(-bound, bound);
+        let last = ((hi + ax) * 4.0 + Vec4::splat(1.5)).floor().clamp(-bound, bound);
+        SubRows { first, last }
     }
 
     /// How many of texel column `i`'s 4 x 4 sub-samples (`x = i - 3/8, ...,
     /// i + 3/8` on each row) lie in the cross-section.
-    pub fn covered(&self, t: &Triangle2, i: f32) -> u32 {
-        // Sample m (0..4) of a row is at dx = u - 3/8 + m/4: in [lo, hi]
-        // for m from ceil(4 (lo - u) + 3/2) to floor(4 (hi - u) + 3/2).
-        let u = Vec4::splat(i - t.ax);
-        let first = ((self.lo - u) * 4.0 + Vec4::splat(1.5)).ceil().max(Vec4::ZERO);
-        let last = ((self.hi - u) * 4.0 + Vec4::splat(1.5)).floor().min(Vec4::splat(3.0));
+    pub fn covered(&self, i: f32) -> u32 {
+        self.covered_span(i, i)
+    }
+
+    /// The sub-samples of texel columns `i0` to `i1` in the cross-section:
+    /// the sum of their `covered`, exactly (the same integers).
+    pub fn covered_span(&self, i0: f32, i1: f32) -> u32 {
+        let first = self.first.max(Vec4::splat(4.0 * i0));
+        let last = self.last.min(Vec4::splat(4.0 * i1 + 3.0));
         let n = (last - first + Vec4::ONE).max(Vec4::ZERO);
         (n.x + n.y + n.z + n.w) as u32
     }
@@ -1534,10 +1546,41 @@ fn resolved_at(texels: &[Vec4], params: &CausticsParams, k: u32, x: f32, z: f32)
     }
     let (i0, j0) = (u.floor(), v.floor());
     let (fu, fv) = (u - i0, v - j0);
-    let low = texel_at(texels, params, k, i0, j0) * (1.0 - fu) + texel_at(texels, params, k, i0 + 1.0, j0) * fu;
-    let high =
-        texel_at(texels, params, k, i0, j0 + 1.0) * (1.0 - fu) + texel_at(texels, params, k, i0 + 1.0, j0 + 1.0) * fu;
+    let (width, height) = (params.map_width as f32, params.map_height as f32);
+    let (low, high) = if i0 >= 0.0 && j0 >= 0.0 && i0 + 1.0 < width && j0 + 1.0 < height {
+        // All four texels on the map (most reads): one index, no tests.
+        let at = ((k * params.map_height + j0 as u32) * params.map_width + i0 as u32) as usize;
+        let row = params.map_width as usize;
+        (texels[at] * (1.0 - fu) + texels[at + 1] * fu, texels[at + row] * (1.0 - fu) + texels[at + row + 1] * fu)
+    } else {
+        (
+            texel_at(texels, params, k, i0, j0) * (1.0 - fu) + texel_at(texels, params, k, i0 + 1.0, j0) * fu,
+            texel_at(texels, params, k, i0, j0 + 1.0) * (1.0 - fu)
+                + texel_at(texels, params, k, i0 + 1.0, j0 + 1.0) * fu,
+        )
+    };
     low * (1.0 - fv) + high * fv
+}
+
+/// `e^(-sigma t)` per channel (w = 0), one `exp` where the three
+/// channels' `sigma` are equal (a grey medium: the same bits).
+fn extinction(sigma: Vec4, t: f32) -> Vec4 {
+    if sigma.x == sigma.y && sigma.y == sigma.z {
+        let e = (-sigma.x * t).exp();
+        Vec4::new(e, e, e, 0.0)
+    } else {
+        Vec4::new((-sigma.x * t).exp(), (-sigma.y * t).exp(), (-sigma.z * t).exp(), 0.0)
+    }
+}
+
+/// `light::phi(x)` given `r = e^(-x)` (the same bits: `phi` takes the
+/// same `exp` where it takes one).
+fn phi_of(x: f32, r: f32) -> f32 {
+    if x.abs() < 1e-3 {
+        phi(x)
+    } else {
+        (1.0 - r) / x
+    }
 }
 
 /// Texel `(i, j)` of plane `k` of the resolved shaft maps; zero off the map.
@@ -1706,9 +1749,10 @@ pub fn caustic_shafts_pixel(
                 let scattered = below * (1.0 - w) + above * w;
                 if !lit && (scattered.x > 0.0 || scattered.y > 0.0 || scattered.z > 0.0) {
                     lit = true;
-                    e = Vec4::new((-sigma.x * a).exp(), (-sigma.y * a).exp(), (-sigma.z * a).exp(), 0.0);
-                    r = Vec4::new((-sigma.x * dt).exp(), (-sigma.y * dt).exp(), (-sigma.z * dt).exp(), 0.0);
-                    w_phi = Vec4::new(phi(sigma.x * dt), phi(sigma.y * dt), phi(sigma.z * dt), 0.0) * dt;
+                    e = extinction(sigma, a);
+                    r = extinction(sigma, dt);
+                    let x = sigma * dt;
+                    w_phi = Vec4::new(phi_of(x.x, r.x), phi_of(x.y, r.y), phi_of(x.z, r.z), 0.0) * dt;
                 }
                 if lit {
                     sum += scattered * e * w_phi;
@@ -1973,15 +2017,19 @@ mod tests {
     /// `SubRows` counts a texel's covered sub-samples from each row's
     /// interval; here against the 16 samples tested one by one in f64, on
     /// triangles of every size and shape (slivers, texel-sized, rows
-    /// parallel to an edge). A sample within 1e-4 texels of an edge may go
-    /// either way (f32 rounding), so the f64 count is bracketed.
+    /// parallel to an edge), near the map's corner and near the far side of
+    /// a 512-texel map (where the sample indices are largest). A sample
+    /// within 1e-4 texels of an edge may go either way (f32 rounding), so
+    /// the f64 count is bracketed. A row's `covered_span` is the sum of its
+    /// texels' `covered`.
     #[test]
     fn sub_rows_count_the_samples_inside() {
         let mut next = uniform(11);
         let mut texels = 0;
         for k in 0..4000 {
             let scale = [0.3, 2.0, 12.0][k % 3];
-            let mut c: [f64; 6] = core::array::from_fn(|_| 20.0 + (next() - 0.5) * scale);
+            let off = if k % 2 == 0 { 0 } else { 480 };
+            let mut c: [f64; 6] = core::array::from_fn(|_| (20 + off) as f64 + (next() - 0.5) * scale);
             if k % 7 == 0 {
                 c[3] = c[1]; // an edge parallel to the rows
             }
@@ -2003,9 +2051,12 @@ mod tests {
                 };
                 e(a, b).min(e(b, cc)).min(e(cc, a))
             };
-            for j in 12..29 {
+            for j in 12 + off..29 + off {
                 let rows = SubRows::new(&t, j as f32);
-                for i in 12..29 {
+                let (i0, i1) = (12 + off, 28 + off);
+                let sum: u32 = (i0..=i1).map(|i| rows.covered(i as f32)).sum();
+                assert_eq!(rows.covered_span(i0 as f32, i1 as f32), sum, "triangle {k}, row {j}");
+                for i in i0..=i1 {
                     let (mut surely, mut maybe) = (0, 0);
                     for sz in 0..4 {
                         for sx in 0..4 {
@@ -2014,7 +2065,7 @@ mod tests {
                             maybe += (d >= -1e-4) as u32;
                         }
                     }
-                    let n = rows.covered(&t, i as f32);
+                    let n = rows.covered(i as f32);
                     assert!(
                         surely <= n && n <= maybe,
                         "triangle {k} {c:?}, texel ({i}, {j}): {n} not in [{surely}, {maybe}]"

@@ -268,7 +268,7 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
             let rows = SubRows::new(&t, y);
             let mut x = i0;
             while x <= i1 {
-                let covered = rows.covered(&t, x);
+                let covered = rows.covered(x);
                 if pass == 0 {
                     count += covered;
                 } else if covered > 0 {
@@ -292,11 +292,11 @@ pub fn caustic_triangle<A: AtomicWords + ?Sized>(index: u32, p: &SeaParams, rays
 fn cell_coverage(t: &Triangle2, rows: &(SubRows, SubRows), i0: f32, j0: f32, wide: u32, c: u32) -> u32 {
     let (x, dy) = (i0 + (c % wide) as f32, c / wide);
     if dy == 0 {
-        rows.0.covered(t, x)
+        rows.0.covered(x)
     } else if dy == 1 {
-        rows.1.covered(t, x)
+        rows.1.covered(x)
     } else {
-        SubRows::new(t, j0 + dy as f32).covered(t, x)
+        SubRows::new(t, j0 + dy as f32).covered(x)
     }
 }
 

@@ -370,7 +370,7 @@ fn open_sky(data: &SceneData, from: DVec3, dir: DVec3) -> DVec3 {
         return DVec3::ZERO;
     }
     if sea {
-        return sea_radiance(data, from, dir);
+        return sea_radiance_mirroring(data, from, dir, false);
     }
     SkyReference::new(&data.sky.params, SKY_TOLERANCE).radiance(dir)
 }
@@ -443,6 +443,17 @@ fn incident(
 /// `(1 - R)/n^2`. The surface normal is the scene's (the wave map's at the
 /// hit, or up).
 pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
+    sea_radiance_mirroring(data, o, d, true)
+}
+
+/// `sea_radiance`, the surface mirroring glass (`glass`) or, seen from
+/// glass (`open_sky`), only opaque objects: glass mirrored by the sea seen
+/// through glass is a third meeting with the water and the glass, which
+/// the method leaves out (`sea_along` mirrors no object), and under waves
+/// each level of it multiplies the reference's rays by about 270 (every
+/// slope and sun direction of `rough_reflection`).
+fn sea_radiance_mirroring(data: &SceneData, o: DVec3, d: DVec3, glass: bool) -> DVec3 {
+    let seen = |from: DVec3, w: DVec3| if glass { seen_in_air(data, from, w) } else { object_in_air(data, from, w) };
     let p = &data.sea.params;
     let t = (p.level as f64 - o.y) / d.y;
     let hit = o + d * t;
@@ -471,7 +482,7 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
     let (sky, r) = if p.waves == slicelight_shaders::sea::WAVES_NORMAL_MAP {
         let slope = glam::DVec2::new(-normal.x / normal.y, -normal.z / normal.y);
         let rough = p.roughness.truncate().as_dvec3();
-        let objects = |w: DVec3| seen_in_air(data, hit, w);
+        let objects = |w: DVec3| seen(hit, w);
         let shade = clouds * sun_over_water(data, hit);
         let (light, r) = crate::sea::reference::rough_reflection(
             &sky_reference,
@@ -489,7 +500,7 @@ pub fn sea_radiance(data: &SceneData, o: DVec3, d: DVec3) -> DVec3 {
         let reflected = d + normal * (2.0 * cos_i);
         let reflected = DVec3::new(reflected.x, reflected.y.abs(), reflected.z).normalize();
         let without_sun = sky_reference.sky_without_sun(reflected);
-        let mirrored = seen_in_air(data, hit, reflected)
+        let mirrored = seen(hit, reflected)
             .unwrap_or_else(|| without_sun + (sky_reference.radiance(reflected) - without_sun) * clouds);
         (mirrored, r)
     };

@@ -1562,17 +1562,6 @@ fn resolved_at(texels: &[Vec4], params: &CausticsParams, k: u32, x: f32, z: f32)
     low * (1.0 - fv) + high * fv
 }
 
-/// `e^(-sigma t)` per channel (w = 0), one `exp` where the three
-/// channels' `sigma` are equal (a grey medium: the same bits).
-fn extinction(sigma: Vec4, t: f32) -> Vec4 {
-    if sigma.x == sigma.y && sigma.y == sigma.z {
-        let e = (-sigma.x * t).exp();
-        Vec4::new(e, e, e, 0.0)
-    } else {
-        Vec4::new((-sigma.x * t).exp(), (-sigma.y * t).exp(), (-sigma.z * t).exp(), 0.0)
-    }
-}
-
 /// `light::phi(x)` given `r = e^(-x)` (the same bits: `phi` takes the
 /// same `exp` where it takes one).
 fn phi_of(x: f32, r: f32) -> f32 {
@@ -1749,8 +1738,9 @@ pub fn caustic_shafts_pixel(
                 let scattered = below * (1.0 - w) + above * w;
                 if !lit && (scattered.x > 0.0 || scattered.y > 0.0 || scattered.z > 0.0) {
                     lit = true;
-                    e = extinction(sigma, a);
-                    r = extinction(sigma, dt);
+                    // One exp for the three channels of a grey medium.
+                    e = transmittance(sigma, a);
+                    r = transmittance(sigma, dt);
                     let x = sigma * dt;
                     w_phi = Vec4::new(phi_of(x.x, r.x), phi_of(x.y, r.y), phi_of(x.z, r.z), 0.0) * dt;
                 }

@@ -81,6 +81,16 @@ pub fn phi(x: f32) -> f32 {
     }
 }
 
+/// `phi(x)` given `r = e^(-x)` (the same bits: `phi` takes the same `exp`
+/// where it takes one), for a march that carries `r` already.
+pub fn phi_given(x: f32, r: f32) -> f32 {
+    if x.abs() < 1e-3 {
+        phi(x)
+    } else {
+        (1.0 - r) / x
+    }
+}
+
 /// `p` in the light's frame: `(x along axis_x, y along axis_y, z along axis_z)`,
 /// metres, relative to the light's position (spot) or entry-plane centre
 /// (directional).

@@ -101,6 +101,62 @@ impl AtomicWords for CpuAtomics<'_> {
     }
 }
 
+/// Words one CPU thread owns alone: plain adds, no atomics. Each thread
+/// adds into its own words and `merge` sums them after: the bins' integer
+/// sums do not depend on how the contributions were split or ordered, so
+/// the merged words are the bits `CpuAtomics` (and the GPU) give.
+#[cfg(not(target_arch = "spirv"))]
+pub struct CpuWords<'a>(pub &'a mut [u32]);
+
+#[cfg(not(target_arch = "spirv"))]
+impl AtomicWords for CpuWords<'_> {
+    fn fetch_add(&mut self, index: u32, value: u32) -> u32 {
+        let w = &mut self.0[index as usize];
+        let old = *w;
+        *w = old.wrapping_add(value);
+        old
+    }
+
+    fn compare_exchange(&mut self, index: u32, expected: u32, new: u32) -> u32 {
+        let w = &mut self.0[index as usize];
+        let old = *w;
+        if old == expected {
+            *w = new;
+        }
+        old
+    }
+}
+
+/// Adds the words `from` (a buffer of the same layout, filled by the
+/// scatter primitive) into `into`: the rejected counts, and each bin's
+/// 64-bit sum with the carry out of `low` and `high` saturating at
+/// `SATURATED_HIGH`. `low` wraps as the atomic adds wrap it, and a
+/// saturated `high` stays so: the result is the words that every
+/// contribution of both added into one buffer would hold, bit for bit.
+#[cfg(not(target_arch = "spirv"))]
+pub fn merge(into: &mut [u32], from: &[u32]) {
+    assert_eq!(into.len(), from.len(), "merging buffers of different sizes");
+    if into.is_empty() {
+        return;
+    }
+    into[0] = into[0].wrapping_add(from[0]);
+    merge_bins(&mut into[1..], &from[1..]);
+}
+
+/// `merge` of whole bins (`[low, high]` pairs, no rejected count).
+#[cfg(not(target_arch = "spirv"))]
+pub fn merge_bins(into: &mut [u32], from: &[u32]) {
+    for (a, b) in into.as_chunks_mut::<2>().0.iter_mut().zip(from.as_chunks::<2>().0) {
+        if b[0] == 0 && b[1] == 0 {
+            continue;
+        }
+        let low = a[0] as u64 + b[0] as u64;
+        a[0] = low as u32;
+        let high = a[1] as u64 + b[1] as u64 + (low >> 32);
+        a[1] = high.min(SATURATED_HIGH as u64) as u32;
+    }
+}
+
 /// `high + add`, stopping at `SATURATED_HIGH`, with a compare-and-swap loop
 /// (carries are rare next to the adds on `low`, so the loop rarely repeats).
 fn add_high<A: AtomicWords + ?Sized>(words: &mut A, index: u32, add: u32) {
@@ -217,5 +273,49 @@ mod tests {
         assert!(decode(load(1), load(2), 1.0).1, "bin 0 should saturate, not wrap");
         assert!(decode(load(3), load(4), 1.0).1);
         assert_eq!(load(0), 2);
+    }
+
+    /// Contributions split among four threads' own words and merged give
+    /// the words of one atomic buffer that took them all, bit for bit:
+    /// small values, values that carry out of `low`, values past 2^32
+    /// units, bins driven to saturation, rejected values. Without the carry
+    /// or the saturation in `merge_bins` it fails.
+    #[test]
+    fn merged_thread_words_are_the_atomic_words() {
+        let bins = 8u32;
+        let atomic = words(bins);
+        let mut parts = vec![vec![0u32; words_for(bins) as usize]; 4];
+        // A counter-based hash (splitmix64) picks each contribution.
+        let hash = |i: u64| {
+            let mut z = i.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            z ^ (z >> 31)
+        };
+        for i in 0..4000u64 {
+            let h = hash(i);
+            let bin = (h % bins as u64) as u32;
+            let x = match (h >> 8) % 6 {
+                0 => ((h >> 16) % 1000) as f32 * 0.37,
+                1 => 3.9e9 + ((h >> 16) % 1000) as f32 * 1e6,
+                2 => 7.5e12,
+                // Bin 7 only: enough to pass 2^63 units.
+                3 if bin == 7 => 4.0e18,
+                4 => -1.0,
+                _ => ((h >> 16) % 100_000) as f32,
+            };
+            scatter_add(&mut CpuAtomics(&atomic), bin, x, 1.0);
+            scatter_add(&mut CpuWords(&mut parts[(i % 4) as usize]), bin, x, 1.0);
+        }
+        let mut merged = vec![0u32; words_for(bins) as usize];
+        for part in &parts {
+            merge(&mut merged, part);
+        }
+        let atomic: Vec<u32> = atomic.iter().map(|w| w.load(core::sync::atomic::Ordering::Relaxed)).collect();
+        assert_eq!(merged, atomic);
+        // The cases were reached: a saturated bin, a bin past 2^32 units, rejects.
+        assert!(decode(atomic[15], atomic[16], 1.0).1);
+        assert!((1..bins as usize).any(|b| atomic[2 * b] != 0 && atomic[2 * b] < SATURATED_HIGH));
+        assert!(atomic[0] > 0);
     }
 }

@@ -17,7 +17,7 @@ use slicelight_shaders::caustics::{
     ENTRY_WORDS, MAX_SHAFT_PLANES, MAX_SLOPE, PACKED_WORDS,
 };
 use slicelight_shaders::glass::{dispersive, trace_through, Glass, PATH_OUT};
-use slicelight_shaders::scatter::{words_for, CpuAtomics};
+use slicelight_shaders::scatter::words_for;
 use slicelight_shaders::types::{CommonParams, GBufferTexel, MATERIAL_GLASS, NO_OBJECT};
 
 use crate::passes::*;
@@ -36,7 +36,7 @@ pub static PASSES: &[&dyn Pass] = &[
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family =
     Family { name: "caustics", passes: PASSES, kernels: &[], bench: Some(&bench::CausticsSweep) };
-use crate::cpu::{for_each_index, for_each_invocation};
+use crate::cpu::{for_each_invocation, scatter_each_index};
 use crate::scene::{invalid, SceneData};
 use rayon::prelude::*;
 
@@ -903,12 +903,11 @@ fn draw_maps(
     // Zeroed pages the rasteriser never reaches are never touched: most
     // of a map holds no light.
     let mut maps = Buffer::zeroed::<u32>(words as usize);
-    let atomics = crate::cpu::as_atomics(maps.as_mut_slice::<u32>());
     let rays = frame.get::<ExitRay>(&CAUSTICS_RAYS);
     let table = frame.get::<u32>(&CAUSTICS_TABLE);
-    for_each_index(map_invocations(p), progress, |i| {
+    scatter_each_index(maps.as_mut_slice::<u32>(), map_invocations(p), progress, |i, words| {
         let (m, t) = (&scene.materials, table);
-        rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, t, m, &mut CpuAtomics(atomics));
+        rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, t, m, words);
     });
     maps
 }

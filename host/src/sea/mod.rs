@@ -20,7 +20,6 @@ use rayon::prelude::*;
 use serde::Deserialize;
 use slicelight_shaders::glass::Glass;
 use slicelight_shaders::optics;
-use slicelight_shaders::scatter::CpuAtomics;
 use slicelight_shaders::sea::air::{Above, GlassInAir};
 use slicelight_shaders::sea::caustics::{
     caustic_points, caustic_ray, caustic_triangle, caustic_triangles, shaft_map_len, shaft_mip_texel,
@@ -1274,9 +1273,8 @@ impl Pass for SeaCaustics {
         let mut words = Buffer::zeroed::<u32>(scene.sea.caustic_words() as usize);
         {
             let rays = frame.get::<Vec4>(&SEA_CAUSTIC_RAYS);
-            let atomics = crate::cpu::as_atomics(words.as_mut_slice::<u32>());
-            crate::cpu::for_each_index(caustic_triangles(p), progress, |i| {
-                caustic_triangle(i, p, rays, &mut CpuAtomics(atomics));
+            crate::cpu::scatter_each_index(words.as_mut_slice::<u32>(), caustic_triangles(p), progress, |i, words| {
+                caustic_triangle(i, p, rays, words);
             });
         }
         frame.insert(&SEA_CAUSTICS, words);

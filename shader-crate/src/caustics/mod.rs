@@ -54,7 +54,7 @@ use crate::common::surface::{channel_part, shadow_ray_visibility, Receiver};
 use crate::geometry::{trace_object, Geometry, NO_HIT};
 use crate::glam::{Quat, UVec3, Vec3, Vec4, Vec4Swizzles};
 use crate::glass::{pick, surface_epsilon, trace_through, Glass, PATH_LOST, PATH_OCCLUDED, PATH_OUT};
-use crate::light::{atan2_accurate, emitted, light_local, phi, transmittance};
+use crate::light::{atan2_accurate, emitted, light_local, phi_given, transmittance};
 use crate::optics;
 use crate::phase;
 use crate::scatter::{scatter_add, AtomicWords, REJECTED_WORD};
@@ -1562,16 +1562,6 @@ fn resolved_at(texels: &[Vec4], params: &CausticsParams, k: u32, x: f32, z: f32)
     low * (1.0 - fv) + high * fv
 }
 
-/// `light::phi(x)` given `r = e^(-x)` (the same bits: `phi` takes the
-/// same `exp` where it takes one).
-fn phi_of(x: f32, r: f32) -> f32 {
-    if x.abs() < 1e-3 {
-        phi(x)
-    } else {
-        (1.0 - r) / x
-    }
-}
-
 /// Texel `(i, j)` of plane `k` of the resolved shaft maps; zero off the map.
 fn texel_at(texels: &[Vec4], params: &CausticsParams, k: u32, i: f32, j: f32) -> Vec4 {
     if i >= 0.0 && j >= 0.0 && i < params.map_width as f32 && j < params.map_height as f32 {
@@ -1742,7 +1732,7 @@ pub fn caustic_shafts_pixel(
                     e = transmittance(sigma, a);
                     r = transmittance(sigma, dt);
                     let x = sigma * dt;
-                    w_phi = Vec4::new(phi_of(x.x, r.x), phi_of(x.y, r.y), phi_of(x.z, r.z), 0.0) * dt;
+                    w_phi = Vec4::new(phi_given(x.x, r.x), phi_given(x.y, r.y), phi_given(x.z, r.z), 0.0) * dt;
                 }
                 if lit {
                     sum += scattered * e * w_phi;

@@ -920,7 +920,7 @@ fn objects_over_the_sea_are_mirrored_in_it() {
 /// through its underside): `sea.reflection` sees nothing where its rays
 /// meet the glass, `sea.glass_air` the glass (`mirrored_against_f64`, the
 /// reference tracing the glass in f64). Flat water here; under waves,
-/// `glass_over_waves_is_mirrored_in_it` (slow, run by hand).
+/// `glass_over_waves_is_mirrored_in_it` (slow: `#[ignore]`, a step of its own in `.ci/run`).
 #[test]
 fn glass_over_the_sea_is_mirrored_in_it() {
     let (ball, sees_ball) = glass_ball_over_the_sea();
@@ -952,8 +952,9 @@ fn glass_ball_over_the_sea() -> (&'static str, impl Fn(Vec3, Vec3) -> bool + Syn
 /// of the sun's disk) through the glass, and each one that leaves the
 /// glass downward into a rough sea of its own, with its own 273 rays and
 /// the sea's second order in f64: 352 to 450 s for the 8 pixels on the 2-core
-/// machine. Run it with `cargo test --release --test sea -- --ignored
-/// --nocapture glass_over_waves`.
+/// machine. `.ci/run` runs it after the other tests (`cargo test --release
+/// --workspace -- --ignored`); by hand, `cargo test --release --test sea --
+/// --ignored --nocapture glass_over_waves`.
 #[test]
 #[ignore = "slow: about 6 minutes of f64 reference on 2 cores"]
 fn glass_over_waves_is_mirrored_in_it() {

@@ -117,11 +117,24 @@ impl Resource {
     }
 
     /// A `PerPixel` resource's contents for `pixels` pixels where no pass writes it.
+    /// Filled in place and in parallel (a G-buffer's blank at 720x480 is
+    /// 22 MB: built as one `Vec` and copied, it took 18 ms of `sea_open`'s
+    /// frame); an all-zero blank is the allocator's zeroed pages.
     pub fn blank(&self, pixels: usize) -> Option<Buffer> {
-        match self.kind {
-            ResourceKind::PerPixel { blank } => Some(Buffer::from_bytes(&blank().repeat(pixels))),
-            _ => None,
+        use rayon::prelude::*;
+        let ResourceKind::PerPixel { blank } = self.kind else { return None };
+        let pattern = blank();
+        let bytes = pattern.len() * pixels;
+        if pattern.iter().all(|&b| b == 0) {
+            return Some(Buffer::zeroed::<u8>(bytes));
         }
+        let mut buffer = Buffer::overwritten::<u8>(bytes);
+        buffer.as_mut_slice::<u8>().par_chunks_mut(pattern.len() * 4096).for_each(|chunk| {
+            for texel in chunk.chunks_exact_mut(pattern.len()) {
+                texel.copy_from_slice(&pattern);
+            }
+        });
+        Some(buffer)
     }
 }
 

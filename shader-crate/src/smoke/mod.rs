@@ -601,28 +601,52 @@ pub fn stencil(n: UVec3, walls: u32, fluid: &[u32], flat: u32) -> u32 {
     bits | (diagonal << 8)
 }
 
+/// A field of cell values read by index: a slice; on the CPU also cells
+/// that other threads write at other indices (`gauss_seidel`'s in-place
+/// sweep, where a colour's cells read only the other colour's).
+pub trait Cells {
+    fn cell(&self, i: usize) -> f32;
+}
+
+impl Cells for [f32] {
+    #[inline(always)]
+    fn cell(&self, i: usize) -> f32 {
+        self[i]
+    }
+}
+
+/// f32 bits in atomics (relaxed loads: plain loads on x86-64).
+#[cfg(not(target_arch = "spirv"))]
+impl Cells for [core::sync::atomic::AtomicU32] {
+    #[inline(always)]
+    fn cell(&self, i: usize) -> f32 {
+        f32::from_bits(self[i].load(core::sync::atomic::Ordering::Relaxed))
+    }
+}
+
 /// The sum of `x` over the fluid neighbours a stencil lists.
-fn stencil_sum(n: UVec3, bits: u32, x: &[f32], flat: u32) -> f32 {
+#[inline(always)]
+fn stencil_sum<X: Cells + ?Sized>(n: UVec3, bits: u32, x: &X, flat: u32) -> f32 {
     let i = flat as usize;
     let (sy, sz) = (n.x as usize, (n.x * n.y) as usize);
     let mut sum = 0.0;
     if bits & 1 != 0 {
-        sum += x[i - 1];
+        sum += x.cell(i - 1);
     }
     if bits & 2 != 0 {
-        sum += x[i + 1];
+        sum += x.cell(i + 1);
     }
     if bits & 4 != 0 {
-        sum += x[i - sy];
+        sum += x.cell(i - sy);
     }
     if bits & 8 != 0 {
-        sum += x[i + sy];
+        sum += x.cell(i + sy);
     }
     if bits & 16 != 0 {
-        sum += x[i - sz];
+        sum += x.cell(i - sz);
     }
     if bits & 32 != 0 {
-        sum += x[i + sz];
+        sum += x.cell(i + sz);
     }
     sum
 }
@@ -642,11 +666,11 @@ pub fn apply_poisson(n: UVec3, stencils: &[u32], x: &[f32], flat: u32) -> f32 {
 /// (`(i + j + k) mod 2`) is `colour`; its value unchanged otherwise. Cells
 /// of one colour have neighbours of the other only, so a colour's cells
 /// may be updated in any order (in parallel).
-pub fn gauss_seidel(n: UVec3, stencils: &[u32], b: &[f32], x: &[f32], flat: u32, colour: u32) -> f32 {
+pub fn gauss_seidel<X: Cells + ?Sized>(n: UVec3, stencils: &[u32], b: &[f32], x: &X, flat: u32, colour: u32) -> f32 {
     let i = flat as usize;
     let bits = stencils[i];
     if ((bits & STENCIL_COLOUR) != 0) as u32 != colour {
-        return x[i];
+        return x.cell(i);
     }
     let diagonal = ((bits >> 8) & 15) as f32;
     if bits & STENCIL_FLUID == 0 || diagonal == 0.0 {

@@ -683,6 +683,16 @@ mod tests {
         std::mem::swap(x, scratch);
     }
 
+    /// A level of `n` cells with `walls`, every `solid_every`-th cell solid
+    /// and a right-hand side of mixed signs.
+    fn test_level(n: UVec3, walls: u32, solid_every: u32) -> Level {
+        let cells = (n.x * n.y * n.z) as usize;
+        let fluid: Vec<u32> = (0..cells as u32).map(|i| (i % solid_every != solid_every / 2) as u32).collect();
+        let mut level = Level::new(n, walls, fluid);
+        level.b = (0..cells).map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3).collect();
+        level
+    }
+
     /// The CPU's sweeps in place (`gs_sweep`: rows in parallel, each colour
     /// reading the other while it is not written) give the same bits as the
     /// sweeps into a second array, over a V-cycle's worth of half-sweeps on
@@ -692,10 +702,7 @@ mod tests {
     #[test]
     fn the_in_place_sweeps_equal_the_ping_pong_sweeps() {
         for (n, walls) in [(UVec3::new(33, 17, 20), 63), (UVec3::new(16, 1, 9), 5), (UVec3::new(24, 30, 7), 0)] {
-            let cells = (n.x * n.y * n.z) as usize;
-            let fluid: Vec<u32> = (0..cells as u32).map(|i| (i % 13 != 5) as u32).collect();
-            let mut level = Level::new(n, walls, fluid);
-            level.b = (0..cells).map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3).collect();
+            let mut level = test_level(n, walls, 13);
             let mut reference = level.clone();
             for colour in [0, 1, 0, 1, 1, 0, 1, 0] {
                 gs_sweep(&mut level, colour);
@@ -713,10 +720,7 @@ mod tests {
     fn the_in_place_coarse_solve_equals_the_ping_pong_sweeps() {
         for (n, walls) in [(UVec3::new(4, 4, 4), 63), (UVec3::new(3, 2, 4), 5), (UVec3::new(4, 1, 3), 0)] {
             let cells = (n.x * n.y * n.z) as usize;
-            // Some solid cells, a right-hand side of mixed signs.
-            let fluid: Vec<u32> = (0..cells as u32).map(|i| (i % 7 != 3) as u32).collect();
-            let mut level = Level::new(n, walls, fluid);
-            level.b = (0..cells).map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3).collect();
+            let mut level = test_level(n, walls, 7);
             for _ in 0..COARSE_SWEEPS {
                 ping_pong_sweep(&mut level, 0);
                 ping_pong_sweep(&mut level, 1);

@@ -36,9 +36,10 @@ pub static PASSES: &[&dyn Pass] = &[
 /// The family, as `passes::FAMILIES` registers it.
 pub static FAMILY: Family =
     Family { name: "caustics", passes: PASSES, kernels: &[], bench: Some(&bench::CausticsSweep) };
-use crate::cpu::{for_each_invocation, scatter_each_index};
+use crate::cpu::{for_each_invocation, scatter_each_index, ScatterKernel};
 use crate::scene::{invalid, SceneData};
 use rayon::prelude::*;
+use slicelight_shaders::scatter::AtomicWords;
 
 /// The scene's `[caustics]` table.
 #[derive(Debug, Clone, Copy, serde::Deserialize)]
@@ -937,11 +938,27 @@ fn draw_maps(
     let mut maps = Buffer::zeroed::<u32>(words as usize);
     let rays = frame.get::<ExitRay>(&CAUSTICS_RAYS);
     let table = frame.get::<u32>(&CAUSTICS_TABLE);
-    scatter_each_index(maps.as_mut_slice::<u32>(), map_invocations(p), progress, |i, words| {
-        let (m, t) = (&scene.materials, table);
-        rasterize(i, common, p, &scene.lights, &scene.light_map, &glass, rays, t, m, words);
-    });
+    let kernel = Rasterize { scene, common, p, glass, rays, table };
+    scatter_each_index(maps.as_mut_slice::<u32>(), map_invocations(p), progress, &kernel);
     maps
+}
+
+/// `rasterize` over the maps of `p`, as the CPU's scatter driver calls it.
+struct Rasterize<'a> {
+    scene: &'a SceneData,
+    common: &'a CommonParams,
+    p: &'a CausticsParams,
+    glass: Glass<'a>,
+    rays: &'a [ExitRay],
+    table: &'a [u32],
+}
+
+impl ScatterKernel for Rasterize<'_> {
+    fn run<A: AtomicWords + ?Sized>(&self, i: u32, words: &mut A) {
+        let s = self.scene;
+        let (m, t) = (&s.materials, self.table);
+        rasterize(i, self.common, self.p, &s.lights, &s.light_map, &self.glass, self.rays, t, m, words);
+    }
 }
 
 impl Pass for CausticsMaps {

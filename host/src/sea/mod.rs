@@ -1273,9 +1273,15 @@ impl Pass for SeaCaustics {
         let mut words = Buffer::zeroed::<u32>(scene.sea.caustic_words() as usize);
         {
             let rays = frame.get::<Vec4>(&SEA_CAUSTIC_RAYS);
-            crate::cpu::scatter_each_index(words.as_mut_slice::<u32>(), caustic_triangles(p), progress, |i, words| {
-                caustic_triangle(i, p, rays, words);
-            });
+            /// `caustic_triangle`, as the CPU's scatter driver calls it.
+            struct Triangles<'a>(&'a SeaParams, &'a [Vec4]);
+            impl crate::cpu::ScatterKernel for Triangles<'_> {
+                fn run<A: slicelight_shaders::scatter::AtomicWords + ?Sized>(&self, i: u32, words: &mut A) {
+                    caustic_triangle(i, self.0, self.1, words);
+                }
+            }
+            let kernel = Triangles(p, rays);
+            crate::cpu::scatter_each_index(words.as_mut_slice::<u32>(), caustic_triangles(p), progress, &kernel);
         }
         frame.insert(&SEA_CAUSTICS, words);
     }

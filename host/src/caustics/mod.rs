@@ -893,10 +893,10 @@ fn decode(p: &CausticsParams, words: &[u32]) -> Vec<Vec4> {
 /// Each plane's sum of the maps' densities (rgb, W/m^2 summed over its
 /// texels), from the fixed-point words: the integer sums exactly, then
 /// scaled (what summing `read_bin` of every texel in f64 gives, to f32's
-/// rounding of each), without decoding the maps. Rows in parallel, words
-/// that hold nothing skipped; a frame's report costs about 1 ms instead of
-/// the 34 ms decoding took (`caustics_fog_ball`: 6 planes of 512^2 texels
-/// with 7 bins each, 88 MB of words).
+/// rounding of each), without decoding the maps: the colour bins of every
+/// texel (the slope bins not read), rows in parallel; a frame's report
+/// costs about 1 ms instead of the 34 ms decoding took (`caustics_fog_ball`:
+/// 6 planes of 512^2 texels with 7 bins each, 88 MB of words).
 fn plane_sums(p: &CausticsParams, words: &[u32]) -> Vec<glam::DVec3> {
     let bins = slicelight_shaders::caustics::texel_bins(p) as usize;
     let (width, rows) = (p.map_width as usize, (p.planes * p.map_height) as usize);
